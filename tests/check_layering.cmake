@@ -1,0 +1,17 @@
+# Fails when a pure library source includes gRPC, Protobuf, RocksDB or the
+# generated contract. Run by CTest as layering_pure_libraries.
+set(bad_regex "#include [<\"](grpc|grpcpp|google/protobuf|rocksdb|tpr/v1/)")
+set(failures "")
+foreach(dir extractor/lib extractor/synth indexer/lib)
+  file(GLOB files ${ROOT}/${dir}/*.h ${ROOT}/${dir}/*.cc)
+  foreach(f IN LISTS files)
+    file(STRINGS ${f} hits REGEX "${bad_regex}")
+    if(hits)
+      string(APPEND failures "${f}: ${hits}\n")
+    endif()
+  endforeach()
+endforeach()
+if(failures)
+  message(FATAL_ERROR "pure library includes a service header:\n${failures}")
+endif()
+message(STATUS "pure libraries include no gRPC/Protobuf/RocksDB headers")
