@@ -2,7 +2,7 @@
 # generated contract. Run by CTest as layering_pure_libraries.
 set(bad_regex "#include [<\"](grpc|grpcpp|google/protobuf|rocksdb|tpr/v1/)")
 set(failures "")
-foreach(dir extractor/lib extractor/synth indexer/lib)
+foreach(dir extractor/lib extractor/synth indexer/lib eval/lib)
   file(GLOB files ${ROOT}/${dir}/*.h ${ROOT}/${dir}/*.cc)
   foreach(f IN LISTS files)
     file(STRINGS ${f} hits REGEX "${bad_regex}")
