@@ -1,0 +1,110 @@
+// Integral geodesic G (Tam & Lau 2007, 4.1; Hilaga et al. [9]) and the
+// surface centre, the vertex of minimum G, found by the paper's hierarchical
+// patch search (4.5) rather than by a sweep from every vertex.
+//
+//   DijkstraSolver solver(graph);
+//   SurfaceCentre c = FindSurfaceCentre(graph, solver, IntegralGeodesicOptions{});
+//   double g = IntegralGeodesic(solver, some_vertex);   // one sweep
+#ifndef TPR_EXTRACTOR_LIB_INTEGRAL_GEODESIC_H_
+#define TPR_EXTRACTOR_LIB_INTEGRAL_GEODESIC_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "extractor/lib/geodesic.h"
+
+namespace tpr::extract {
+
+// IntegralGeodesicOptions controls the hierarchical surface-centre search
+// (4.5). The paper gives no numbers except "psi ~ 20" integral geodesics on
+// average (Table 4); the defaults land near that.
+struct IntegralGeodesicOptions {
+  // Patch centres per level (farthest-point sampling inside the current
+  // patch; the patch's previous best centre is reused as the first, so a
+  // level costs patches_per_level - 1 sweeps). Default 8.
+  int patches_per_level = 8;
+  // Stop when a level lowers min G by less than this fraction of min G
+  // ("the change in the smallest integral geodesic is less than a
+  // threshold", 4.5). Default 1e-4.
+  double min_relative_change = 1e-4;
+  // Stop when the patch to split has less than this fraction of the surface
+  // area ("or the patch area is too small", 4.5). Default 1e-3.
+  double min_patch_area_fraction = 1e-3;
+  // Always refine at least this many levels below the first before the
+  // change test may stop the search (a level whose new centres do not beat
+  // the old best would otherwise stop at once). Default 2.
+  int min_levels = 2;
+  // Hard cap on sweeps spent by the search (bad input never hangs).
+  // Default 60.
+  int max_sweeps = 60;
+};
+
+// IntegralGeodesic returns G(q) = sum over vertices p of g_q(p) * area(p),
+// with area(p) one third of p's incident triangle areas: the area-weighted
+// discretization of the integral of 4.1, as Hilaga et al. [9] weight it.
+// Vertices that q cannot reach (other components) contribute nothing, so G
+// is the integral over q's component. Leaves the sweep from q in `solver`
+// (distances(), order()). Precondition 0 <= q < num_vertices().
+// Cost: one Dijkstra sweep. Not thread-safe per solver.
+double IntegralGeodesic(DijkstraSolver& solver, int32_t q);
+
+// IntegralGeodesicOfField returns sum_p distances[p] * area(p) over reached
+// vertices: G of the source of a sweep already run. O(n).
+double IntegralGeodesicOfField(const MeshGraph& graph,
+                               const std::vector<double>& distances);
+
+// SurfaceCentre is the result of the hierarchical search.
+struct SurfaceCentre {
+  // The vertex of smallest G found: the surface centre o (4.1, 4.5).
+  int32_t vertex = -1;
+  // G(vertex), exact (one full sweep): MIN_{q in S} G(q) of Eqs. 1 and 5.
+  double g_min = 0.0;
+  // MAX G estimate for Eqs. 1 and 5: the largest exact G among every vertex
+  // the search swept (the first level's farthest-point centres start at a
+  // double-sweep extreme and take the shape's extremities first, where G
+  // peaks) and the seeds given. A lower bound of the true maximum; callers
+  // should raise it with G of their own candidates (topological points,
+  // 4.4) so that Eq. 1 is never negative.
+  double g_max = 0.0;
+  int32_t g_max_vertex = -1;
+  // Dijkstra sweeps spent by the search (psi of Table 4).
+  int sweeps = 0;
+  // Levels of refinement done.
+  int levels = 0;
+  // Every vertex whose G was computed, with its G (for reuse and tests).
+  std::vector<int32_t> evaluated_vertices;
+  std::vector<double> evaluated_g;
+};
+
+// FindSurfaceCentre runs the hierarchical search of 4.5 on the largest
+// component (by area): split the current patch into patches_per_level
+// patches by farthest-point sampling (patches are the Voronoi cells of the
+// centres under graph distance), compute G at each centre, then recurse
+// into the patch around the best centre (its cell plus the margin up to the
+// sampling radius, so a minimum just across a cell border is not lost),
+// until the change in min G or the patch area is small. Starts from a
+// vertex of the largest component. Returns vertex -1 for a graph with no
+// vertex. Cost: `sweeps` Dijkstra sweeps (about 15-25 with the defaults) plus
+// O(n) per sweep. Not thread-safe per solver.
+SurfaceCentre FindSurfaceCentre(const MeshGraph& graph, DijkstraSolver& solver,
+                                const IntegralGeodesicOptions& options);
+
+// FindSurfaceCentreFrom is FindSurfaceCentre with the first level seeded at
+// `seed`, whose full distance field `seed_distances` (a sweep from seed) the
+// caller already has: SelectSourcePoints passes the first double-sweep
+// extreme, saving a sweep. The search stays in seed's component.
+SurfaceCentre FindSurfaceCentreFrom(const MeshGraph& graph,
+                                    DijkstraSolver& solver,
+                                    const IntegralGeodesicOptions& options,
+                                    int32_t seed,
+                                    const std::vector<double>& seed_distances);
+
+// BruteForceSurfaceCentre sweeps from every vertex of the largest
+// component: the test oracle. Cost n sweeps.
+SurfaceCentre BruteForceSurfaceCentre(const MeshGraph& graph,
+                                      DijkstraSolver& solver);
+
+}  // namespace tpr::extract
+
+#endif  // TPR_EXTRACTOR_LIB_INTEGRAL_GEODESIC_H_
