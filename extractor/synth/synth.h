@@ -1,0 +1,125 @@
+// Synthetic articulated shapes: labelled, posable test data for TPR retrieval
+// (Tam & Lau 2007, section 7 evaluates on deformable models: one creature in
+// many poses). Each class is a tree of tapered bones; a pose bends every joint
+// within its limits; the surface is a smooth implicit blend of the bones,
+// polygonized into a closed, manifold, genus-0 triangle mesh.
+//
+//   tpr::synth::ShapeOptions options;            // 10k vertices, seed 1
+//   absl::StatusOr<tpr::extract::Mesh> dog =
+//       tpr::synth::GenerateShape("quadruped_slender", /*pose_index=*/3, options);
+#ifndef TPR_EXTRACTOR_SYNTH_SYNTH_H_
+#define TPR_EXTRACTOR_SYNTH_SYNTH_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "extractor/lib/mesh.h"
+
+namespace tpr::synth {
+
+// ClassNames returns the shape classes GenerateShape accepts, in a fixed
+// order (the order tpr-synth --classes N takes the first N from). There are
+// at least 8; "biped_adult"/"biped_child" and
+// "quadruped_slender"/"quadruped_stocky" share a skeleton and differ only in
+// proportions and thickness. Thread-safe, O(1).
+std::vector<std::string> ClassNames();
+
+// ShapeOptions controls one generated mesh.
+struct ShapeOptions {
+  // Vertices of the output mesh; the result is within 20% of it (usually
+  // exact). Accepted range [200, 1,000,000]. Default 10,000.
+  int target_vertices = 10000;
+  // Seed of every random choice (pose angles, rigid motion). Same seed, same
+  // class, same pose index: bit-identical mesh. Default 1.
+  uint64_t seed = 1;
+  // Apply a random rotation, a translation in [-1, 1]^3 and a uniform scale
+  // in [1, 2] after posing. The mesh is then exactly the similarity image of
+  // the random_rigid = false mesh (same triangles, moved vertices).
+  // Default false.
+  bool random_rigid = false;
+  // Fraction of each joint's angle limit a pose may use: 0 is the rest pose,
+  // 1 the full range. Accepted range [0, 1]. Default 1.
+  double pose_amount = 1.0;
+};
+
+// Bone is one segment of a skeleton: a capsule from `start` to `end` whose
+// radius tapers linearly from `start_radius` to `end_radius`. A bone with
+// start == end is a ball.
+struct Bone {
+  // Index of the parent bone in Skeleton::bones, -1 for the root. Parents
+  // come before their children.
+  int parent = -1;
+  Eigen::Vector3d start = Eigen::Vector3d::Zero();
+  Eigen::Vector3d end = Eigen::Vector3d::Zero();
+  double start_radius = 0.1;
+  double end_radius = 0.1;
+  // Short name ("l_forearm"), for debugging and tests.
+  std::string name;
+};
+
+// Skeleton is a tree of bones (never a loop, so the surface has genus 0).
+struct Skeleton {
+  std::vector<Bone> bones;
+};
+
+// TipCount returns the number of protrusion tips of `skeleton`: bones with no
+// child that are meant to end in a tip (every leaf bone). O(bones).
+int TipCount(const Skeleton& skeleton);
+
+// PoseSkeleton returns the posed skeleton of `class_name` for
+// (options.seed, pose_index), in the frame of the mesh GenerateShape returns
+// for the same arguments (rigid motion included). Non-adjacent bones are kept
+// apart (poses that would bring limbs into contact are redrawn, then damped
+// towards the rest pose), so protrusions stay separated.
+// Errors: INVALID_ARGUMENT for an unknown class (the message lists the valid
+// ones), a negative pose index or options out of range. Thread-safe, cheap
+// (microseconds).
+absl::StatusOr<Skeleton> PoseSkeleton(absl::string_view class_name,
+                                      int pose_index,
+                                      const ShapeOptions& options);
+
+// GenerateShape returns the mesh of `class_name` in pose `pose_index`: closed
+// (no boundary edge), edge- and vertex-manifold, one component, genus 0,
+// counter-clockwise seen from outside, about options.target_vertices
+// vertices. Deterministic in (class, pose_index, options).
+// Errors: as PoseSkeleton; INTERNAL if the polygonizer cannot produce a
+// genus-0 surface (not seen for the built-in classes).
+// Thread-safe. Cost: about 0.1 s for 10k vertices on one core; grows
+// linearly with target_vertices.
+absl::StatusOr<extract::Mesh> GenerateShape(absl::string_view class_name,
+                                            int pose_index,
+                                            const ShapeOptions& options);
+
+// StarSkeleton returns a ball with `arms` straight cylindrical arms of equal
+// length, spread evenly over the sphere and bent a little by the pose
+// (pose index 0 is the rest pose when pose_amount == 0). Each arm ends in
+// one tip far from the centre: arm tips are the `arms` points farthest from
+// the ball centre. Errors: INVALID_ARGUMENT unless 2 <= arms <= 8, or for
+// options out of range. Thread-safe.
+absl::StatusOr<Skeleton> StarSkeleton(int arms, int pose_index,
+                                      const ShapeOptions& options);
+
+// GenerateStar returns the mesh of StarSkeleton(arms, 0, options), with the
+// same guarantees and errors as GenerateShape.
+absl::StatusOr<extract::Mesh> GenerateStar(int arms,
+                                           const ShapeOptions& options);
+
+// MeshFromSkeleton polygonizes the smooth blend of `skeleton`'s bones into a
+// closed, manifold, genus-0 mesh with about `target_vertices` vertices.
+// Preconditions: the skeleton is a tree whose non-adjacent bones do not
+// touch. Errors: INVALID_ARGUMENT for an empty skeleton, a bad parent index,
+// a non-finite coordinate, a radius <= 0 or target_vertices outside
+// [200, 1,000,000]; INTERNAL if the surface is not one genus-0 component
+// even on a refined grid. Thread-safe. Cost: linear in target_vertices plus
+// the number of grid cells the thinnest bone forces (see synth.cc).
+absl::StatusOr<extract::Mesh> MeshFromSkeleton(const Skeleton& skeleton,
+                                               int target_vertices);
+
+}  // namespace tpr::synth
+
+#endif  // TPR_EXTRACTOR_SYNTH_SYNTH_H_
