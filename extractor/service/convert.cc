@@ -1,0 +1,120 @@
+#include "extractor/service/convert.h"
+
+#include <algorithm>
+
+#include "absl/strings/str_cat.h"
+
+// The version comes from CMake's project() through tpr_extract's compile
+// definition when available; the extractor/CMakeLists.txt sets it PRIVATE on
+// tpr_extract only, so fall back to the same number here.
+#ifndef TPR_VERSION_STRING
+#define TPR_VERSION_STRING "0.1.0"
+#endif
+
+namespace tpr::extractor_service {
+
+const char kExtractorVersion[] = TPR_VERSION_STRING;
+
+absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& proto,
+                                                  int max_threads) {
+  extract::Options options;
+  if (proto.bands() != 0) {
+    if (proto.bands() < 1 || proto.bands() > 256) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "options.bands must be in 1..256 (0 for the default 20), got ", proto.bands()));
+    }
+    options.bands = proto.bands();
+  }
+  if (proto.cycle_min_vertices() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.cycle_min_vertices must be >= 0, got ", proto.cycle_min_vertices()));
+  }
+  if (proto.cycle_min_vertices() != 0) options.cycle_min_vertices = proto.cycle_min_vertices();
+  // NaN fails both comparisons below, so test it the other way round.
+  if (!(proto.ring_length_threshold() >= 0.0 && proto.ring_length_threshold() < 1.0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.ring_length_threshold must be in [0, 1), got ",
+        proto.ring_length_threshold()));
+  }
+  if (proto.ring_length_threshold() != 0.0) {
+    options.ring_length_threshold = proto.ring_length_threshold();
+  }
+  if (proto.threads() < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.threads must be >= 0, got ", proto.threads()));
+  }
+  options.threads = std::clamp(proto.threads(), 1, std::max(1, max_threads));
+  options.explain = proto.explain();
+  return options;
+}
+
+v1::ExtractOptions OptionsToProto(const extract::Options& options) {
+  v1::ExtractOptions proto;
+  proto.set_bands(options.bands);
+  proto.set_cycle_min_vertices(options.cycle_min_vertices);
+  proto.set_ring_length_threshold(options.ring_length_threshold);
+  proto.set_threads(options.threads);
+  proto.set_explain(options.explain);
+  return proto;
+}
+
+extract::MeshFormat FormatFromProto(v1::MeshFormat format) {
+  switch (format) {
+    case v1::MESH_FORMAT_OFF:
+      return extract::MeshFormat::kOff;
+    case v1::MESH_FORMAT_OBJ:
+      return extract::MeshFormat::kObj;
+    case v1::MESH_FORMAT_PLY:
+      return extract::MeshFormat::kPly;
+    case v1::MESH_FORMAT_STL:
+      return extract::MeshFormat::kStl;
+    default:
+      return extract::MeshFormat::kUnknown;
+  }
+}
+
+v1::MeshStats StatsToProto(const extract::MeshStats& stats) {
+  v1::MeshStats proto;
+  proto.set_vertices(stats.vertices);
+  proto.set_faces(stats.faces);
+  proto.set_area(stats.area);
+  proto.set_boundary_edges(stats.boundary_edges);
+  proto.set_components(stats.components);
+  proto.set_genus(stats.genus);
+  proto.set_dropped_degenerate_faces(stats.dropped_degenerate_faces);
+  proto.set_dropped_duplicate_faces(stats.dropped_duplicate_faces);
+  proto.set_unreferenced_vertices(stats.unreferenced_vertices);
+  return proto;
+}
+
+v1::Signature SignatureToProto(const extract::Signature& signature,
+                               const extract::Options& options) {
+  v1::Signature proto;
+  proto.mutable_features()->Reserve(static_cast<int>(signature.features.size()));
+  for (const extract::Feature& f : signature.features) {
+    v1::Feature* out = proto.add_features();
+    out->set_kind(f.kind == extract::FeatureKind::kPoint ? v1::FEATURE_KIND_POINT
+                                                         : v1::FEATURE_KIND_RING);
+    out->set_weight(f.weight);
+    out->set_integral_geodesic(f.integral_geodesic);
+    out->mutable_curvature()->Add(f.curvature.begin(), f.curvature.end());
+    out->mutable_area()->Add(f.area.begin(), f.area.end());
+    out->mutable_distance()->Add(f.distance.begin(), f.distance.end());
+  }
+  *proto.mutable_mesh() = StatsToProto(signature.stats);
+  proto.set_extractor_version(kExtractorVersion);
+  *proto.mutable_options() = OptionsToProto(options);
+  return proto;
+}
+
+v1::Explanation ExplanationToProto(const extract::Explanation& explanation) {
+  v1::Explanation proto;
+  proto.mutable_vertex_region()->Add(explanation.vertex_region.begin(),
+                                     explanation.vertex_region.end());
+  for (const std::vector<int32_t>& vertices : explanation.feature_vertices) {
+    proto.add_feature_vertices()->mutable_vertices()->Add(vertices.begin(), vertices.end());
+  }
+  return proto;
+}
+
+}  // namespace tpr::extractor_service

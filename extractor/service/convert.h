@@ -1,0 +1,54 @@
+// Conversions between the extractor library's types (tpr::extract) and the
+// wire contract (tpr.v1). The service and the CLI use them; nothing else
+// converts, so the two forms cannot drift apart.
+//
+//   absl::StatusOr<extract::Options> o = OptionsFromProto(request.options());
+//   v1::Signature wire = SignatureToProto(result.signature, *o);
+//   extract::MeshFormat f = FormatFromProto(request.format());
+#ifndef TPR_EXTRACTOR_SERVICE_CONVERT_H_
+#define TPR_EXTRACTOR_SERVICE_CONVERT_H_
+
+#include "absl/status/statusor.h"
+#include "extractor/lib/extract.h"
+#include "extractor/lib/mesh_io.h"
+#include "extractor/lib/signature.h"
+#include "tpr/v1/extractor.pb.h"
+#include "tpr/v1/signature.pb.h"
+
+namespace tpr::extractor_service {
+
+// kExtractorVersion is the semantic version stamped into every signature
+// (Signature.extractor_version): the project version from CMake.
+extern const char kExtractorVersion[];
+
+// OptionsFromProto returns the library options for `proto`, a zero field
+// meaning the default documented in extractor/lib/extract.h.
+// Errors: INVALID_ARGUMENT when bands is outside 1..256 or another field is
+// negative (the message names the field). `max_threads` caps the requested
+// Dijkstra threads (a client must not be able to take the whole machine).
+// O(1). Thread-safe.
+absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& proto,
+                                                  int max_threads);
+
+// OptionsToProto returns `options` in wire form, every field filled.
+v1::ExtractOptions OptionsToProto(const extract::Options& options);
+
+// FormatFromProto maps the wire format hint to intake's; UNSPECIFIED (and
+// any unknown value) becomes kUnknown, which makes intake guess.
+extract::MeshFormat FormatFromProto(v1::MeshFormat format);
+
+// StatsToProto returns `stats` in wire form.
+v1::MeshStats StatsToProto(const extract::MeshStats& stats);
+
+// SignatureToProto returns the wire signature of `signature`, with its mesh
+// statistics, kExtractorVersion and `options` (defaults filled). O(features x
+// bands). Thread-safe.
+v1::Signature SignatureToProto(const extract::Signature& signature,
+                               const extract::Options& options);
+
+// ExplanationToProto returns `explanation` in wire form.
+v1::Explanation ExplanationToProto(const extract::Explanation& explanation);
+
+}  // namespace tpr::extractor_service
+
+#endif  // TPR_EXTRACTOR_SERVICE_CONVERT_H_
