@@ -93,7 +93,8 @@ SurfaceCentre FindSurfaceCentre(const MeshGraph& graph, DijkstraSolver& solver,
 // FindSurfaceCentreFrom is FindSurfaceCentre with the first level seeded at
 // `seed`, whose full distance field `seed_distances` (a sweep from seed) the
 // caller already has: SelectSourcePoints passes the first double-sweep
-// extreme, saving a sweep. The search stays in seed's component.
+// extreme, saving a sweep. seed_distances may be solver.distances() (it is
+// copied before the first sweep). The search stays in seed's component.
 SurfaceCentre FindSurfaceCentreFrom(const MeshGraph& graph,
                                     DijkstraSolver& solver,
                                     const IntegralGeodesicOptions& options,

@@ -1,0 +1,333 @@
+#include "extractor/lib/geodesic.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+
+namespace tpr::extract {
+namespace {
+
+// An undirected arc u < v with its length, before compression into rows.
+struct Arc {
+  int32_t u;
+  int32_t v;
+  double length;
+};
+
+// An edge occurrence in a triangle: the edge (lo, hi) and the triangle's
+// third vertex, so that the two triangles of an interior edge meet after
+// sorting.
+struct EdgeSide {
+  int32_t lo;
+  int32_t hi;
+  int32_t opposite;
+};
+
+// UnfoldedLength returns the length of the straight segment from c to d with
+// triangles (a, b, c) and (a, b, d) unfolded into one plane about edge (a,
+// b), or a negative value when that segment does not cross the open edge
+// (then the straight line leaves the two triangles and is no surface path).
+// The unfolded segment is a genuine path on the surface, so adding it keeps
+// Dijkstra an upper bound of the geodesic.
+double UnfoldedLength(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                      const Eigen::Vector3d& c, const Eigen::Vector3d& d) {
+  const Eigen::Vector3d ab = b - a;
+  const double len = ab.norm();
+  if (!(len > 0.0)) return -1.0;
+  const Eigen::Vector3d axis = ab / len;
+  const Eigen::Vector3d ac = c - a;
+  const Eigen::Vector3d ad = d - a;
+  const double xc = ac.dot(axis);
+  const double yc = (ac - xc * axis).norm();
+  const double xd = ad.dot(axis);
+  const double yd = (ad - xd * axis).norm();  // on the other side: -yd
+  if (!(yc > 0.0) || !(yd > 0.0)) return -1.0;
+  const double x_cross = xc + (xd - xc) * yc / (yc + yd);
+  // Strictly inside, with a small margin: a path through a vertex is
+  // already covered by the two edge paths.
+  const double margin = 1e-9 * len;
+  if (x_cross <= margin || x_cross >= len - margin) return -1.0;
+  return std::hypot(xd - xc, yc + yd);
+}
+
+}  // namespace
+
+MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
+  MeshGraph g;
+  g.mesh_ = &mesh;
+  const int32_t n = static_cast<int32_t>(mesh.positions.size());
+  const auto& p = mesh.positions;
+
+  g.vertex_areas_.assign(n, 0.0);
+  std::vector<EdgeSide> sides;
+  sides.reserve(3 * mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    assert(t[0] >= 0 && t[0] < n && t[1] >= 0 && t[1] < n && t[2] >= 0 &&
+           t[2] < n);
+    const double area =
+        0.5 * (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]).norm();
+    for (int k = 0; k < 3; ++k) {
+      g.vertex_areas_[t[k]] += area / 3.0;
+      const int32_t a = t[k];
+      const int32_t b = t[(k + 1) % 3];
+      if (a == b) continue;
+      sides.push_back({std::min(a, b), std::max(a, b), t[(k + 2) % 3]});
+    }
+  }
+  g.total_area_ = 0.0;
+  for (double a : g.vertex_areas_) g.total_area_ += a;
+
+  std::sort(sides.begin(), sides.end(), [](const EdgeSide& x, const EdgeSide& y) {
+    return x.lo != y.lo ? x.lo < y.lo
+                        : (x.hi != y.hi ? x.hi < y.hi : x.opposite < y.opposite);
+  });
+
+  std::vector<Arc> arcs;
+  arcs.reserve(sides.size() * (options.unfold_opposite_edges ? 2 : 1));
+  for (size_t i = 0; i < sides.size();) {
+    size_t j = i;
+    while (j < sides.size() && sides[j].lo == sides[i].lo &&
+           sides[j].hi == sides[i].hi) {
+      ++j;
+    }
+    const int32_t a = sides[i].lo;
+    const int32_t b = sides[i].hi;
+    arcs.push_back({a, b, (p[a] - p[b]).norm()});
+    // Only manifold interior edges (exactly two triangles) have a well
+    // defined unfolding.
+    if (options.unfold_opposite_edges && j - i == 2) {
+      const int32_t c = sides[i].opposite;
+      const int32_t d = sides[i + 1].opposite;
+      if (c != d) {
+        const double len = UnfoldedLength(p[a], p[b], p[c], p[d]);
+        if (len > 0.0) arcs.push_back({std::min(c, d), std::max(c, d), len});
+      }
+    }
+    i = j;
+  }
+  // A shortcut may duplicate a mesh edge or another shortcut: keep the
+  // shortest length per vertex pair.
+  std::sort(arcs.begin(), arcs.end(), [](const Arc& x, const Arc& y) {
+    return x.u != y.u ? x.u < y.u : (x.v != y.v ? x.v < y.v : x.length < y.length);
+  });
+  arcs.erase(std::unique(arcs.begin(), arcs.end(),
+                         [](const Arc& x, const Arc& y) {
+                           return x.u == y.u && x.v == y.v;
+                         }),
+             arcs.end());
+
+  g.offsets_.assign(static_cast<size_t>(n) + 1, 0);
+  for (const Arc& e : arcs) {
+    ++g.offsets_[e.u + 1];
+    ++g.offsets_[e.v + 1];
+  }
+  for (int32_t v = 0; v < n; ++v) g.offsets_[v + 1] += g.offsets_[v];
+  g.targets_.resize(arcs.size() * 2);
+  g.lengths_.resize(arcs.size() * 2);
+  std::vector<int64_t> fill(g.offsets_.begin(), g.offsets_.end() - 1);
+  // Arcs are sorted by (u, v), so each row comes out sorted by target.
+  for (const Arc& e : arcs) {
+    g.targets_[fill[e.v]] = e.u;
+    g.lengths_[fill[e.v]++] = e.length;
+  }
+  for (const Arc& e : arcs) {
+    g.targets_[fill[e.u]] = e.v;
+    g.lengths_[fill[e.u]++] = e.length;
+  }
+
+  // Components by breadth-first search over the rows.
+  g.component_.assign(n, -1);
+  g.num_components_ = 0;
+  std::vector<int32_t> queue;
+  queue.reserve(n);
+  for (int32_t s = 0; s < n; ++s) {
+    if (g.component_[s] >= 0) continue;
+    const int32_t id = g.num_components_++;
+    double area = 0.0;
+    queue.clear();
+    queue.push_back(s);
+    g.component_[s] = id;
+    for (size_t h = 0; h < queue.size(); ++h) {
+      const int32_t v = queue[h];
+      area += g.vertex_areas_[v];
+      for (int64_t k = g.offsets_[v]; k < g.offsets_[v + 1]; ++k) {
+        const int32_t u = g.targets_[k];
+        if (g.component_[u] < 0) {
+          g.component_[u] = id;
+          queue.push_back(u);
+        }
+      }
+    }
+    g.component_areas_.push_back(area);
+  }
+  return g;
+}
+
+absl::StatusOr<MeshGraph> MeshGraph::Create(const Mesh& mesh,
+                                            const GeodesicOptions& options) {
+  const size_t n = mesh.positions.size();
+  if (n == 0) return absl::InvalidArgumentError("mesh has no vertices");
+  if (n > static_cast<size_t>(std::numeric_limits<int32_t>::max() / 2)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("mesh has too many vertices for 32-bit ids: ", n));
+  }
+  for (size_t v = 0; v < n; ++v) {
+    if (!mesh.positions[v].allFinite()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("vertex ", v, " has a non-finite coordinate"));
+    }
+  }
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int32_t i = mesh.triangles[f][k];
+      if (i < 0 || static_cast<size_t>(i) >= n) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "triangle ", f, " refers to vertex ", i, ", out of range [0, ", n,
+            ")"));
+      }
+    }
+  }
+  return Build(mesh, options);
+}
+
+int32_t MeshGraph::largest_component() const {
+  int32_t best = -1;
+  for (int32_t c = 0; c < num_components_; ++c) {
+    if (best < 0 || component_areas_[c] > component_areas_[best]) best = c;
+  }
+  return best;
+}
+
+DijkstraSolver::DijkstraSolver(const MeshGraph& graph) : graph_(&graph) {
+  const int32_t n = graph.num_vertices();
+  dist_.assign(n, kUnreachable);
+  source_.assign(n, -1);
+  parent_.assign(n, -1);
+  settled_.assign(n, 0);
+  order_.reserve(n);
+  touched_.reserve(n);
+  // Lazy deletion can hold up to one entry per arc; start at 2n, which
+  // covers a closed mesh's typical peak, and let the first sweep grow it.
+  heap_.reserve(static_cast<size_t>(n) * 2 + 16);
+}
+
+void DijkstraSolver::Reset() {
+  for (int32_t v : touched_) {
+    dist_[v] = kUnreachable;
+    source_[v] = -1;
+    parent_[v] = -1;
+    settled_[v] = 0;
+  }
+  touched_.clear();
+  order_.clear();
+  heap_.clear();
+}
+
+// A 4-ary heap: shallower than a binary heap and its four children share a
+// cache line, which matters more than the extra comparisons here.
+void DijkstraSolver::Push(double key, int32_t vertex) {
+  size_t i = heap_.size();
+  heap_.push_back({key, vertex});
+  while (i > 0) {
+    const size_t parent = (i - 1) >> 2;
+    if (heap_[parent].key <= key) break;
+    heap_[i] = heap_[parent];
+    i = parent;
+  }
+  heap_[i] = {key, vertex};
+}
+
+DijkstraSolver::HeapEntry DijkstraSolver::Pop() {
+  const HeapEntry top = heap_[0];
+  const HeapEntry last = heap_.back();
+  heap_.pop_back();
+  const size_t size = heap_.size();
+  if (size == 0) return top;
+  size_t i = 0;
+  while (true) {
+    const size_t first = 4 * i + 1;
+    if (first >= size) break;
+    size_t best = first;
+    const size_t end = std::min(first + 4, size);
+    for (size_t c = first + 1; c < end; ++c) {
+      if (heap_[c].key < heap_[best].key) best = c;
+    }
+    if (heap_[best].key >= last.key) break;
+    heap_[i] = heap_[best];
+    i = best;
+  }
+  heap_[i] = last;
+  return top;
+}
+
+const std::vector<double>& DijkstraSolver::Run(int32_t source,
+                                               const RunOptions& run) {
+  const int32_t sources[1] = {source};
+  return Run(absl::MakeConstSpan(sources, 1), {}, run);
+}
+
+const std::vector<double>& DijkstraSolver::Run(
+    absl::Span<const int32_t> sources, absl::Span<const double> initial_values,
+    const RunOptions& run) {
+  assert(initial_values.empty() || initial_values.size() == sources.size());
+  Reset();
+  const MeshGraph& g = *graph_;
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const int32_t v = sources[i];
+    assert(v >= 0 && v < g.num_vertices());
+    const double t = initial_values.empty() ? 0.0 : initial_values[i];
+    assert(std::isfinite(t));
+    if (t < dist_[v]) {
+      if (dist_[v] == kUnreachable) touched_.push_back(v);
+      dist_[v] = t;
+      source_[v] = static_cast<int32_t>(i);
+      Push(t, v);
+    }
+  }
+  const double max_distance = run.max_distance;
+  bool stopped_early = false;
+  while (!heap_.empty()) {
+    const HeapEntry e = Pop();
+    const int32_t v = e.vertex;
+    if (settled_[v] || e.key > dist_[v]) continue;  // stale entry
+    if (e.key > max_distance) {
+      stopped_early = true;
+      break;
+    }
+    settled_[v] = 1;
+    order_.push_back(v);
+    const int32_t src = source_[v];
+    const absl::Span<const int32_t> nbrs = g.neighbors(v);
+    const absl::Span<const double> lens = g.lengths(v);
+    for (size_t k = 0; k < nbrs.size(); ++k) {
+      const int32_t u = nbrs[k];
+      const double nd = e.key + lens[k];
+      if (nd < dist_[u]) {
+        if (dist_[u] == kUnreachable) touched_.push_back(u);
+        dist_[u] = nd;
+        source_[u] = src;
+        parent_[u] = v;
+        Push(nd, u);
+      }
+    }
+  }
+  if (stopped_early) {
+    // Tentative distances beyond the bound are not results: report them as
+    // unreached, keeping touched_ so the next Reset still clears them.
+    for (int32_t v : touched_) {
+      if (!settled_[v]) {
+        dist_[v] = kUnreachable;
+        source_[v] = -1;
+        parent_[v] = -1;
+      }
+    }
+  }
+  return dist_;
+}
+
+}  // namespace tpr::extract
