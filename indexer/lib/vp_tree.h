@@ -1,0 +1,171 @@
+// VpTree: an exact metric index (vantage-point tree, Tam & Lau 2007 section
+// 6.2; Yianilos 1993) over items 0..n-1 under any metric, with exact k-NN,
+// range and ranked (incremental, best-first) search. The metric is supplied
+// as callbacks, so the same tree serves the EMD (signature_index.h) and, in
+// tests, plain vectors under L1/L2.
+//
+//   absl::StatusOr<VpTree> tree = VpTree::Build(n, pair_distance, {});
+//   QuerySpec q; q.distance = [&](uint32_t i) { return Dist(query, item[i]); };
+//   for (const ItemNeighbor& nb : tree->Knn(q, 10)) Use(nb.item, nb.distance);
+//
+// Shape: each internal node holds one vantage point (chosen among a few
+// random candidates for the largest spread of distances, as NMSLIB does) and
+// splits the rest at the median distance into an inner and an outer child;
+// leaves hold buckets of up to leaf_size items. Every node stores, for each
+// of its ancestors' vantage points, the [min, max] distance from that point
+// to the items below it, and every item its distance to each ancestor's
+// vantage point; both are by-products of the build and give tight
+// triangle-inequality bounds without extra distance computations.
+#ifndef TPR_INDEXER_LIB_VP_TREE_H_
+#define TPR_INDEXER_LIB_VP_TREE_H_
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+
+namespace tpr::index {
+
+// SearchStats counts the work of one search.
+struct SearchStats {
+  // Full metric evaluations (EMDs), vantage points included.
+  int64_t emd_computations = 0;
+  // Cheap lower bounds evaluated (QuerySpec::lower_bound calls).
+  int64_t lower_bounds = 0;
+  // Tree nodes expanded.
+  int64_t nodes_visited = 0;
+};
+
+// ItemNeighbor is one result of a search by item number.
+struct ItemNeighbor {
+  uint32_t item = 0;
+  double distance = 0.0;
+};
+
+// VpTreeOptions shapes a VpTree. The paper's tree has fan-out 2 and at most
+// two points per node (7.4); we keep fan-out 2 but use leaf buckets, whose
+// items are filtered by stored distances at no metric cost.
+struct VpTreeOptions {
+  // Largest bucket at a leaf. Default: 16.
+  size_t leaf_size = 16;
+  // Vantage-point candidates drawn at random per node; the one whose
+  // distances to a sample have the largest spread wins. 1 = random choice.
+  // Default: 5.
+  size_t vantage_candidates = 5;
+  // Items each candidate is compared with. Nodes with fewer than
+  // 4 * vantage_sample items use 1 candidate (the saving is not worth the
+  // distances there). Default: 16.
+  size_t vantage_sample = 16;
+  // Seed of the candidate draw; the same seed and data give the same tree.
+  // Default: 1.
+  uint64_t seed = 1;
+  // Threads computing distances during the build (the pair metric must then
+  // be thread-safe). Default: 1.
+  int build_threads = 1;
+};
+
+// PairDistance returns d(item i, item j) >= 0; it must be a metric.
+using PairDistance = std::function<double(uint32_t, uint32_t)>;
+
+// QuerySpec is how a search sees its query.
+struct QuerySpec {
+  // Required: d(query, item). May return NaN for an item whose point is not
+  // available; such an item is never returned and its distances are not used
+  // for pruning.
+  std::function<double(uint32_t)> distance;
+  // Optional: a cheap bound <= distance(item) (the EMD centroid bound); it
+  // is consulted before every non-vantage distance.
+  std::function<double(uint32_t)> lower_bound;
+  // Optional: false for items that must never be returned (tombstones,
+  // filters); their distance is then not computed unless they are vantage
+  // points. Called at most once per item per search.
+  std::function<bool(uint32_t)> accept;
+  // Optional: strict order among items at equal distance. Default: item
+  // number.
+  std::function<bool(uint32_t, uint32_t)> tie_less;
+  // Items outside the tree (an unindexed buffer), searched linearly.
+  std::vector<uint32_t> extra_items;
+  // Only items with distance <= radius are returned. Default: unlimited.
+  double radius = std::numeric_limits<double>::infinity();
+};
+
+// NeighborCursor yields results in ascending (distance, tie_less) order.
+// Not thread-safe; the index it came from must outlive it.
+class NeighborCursor {
+ public:
+  virtual ~NeighborCursor() = default;
+  // Next returns the next neighbour, nullopt when none is left.
+  virtual std::optional<ItemNeighbor> Next() = 0;
+  // stats returns the work done so far.
+  virtual const SearchStats& stats() const = 0;
+};
+
+// VpTree is immutable once built; searches on one tree may run concurrently.
+class VpTree {
+ public:
+  // An empty tree (size 0).
+  VpTree();
+  ~VpTree();
+  VpTree(VpTree&&) noexcept;
+  VpTree& operator=(VpTree&&) noexcept;
+
+  // Build indexes items 0..n-1 under `distance` (a metric; thread-safe when
+  // options.build_threads > 1). Returns INVALID_ARGUMENT for a bad option or
+  // n >= 2^32 - 1, CANCELLED when *cancel becomes true meanwhile.
+  // Cost: about n * (log2(n / leaf_size) + 1) distances plus
+  // vantage_candidates * vantage_sample per large node; O(n log n) memory.
+  static absl::StatusOr<VpTree> Build(size_t n, const PairDistance& distance,
+                                      const VpTreeOptions& options,
+                                      const std::atomic<bool>* cancel = nullptr);
+
+  // size returns the number of items indexed.
+  size_t size() const;
+  // height returns the number of internal levels on the longest path.
+  size_t height() const;
+  // node_count returns the number of nodes.
+  size_t node_count() const;
+
+  // Search starts a ranked search (best-first over node lower bounds, with
+  // lazily refined item bounds: stored distance, then the cheap bound, then
+  // the metric). Each item is returned as soon as no unexplored node or
+  // unrefined item can beat it, so the metric is computed only for items
+  // whose bounds are below the last distance returned. spec.distance is
+  // required. The cursor refers to this tree.
+  std::unique_ptr<NeighborCursor> Search(QuerySpec spec) const;
+  // Knn returns the first min(k, available) results of Search.
+  std::vector<ItemNeighbor> Knn(QuerySpec spec, size_t k,
+                                SearchStats* stats = nullptr) const;
+  // Range returns every result within spec.radius, in order.
+  std::vector<ItemNeighbor> Range(QuerySpec spec,
+                                  SearchStats* stats = nullptr) const;
+
+  // Serialize returns the tree as versioned, checksummed bytes (structure
+  // and stored distances; no points). O(n log n) bytes.
+  std::string Serialize() const;
+  // Deserialize reads Serialize() bytes. Returns INVALID_ARGUMENT for bytes
+  // that are not a VP-tree or of an unknown version, DATA_LOSS for truncated
+  // or corrupt ones. Never crashes on arbitrary input.
+  static absl::StatusOr<VpTree> Deserialize(absl::string_view bytes);
+
+  struct Node;  // defined in vp_tree.cc
+
+ private:
+  friend class VpTreeBuilder;
+  friend class VpCursor;
+  friend class VpTreeReader;
+  struct Data;
+  std::unique_ptr<Data> data_;
+};
+
+}  // namespace tpr::index
+
+#endif  // TPR_INDEXER_LIB_VP_TREE_H_
