@@ -1,0 +1,203 @@
+// The TPR Search C++ SDK: typed calls to tpr-extractor (mesh -> signature)
+// and tpr-indexer (store signatures, k-NN search under EMD), with
+// absl::Status errors, per-call deadlines, retries with exponential backoff
+// on UNAVAILABLE for idempotent calls, a streaming k-NN iterator that can be
+// stopped early, and channels over several addresses or a dns:/// name with
+// round-robin load balancing. Messages are the tpr.v1 protobuf types.
+//
+//   auto extractor = tpr::client::ExtractorClient::Connect("127.0.0.1:7001,127.0.0.1:7011");
+//   auto indexer = tpr::client::IndexerClient::Connect("127.0.0.1:7002");
+//   absl::StatusOr<tpr::v1::ExtractResponse> r = extractor->ExtractFile("dog.off");
+//   tpr::v1::Model model;  model.set_id("dog.off");  *model.mutable_signature() = r->signature();
+//   absl::Status s = indexer->Upsert(model, /*overwrite=*/true).status();
+//   tpr::v1::SearchRequest q;  q.set_id("dog.off");  q.set_k(5);
+//   std::unique_ptr<tpr::client::SearchStream> stream = indexer->Search(q);
+//   for (tpr::v1::Neighbor n; stream->Next(&n);) Print(n.rank(), n.id(), n.distance());
+//   absl::Status done = stream->Finish();   // OK, or why the stream broke
+//
+// Thread-safety: ExtractorClient and IndexerClient are thread-safe and cheap
+// to copy (they share one channel). SearchStream and BatchUpsertWriter
+// objects belong to one thread at a time.
+#ifndef TPR_CLIENT_CLIENT_H_
+#define TPR_CLIENT_CLIENT_H_
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/channel.h>
+#include <grpcpp/client_context.h>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "tpr/v1/extractor.grpc.pb.h"
+#include "tpr/v1/indexer.grpc.pb.h"
+
+namespace tpr::client {
+
+// CallOptions: deadline and retry policy of one call.
+struct CallOptions {
+  // Deadline for the whole call, retries included, measured from the call's
+  // start. Default 60 s. absl::InfiniteDuration() for none.
+  absl::Duration timeout = absl::Seconds(60);
+  // Attempts for idempotent calls that fail with UNAVAILABLE (extract, get,
+  // list, search before its first result, stats, upsert with overwrite);
+  // 1 disables retries. Other calls and other codes are never retried.
+  // Default 4.
+  int max_attempts = 4;
+  // Wait before the second attempt; each later wait is multiplied by
+  // backoff_multiplier up to max_backoff, with +-20% jitter so that clients
+  // do not retry in lockstep. Defaults 100 ms, 2.0, 2 s.
+  absl::Duration initial_backoff = absl::Milliseconds(100);
+  double backoff_multiplier = 2.0;
+  absl::Duration max_backoff = absl::Seconds(2);
+};
+
+// ChannelTarget returns the gRPC target for `addresses`:
+//   "127.0.0.1:7001"                   -> "ipv4:127.0.0.1:7001"
+//   "127.0.0.1:7001,127.0.0.1:7002"    -> "ipv4:127.0.0.1:7001,127.0.0.1:7002"
+//   "[::1]:7001,[::1]:7002"            -> "ipv6:[::1]:7001,[::1]:7002"
+//   "localhost:7001"                   -> "dns:///localhost:7001"
+//   "dns:///name:7001", "ipv4:...", "unix:/path" -> unchanged.
+// Errors: INVALID_ARGUMENT for an empty list, an entry without a port, a
+// list mixing families, or several host names (use one dns:/// name that
+// resolves to several addresses instead). O(length). Thread-safe.
+absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses);
+
+// MakeChannel returns an insecure channel to ChannelTarget(addresses) with
+// round_robin load balancing (every resolved address gets calls in turn)
+// and 64 MiB message limits. Connection happens lazily on the first call.
+// Errors: those of ChannelTarget.
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses);
+
+// kChunkBytes is the size of one upload message of ExtractorClient: 1 MiB,
+// well under gRPC's 4 MiB default message limit.
+inline constexpr size_t kChunkBytes = size_t{1} << 20;
+
+// ExtractorClient calls tpr.v1.Extractor.
+class ExtractorClient {
+ public:
+  // Uses `channel` (see MakeChannel); `defaults` apply to calls that pass no
+  // CallOptions.
+  explicit ExtractorClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
+
+  // Connect returns a client over MakeChannel(addresses).
+  static absl::StatusOr<ExtractorClient> Connect(absl::string_view addresses,
+                                                 CallOptions defaults = {});
+
+  // ExtractFile reads the mesh file at `path` and calls ExtractBytes with its
+  // base name. NOT_FOUND when the file cannot be read; otherwise as
+  // ExtractBytes. Cost: one read of the file plus the call.
+  absl::StatusOr<v1::ExtractResponse> ExtractFile(const std::string& path,
+                                                  const v1::ExtractOptions& options = {},
+                                                  const CallOptions* call = nullptr) const;
+
+  // ExtractBytes uploads `bytes` in kChunkBytes messages (the first carries
+  // format, file_name and options) and returns the server's response.
+  // Errors: the server's code and message (INVALID_ARGUMENT for a malformed
+  // mesh, RESOURCE_EXHAUSTED above its limits or when it is busy,
+  // DEADLINE_EXCEEDED, UNAVAILABLE after max_attempts). Retried on
+  // UNAVAILABLE (extraction is a pure function of bytes and options).
+  absl::StatusOr<v1::ExtractResponse> ExtractBytes(absl::string_view bytes,
+                                                   absl::string_view file_name,
+                                                   const v1::ExtractOptions& options = {},
+                                                   v1::MeshFormat format =
+                                                       v1::MESH_FORMAT_UNSPECIFIED,
+                                                   const CallOptions* call = nullptr) const;
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
+  std::shared_ptr<v1::Extractor::Stub> stub_;
+  CallOptions defaults_;
+};
+
+// SearchStream iterates over the neighbours of one k-NN search as the server
+// streams them, in ascending distance. Destroying it (or calling Cancel)
+// before the end cancels the RPC, which stops the server's search.
+class SearchStream {
+ public:
+  virtual ~SearchStream() = default;
+  // Next stores the next neighbour in `*neighbor` and returns true, or
+  // returns false at the end of the stream or on error (see Finish). Blocks
+  // until the server sends the neighbour.
+  virtual bool Next(v1::Neighbor* neighbor) = 0;
+  // Cancel stops the search early; later Next calls return false and
+  // Finish returns OK (a cancel asked for by the caller is not an error).
+  virtual void Cancel() = 0;
+  // Finish returns how the stream ended: OK after the last neighbour (or a
+  // Cancel), otherwise the server's error (INVALID_ARGUMENT for k < 1 or a
+  // negative radius, NOT_FOUND for an unknown query id, DEADLINE_EXCEEDED,
+  // UNAVAILABLE). Drains and discards unread neighbours first.
+  virtual absl::Status Finish() = 0;
+  // Stats returns the server's search statistics once the stream ended
+  // normally, else nullptr.
+  virtual const v1::SearchStats* Stats() const = 0;
+};
+
+// BatchUpsertWriter streams models to one BatchUpsert call.
+class BatchUpsertWriter {
+ public:
+  virtual ~BatchUpsertWriter() = default;
+  // Write sends one model. Returns false when the stream is broken (the
+  // server failed the call); Finish then says why. Blocks under flow control.
+  virtual bool Write(const v1::Model& model, bool overwrite) = 0;
+  // Finish closes the stream and returns the server's counts, or its error
+  // (models before the failing one are kept). Call exactly once.
+  virtual absl::StatusOr<v1::BatchUpsertResponse> Finish() = 0;
+};
+
+// IndexerClient calls tpr.v1.Indexer.
+class IndexerClient {
+ public:
+  explicit IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
+  static absl::StatusOr<IndexerClient> Connect(absl::string_view addresses,
+                                               CallOptions defaults = {});
+
+  // Upsert stores `model`; returns true when the id was new. ALREADY_EXISTS
+  // when the id exists and !overwrite; INVALID_ARGUMENT for a bad id or
+  // signature. Retried on UNAVAILABLE only when overwrite (then repeating it
+  // is harmless).
+  absl::StatusOr<bool> Upsert(const v1::Model& model, bool overwrite,
+                              const CallOptions* call = nullptr) const;
+
+  // BatchUpsert starts a streaming batch upsert under one deadline. Never
+  // retried (the stream is not replayable).
+  std::unique_ptr<BatchUpsertWriter> BatchUpsert(const CallOptions* call = nullptr) const;
+
+  // Delete removes `id`. NOT_FOUND when unknown. Not retried (a retry after
+  // a lost reply would report NOT_FOUND for a delete that happened).
+  absl::Status Delete(const std::string& id, const CallOptions* call = nullptr) const;
+
+  // Get returns the model `id` with its signature. NOT_FOUND when unknown.
+  absl::StatusOr<v1::Model> Get(const std::string& id, const CallOptions* call = nullptr) const;
+
+  // List returns one page (see ListRequest). Retried on UNAVAILABLE.
+  absl::StatusOr<v1::ListResponse> List(const v1::ListRequest& request,
+                                        const CallOptions* call = nullptr) const;
+
+  // ListAll pages through every model (with `label` if non-empty) and
+  // returns them in id order, without signatures. Cost: one call per 1000.
+  absl::StatusOr<std::vector<v1::Model>> ListAll(const std::string& label = "",
+                                                 const CallOptions* call = nullptr) const;
+
+  // Search starts a k-NN search (see SearchRequest) and returns its stream.
+  // Retried on UNAVAILABLE while no neighbour has been delivered yet. Errors
+  // arrive through SearchStream::Finish.
+  std::unique_ptr<SearchStream> Search(const v1::SearchRequest& request,
+                                       const CallOptions* call = nullptr) const;
+
+  // Stats returns the server's counts and sizes.
+  absl::StatusOr<v1::StatsResponse> Stats(const CallOptions* call = nullptr) const;
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
+  std::shared_ptr<v1::Indexer::Stub> stub_;
+  CallOptions defaults_;
+};
+
+}  // namespace tpr::client
+
+#endif  // TPR_CLIENT_CLIENT_H_

@@ -1,0 +1,442 @@
+#include "tpr/client.h"
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <thread>
+#include <utility>
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+#include "common/grpc_status.h"
+
+namespace tpr::client {
+namespace {
+
+// Whether `host` is a dotted IPv4 literal (four decimal groups).
+bool IsIpv4Literal(absl::string_view host) {
+  std::vector<absl::string_view> parts = absl::StrSplit(host, '.');
+  if (parts.size() != 4) return false;
+  for (absl::string_view p : parts) {
+    if (p.empty() || p.size() > 3) return false;
+    for (char c : p) {
+      if (!absl::ascii_isdigit(static_cast<unsigned char>(c))) return false;
+    }
+  }
+  return true;
+}
+
+enum class Family { kIpv4, kIpv6, kName };
+
+absl::StatusOr<Family> ClassifyAddress(absl::string_view address) {
+  if (absl::StartsWith(address, "[")) {
+    const size_t close = address.find(']');
+    if (close == absl::string_view::npos || close + 1 >= address.size() ||
+        address[close + 1] != ':' || close + 2 >= address.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("address '", address, "' needs the form [v6]:PORT"));
+    }
+    return Family::kIpv6;
+  }
+  const size_t colon = address.rfind(':');
+  if (colon == absl::string_view::npos || colon == 0 || colon + 1 == address.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("address '", address, "' needs the form HOST:PORT"));
+  }
+  return IsIpv4Literal(address.substr(0, colon)) ? Family::kIpv4 : Family::kName;
+}
+
+std::chrono::system_clock::time_point DeadlineFor(const CallOptions& call) {
+  if (call.timeout == absl::InfiniteDuration()) {
+    return std::chrono::system_clock::time_point::max();
+  }
+  return std::chrono::system_clock::now() +
+         std::chrono::microseconds(absl::ToInt64Microseconds(call.timeout));
+}
+
+// Runs `attempt(context)` until it succeeds, fails with a code other than
+// UNAVAILABLE, attempts run out, or the next backoff would pass the
+// deadline. Every attempt gets a fresh context with the call's deadline.
+// Backoff is hand-written rather than gRPC's service-config retry policy so
+// that the rule "retry only idempotent calls" lives next to each call and
+// the jitter does not depend on channel configuration.
+template <typename Attempt>
+grpc::Status WithRetries(const CallOptions& call, bool idempotent, Attempt&& attempt) {
+  const auto deadline = DeadlineFor(call);
+  const int attempts = idempotent ? std::max(1, call.max_attempts) : 1;
+  absl::Duration backoff = call.initial_backoff;
+  thread_local std::mt19937 rng(std::random_device{}());
+  grpc::Status status;
+  for (int i = 0; i < attempts; ++i) {
+    grpc::ClientContext context;
+    context.set_deadline(deadline);
+    status = attempt(&context);
+    if (status.error_code() != grpc::StatusCode::UNAVAILABLE || i + 1 == attempts) break;
+    std::uniform_real_distribution<double> jitter(0.8, 1.2);
+    const auto wait = std::chrono::microseconds(
+        static_cast<int64_t>(absl::ToDoubleMicroseconds(backoff) * jitter(rng)));
+    if (std::chrono::system_clock::now() + wait >= deadline) break;
+    std::this_thread::sleep_for(wait);
+    backoff = std::min(call.max_backoff, backoff * call.backoff_multiplier);
+  }
+  return status;
+}
+
+absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open mesh file ", path));
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  if (in.bad()) return absl::DataLossError(absl::StrCat("cannot read mesh file ", path));
+  return std::move(buffer).str();
+}
+
+}  // namespace
+
+absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
+  addresses = absl::StripAsciiWhitespace(addresses);
+  if (addresses.empty()) return absl::InvalidArgumentError("no server address given");
+  // Already a gRPC target with a resolver scheme.
+  for (absl::string_view scheme : {"dns:", "ipv4:", "ipv6:", "unix:", "unix-abstract:"}) {
+    if (absl::StartsWith(addresses, scheme)) return std::string(addresses);
+  }
+  std::vector<std::string> list;
+  for (absl::string_view a : absl::StrSplit(addresses, ',', absl::SkipWhitespace())) {
+    list.emplace_back(absl::StripAsciiWhitespace(a));
+  }
+  if (list.empty()) return absl::InvalidArgumentError("no server address given");
+  std::vector<Family> families;
+  for (const std::string& a : list) {
+    absl::StatusOr<Family> f = ClassifyAddress(a);
+    if (!f.ok()) return f.status();
+    families.push_back(*f);
+  }
+  if (std::any_of(families.begin(), families.end(),
+                  [&](Family f) { return f != families.front(); })) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "addresses '", addresses, "' mix IPv4, IPv6 and host names; list one kind"));
+  }
+  switch (families.front()) {
+    case Family::kIpv4:
+      return absl::StrCat("ipv4:", absl::StrJoin(list, ","));
+    case Family::kIpv6:
+      return absl::StrCat("ipv6:", absl::StrJoin(list, ","));
+    case Family::kName:
+      if (list.size() > 1) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "addresses '", addresses,
+            "' list several host names; give IP literals or one dns:///NAME:PORT"));
+      }
+      return absl::StrCat("dns:///", list.front());
+  }
+  return absl::InternalError("unreachable");
+}
+
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses) {
+  absl::StatusOr<std::string> target = ChannelTarget(addresses);
+  if (!target.ok()) return target.status();
+  grpc::ChannelArguments args;
+  args.SetLoadBalancingPolicyName("round_robin");
+  args.SetMaxReceiveMessageSize(64 << 20);
+  args.SetMaxSendMessageSize(64 << 20);
+  return grpc::CreateCustomChannel(*target, grpc::InsecureChannelCredentials(), args);
+}
+
+// --- ExtractorClient ---------------------------------------------------------
+
+ExtractorClient::ExtractorClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults)
+    : channel_(std::move(channel)),
+      stub_(v1::Extractor::NewStub(channel_)),
+      defaults_(defaults) {}
+
+absl::StatusOr<ExtractorClient> ExtractorClient::Connect(absl::string_view addresses,
+                                                         CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = MakeChannel(addresses);
+  if (!channel.ok()) return channel.status();
+  return ExtractorClient(*std::move(channel), defaults);
+}
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
+    const std::string& path, const v1::ExtractOptions& options, const CallOptions* call) const {
+  absl::StatusOr<std::string> bytes = ReadWholeFile(path);
+  if (!bytes.ok()) return bytes.status();
+  const size_t slash = path.find_last_of('/');
+  const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
+  return ExtractBytes(*bytes, name, options, v1::MESH_FORMAT_UNSPECIFIED, call);
+}
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
+    absl::string_view bytes, absl::string_view file_name, const v1::ExtractOptions& options,
+    v1::MeshFormat format, const CallOptions* call) const {
+  v1::ExtractResponse response;
+  grpc::Status status = WithRetries(
+      call ? *call : defaults_, /*idempotent=*/true, [&](grpc::ClientContext* context) {
+        response.Clear();
+        std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer =
+            stub_->Extract(context, &response);
+        size_t offset = 0;
+        bool first = true;
+        // The first message always goes out, even for empty bytes, so that
+        // the server sees the header (and reports "no mesh data").
+        while (first || offset < bytes.size()) {
+          v1::ExtractRequest request;
+          if (first) {
+            request.set_format(format);
+            request.set_file_name(std::string(file_name));
+            *request.mutable_options() = options;
+          }
+          const size_t n = std::min(kChunkBytes, bytes.size() - offset);
+          request.set_data(bytes.data() + offset, n);
+          offset += n;
+          first = false;
+          // A failed write means the server already ended the call (for
+          // example RESOURCE_EXHAUSTED at its byte limit): Finish says why.
+          if (!writer->Write(request)) break;
+        }
+        writer->WritesDone();
+        return writer->Finish();
+      });
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response;
+}
+
+// --- IndexerClient -------------------------------------------------------------
+
+namespace {
+
+class GrpcBatchUpsertWriter final : public BatchUpsertWriter {
+ public:
+  GrpcBatchUpsertWriter(std::shared_ptr<v1::Indexer::Stub> stub, const CallOptions& call)
+      : stub_(std::move(stub)) {
+    context_.set_deadline(DeadlineFor(call));
+    writer_ = stub_->BatchUpsert(&context_, &response_);
+  }
+  ~GrpcBatchUpsertWriter() override {
+    if (!finished_) {
+      context_.TryCancel();
+      writer_->Finish();
+    }
+  }
+  bool Write(const v1::Model& model, bool overwrite) override {
+    v1::UpsertRequest request;
+    *request.mutable_model() = model;
+    request.set_overwrite(overwrite);
+    return writer_->Write(request);
+  }
+  absl::StatusOr<v1::BatchUpsertResponse> Finish() override {
+    finished_ = true;
+    writer_->WritesDone();
+    grpc::Status status = writer_->Finish();
+    if (!status.ok()) return FromGrpcStatus(status);
+    return response_;
+  }
+
+ private:
+  // Shared so that the writer may outlive the client that made it.
+  std::shared_ptr<v1::Indexer::Stub> stub_;
+  grpc::ClientContext context_;
+  v1::BatchUpsertResponse response_;
+  std::unique_ptr<grpc::ClientWriter<v1::UpsertRequest>> writer_;
+  bool finished_ = false;
+};
+
+class GrpcSearchStream final : public SearchStream {
+ public:
+  GrpcSearchStream(std::shared_ptr<v1::Indexer::Stub> stub, v1::SearchRequest request, const CallOptions& call)
+      : stub_(std::move(stub)), request_(std::move(request)), call_(call), deadline_(DeadlineFor(call)) {
+    Start();
+  }
+  ~GrpcSearchStream() override {
+    if (!done_) {
+      context_->TryCancel();
+      reader_->Finish();
+    }
+  }
+
+  bool Next(v1::Neighbor* neighbor) override {
+    while (!done_) {
+      v1::SearchResponse response;
+      if (reader_->Read(&response)) {
+        if (response.has_neighbor()) {
+          ++delivered_;
+          *neighbor = response.neighbor();
+          return true;
+        }
+        if (response.has_stats()) {
+          stats_ = response.stats();
+          has_stats_ = true;
+        }
+        continue;
+      }
+      grpc::Status status = reader_->Finish();
+      // Nothing delivered yet: the search may be repeated elsewhere.
+      if (status.error_code() == grpc::StatusCode::UNAVAILABLE && delivered_ == 0 &&
+          attempt_ < std::max(1, call_.max_attempts) && Backoff()) {
+        Start();
+        continue;
+      }
+      done_ = true;
+      status_ = cancelled_ ? absl::OkStatus() : FromGrpcStatus(status);
+      if (!status_.ok()) has_stats_ = false;
+    }
+    return false;
+  }
+
+  void Cancel() override {
+    if (done_) return;
+    cancelled_ = true;
+    context_->TryCancel();
+  }
+
+  absl::Status Finish() override {
+    v1::Neighbor ignored;
+    while (Next(&ignored)) {
+    }
+    return status_;
+  }
+
+  const v1::SearchStats* Stats() const override {
+    return done_ && has_stats_ ? &stats_ : nullptr;
+  }
+
+ private:
+  void Start() {
+    ++attempt_;
+    context_ = std::make_unique<grpc::ClientContext>();
+    context_->set_deadline(deadline_);
+    reader_ = stub_->Search(context_.get(), request_);
+  }
+  // Sleeps before the next attempt; false when that would pass the deadline.
+  bool Backoff() {
+    absl::Duration wait = call_.initial_backoff;
+    for (int i = 1; i < attempt_; ++i) wait = std::min(call_.max_backoff, wait * call_.backoff_multiplier);
+    const auto w = std::chrono::microseconds(absl::ToInt64Microseconds(wait));
+    if (std::chrono::system_clock::now() + w >= deadline_) return false;
+    std::this_thread::sleep_for(w);
+    return true;
+  }
+
+  std::shared_ptr<v1::Indexer::Stub> stub_;
+  const v1::SearchRequest request_;
+  const CallOptions call_;
+  const std::chrono::system_clock::time_point deadline_;
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<grpc::ClientReader<v1::SearchResponse>> reader_;
+  int attempt_ = 0;
+  int64_t delivered_ = 0;
+  bool done_ = false;
+  bool cancelled_ = false;
+  absl::Status status_;
+  v1::SearchStats stats_;
+  bool has_stats_ = false;
+};
+
+}  // namespace
+
+IndexerClient::IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults)
+    : channel_(std::move(channel)),
+      stub_(v1::Indexer::NewStub(channel_)),
+      defaults_(defaults) {}
+
+absl::StatusOr<IndexerClient> IndexerClient::Connect(absl::string_view addresses,
+                                                     CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = MakeChannel(addresses);
+  if (!channel.ok()) return channel.status();
+  return IndexerClient(*std::move(channel), defaults);
+}
+
+absl::StatusOr<bool> IndexerClient::Upsert(const v1::Model& model, bool overwrite,
+                                           const CallOptions* call) const {
+  v1::UpsertRequest request;
+  *request.mutable_model() = model;
+  request.set_overwrite(overwrite);
+  v1::UpsertResponse response;
+  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/overwrite,
+                                    [&](grpc::ClientContext* context) {
+                                      return stub_->Upsert(context, request, &response);
+                                    });
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response.created();
+}
+
+std::unique_ptr<BatchUpsertWriter> IndexerClient::BatchUpsert(const CallOptions* call) const {
+  return std::make_unique<GrpcBatchUpsertWriter>(stub_, call ? *call : defaults_);
+}
+
+absl::Status IndexerClient::Delete(const std::string& id, const CallOptions* call) const {
+  v1::DeleteRequest request;
+  request.set_id(id);
+  v1::DeleteResponse response;
+  return FromGrpcStatus(WithRetries(call ? *call : defaults_, /*idempotent=*/false,
+                                    [&](grpc::ClientContext* context) {
+                                      return stub_->Delete(context, request, &response);
+                                    }));
+}
+
+absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
+                                             const CallOptions* call) const {
+  v1::GetRequest request;
+  request.set_id(id);
+  v1::Model response;
+  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+                                    [&](grpc::ClientContext* context) {
+                                      return stub_->Get(context, request, &response);
+                                    });
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response;
+}
+
+absl::StatusOr<v1::ListResponse> IndexerClient::List(const v1::ListRequest& request,
+                                                     const CallOptions* call) const {
+  v1::ListResponse response;
+  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+                                    [&](grpc::ClientContext* context) {
+                                      return stub_->List(context, request, &response);
+                                    });
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response;
+}
+
+absl::StatusOr<std::vector<v1::Model>> IndexerClient::ListAll(const std::string& label,
+                                                              const CallOptions* call) const {
+  std::vector<v1::Model> models;
+  v1::ListRequest request;
+  request.set_page_size(1000);
+  request.set_label(label);
+  while (true) {
+    absl::StatusOr<v1::ListResponse> page = List(request, call);
+    if (!page.ok()) return page.status();
+    for (v1::Model& m : *page->mutable_models()) models.push_back(std::move(m));
+    if (page->next_page_token().empty()) break;
+    request.set_page_token(page->next_page_token());
+  }
+  return models;
+}
+
+std::unique_ptr<SearchStream> IndexerClient::Search(const v1::SearchRequest& request,
+                                                    const CallOptions* call) const {
+  return std::make_unique<GrpcSearchStream>(stub_, request, call ? *call : defaults_);
+}
+
+absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(const CallOptions* call) const {
+  v1::StatsRequest request;
+  v1::StatsResponse response;
+  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+                                    [&](grpc::ClientContext* context) {
+                                      return stub_->Stats(context, request, &response);
+                                    });
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response;
+}
+
+}  // namespace tpr::client
