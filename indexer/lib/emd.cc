@@ -1,0 +1,488 @@
+// Exact EMD by a network simplex specialized for small dense transportation
+// problems, and the centroid lower bound.
+//
+// Why hand-written. LEMON's NetworkSimplex (Boost licence, Debian
+// liblemon-dev) is correct and is our test oracle, but it is generic graph
+// code: building a ListDigraph of n m arcs, node and arc maps, and its
+// artificial-root start cost more than the whole solve for n, m ~ 30.
+// Rubner's emd.c keeps static state (not thread-safe) and has fixed maximum
+// sizes. Here the arcs are implicit (arc (i, j) is cell (i, j) of a dense
+// cost matrix computed by a vectorized kernel), the start is a greedy basis
+// that is already close to optimal, and every buffer is reused.
+//
+// The method (network simplex for the transportation problem):
+//   nodes: supplies 0..n-1 (masses of a), demands n..n+m-1 (masses of b),
+//          and an artificial root R = n + m;
+//   arcs:  i -> n+j for every cell, cost Dist(a_i, b_j), uncapacitated;
+//          R -> v for every node, cost 0, never allowed to enter.
+// The spanning tree is stored as parent pointers plus intrusive child
+// lists; the flow of the tree arc joining v to parent[v] is flow[v]. The
+// direction of a tree arc follows from the node types (supply -> demand,
+// root -> anything), so it is not stored.
+//
+// Start. A least-cost-per-row greedy assignment ships all mass along at
+// most n + m - 1 cells, which form a forest (each allocation exhausts its
+// row or its column, so no cycle can close). Each forest component hangs
+// from R by an artificial arc R -> v of flow 0. Every zero-flow tree arc is
+// therefore an artificial arc directed away from the root: the tree is
+// STRONGLY FEASIBLE (Cunningham 1976).
+//
+// Degeneracy and cycling. The leaving arc is chosen by Cunningham's rule:
+// among the blocking arcs of the pivot cycle, the last one met when the
+// cycle is traversed in the direction of the entering arc starting at the
+// apex (the join of the two tree paths). This keeps the tree strongly
+// feasible after every pivot, which rules out cycling whatever the entering
+// rule (degenerate pivots, zero-mass features, ties and identical
+// signatures included). LEMON uses the same rule.
+//
+// Artificial arcs never carry mass: a cycle through R uses two of them,
+// and the one it traverses backwards blocks with flow 0, so such a pivot is
+// degenerate (it merges two components). Hence the final flow is feasible
+// for the real arcs alone, every real tree arc has reduced cost 0 and every
+// other real arc has reduced cost >= -tolerance: the LP optimality
+// conditions hold, so the flow is an optimal transport plan.
+#include "indexer/lib/emd.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+namespace tpr::index {
+namespace {
+
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
+#define TPR_MULTIVERSION __attribute__((target_clones("avx2", "default")))
+#else
+#define TPR_MULTIVERSION
+#endif
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Dantzig pricing: the real arc of most negative reduced cost
+// c_ij + u_i - v_j, first in row-major order on ties. `v` is padded to
+// `cs` entries with -inf so padded columns never qualify. Rows are scanned
+// with 8 independent lane minima (vectorizable: no argmin in the hot loop);
+// only a row that beats the best so far is rescanned for its index, with
+// the same expression, hence the same bits.
+TPR_MULTIVERSION
+bool PriceDantzig(const double* cost, int cs, int n, const double* u,
+                  const double* v, double tol, int* ei, int* ej) {
+  double best = -tol;
+  bool found = false;
+  for (int i = 0; i < n; ++i) {
+    const double* row = cost + static_cast<size_t>(i) * cs;
+    const double ui = u[i];
+    double lm[8] = {kInf, kInf, kInf, kInf, kInf, kInf, kInf, kInf};
+    for (int j0 = 0; j0 < cs; j0 += 8) {
+      for (int l = 0; l < 8; ++l) {
+        const double r = row[j0 + l] + ui - v[j0 + l];
+        lm[l] = r < lm[l] ? r : lm[l];
+      }
+    }
+    double rmin = lm[0];
+    for (int l = 1; l < 8; ++l) rmin = lm[l] < rmin ? lm[l] : rmin;
+    if (rmin < best) {
+      for (int j = 0; j < cs; ++j) {
+        if (row[j] + ui - v[j] == rmin) {
+          *ei = i;
+          *ej = j;
+          break;
+        }
+      }
+      best = rmin;
+      found = true;
+    }
+  }
+  return found;
+}
+
+// Largest entry of the n x m block, for the optimality tolerance.
+TPR_MULTIVERSION
+double MaxCost(const double* cost, int cs, int n, int m) {
+  double mx = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const double* row = cost + static_cast<size_t>(i) * cs;
+    for (int j = 0; j < m; ++j) mx = row[j] > mx ? row[j] : mx;
+  }
+  return mx;
+}
+
+}  // namespace
+
+struct EmdSolver::Impl {
+  // Problem.
+  int n = 0;
+  int m = 0;
+  int cs = 0;  // cost row stride (multiple of 8)
+  std::vector<double> cost;  // n x cs
+  std::vector<double> supply;
+  std::vector<double> demand;
+
+  // Tree over n + m + 1 nodes; R = n + m.
+  std::vector<int> parent;
+  std::vector<int> first_child;
+  std::vector<int> next_sib;
+  std::vector<int> prev_sib;
+  std::vector<double> flow;  // flow of the arc joining v and parent[v]
+  std::vector<double> pi;    // potentials; u = pi[0..n), v = pi[n..n+m)
+  std::vector<int> mark;
+  int stamp = 0;
+
+  // Scratch.
+  std::vector<double> vpad;
+  std::vector<double> rem_a;
+  std::vector<double> rem_b;
+  std::vector<int> cell_i;
+  std::vector<int> cell_j;
+  std::vector<double> cell_f;
+  std::vector<int> adj_start;
+  std::vector<int> adj_fill;
+  std::vector<int> adj;
+  std::vector<int> queue;
+  std::vector<int> path;
+
+  EmdStats stats;
+
+  void Reserve(int nn, int mm, int stride) {
+    const size_t nodes = static_cast<size_t>(nn + mm + 1);
+    const size_t cells = static_cast<size_t>(nn) * static_cast<size_t>(stride);
+    if (cost.size() < cells) cost.resize(cells);
+    if (supply.size() < static_cast<size_t>(nn)) supply.resize(nn);
+    if (demand.size() < static_cast<size_t>(mm)) demand.resize(mm);
+    if (rem_a.size() < static_cast<size_t>(nn)) rem_a.resize(nn);
+    if (rem_b.size() < static_cast<size_t>(mm)) rem_b.resize(mm);
+    if (vpad.size() < static_cast<size_t>(stride)) vpad.resize(stride);
+    if (parent.size() < nodes) {
+      parent.resize(nodes);
+      first_child.resize(nodes);
+      next_sib.resize(nodes);
+      prev_sib.resize(nodes);
+      flow.resize(nodes);
+      pi.resize(nodes);
+      mark.resize(nodes, 0);
+      cell_i.resize(nodes);
+      cell_j.resize(nodes);
+      cell_f.resize(nodes);
+      adj_start.resize(nodes + 1);
+      adj_fill.resize(nodes + 1);
+      adj.resize(2 * nodes);
+      queue.resize(nodes);
+      path.resize(nodes);
+    }
+  }
+
+  void Unlink(int v) {
+    const int p = parent[v];
+    if (prev_sib[v] >= 0) {
+      next_sib[prev_sib[v]] = next_sib[v];
+    } else {
+      first_child[p] = next_sib[v];
+    }
+    if (next_sib[v] >= 0) prev_sib[next_sib[v]] = prev_sib[v];
+  }
+
+  void Link(int v, int p) {
+    parent[v] = p;
+    prev_sib[v] = -1;
+    next_sib[v] = first_child[p];
+    if (first_child[p] >= 0) prev_sib[first_child[p]] = v;
+    first_child[p] = v;
+  }
+
+  // Potential of v from its parent: pi[head] = pi[tail] + cost(tail, head)
+  // on every tree arc (reduced cost 0), 0 below R (artificial arcs cost 0).
+  double PotentialFromParent(int v) const {
+    const int p = parent[v];
+    if (p == n + m) return 0.0;
+    if (p < n) {  // arc p -> v, v a demand node
+      return pi[p] + cost[static_cast<size_t>(p) * cs + (v - n)];
+    }
+    // arc v -> p, v a supply node
+    return pi[p] - cost[static_cast<size_t>(v) * cs + (p - n)];
+  }
+
+  // Recomputes potentials in the subtree of s (s included), top-down.
+  // `queue` is free during a pivot.
+  void UpdateSubtreePotentials(int s) {
+    int top = 0;
+    queue[top++] = s;
+    while (top > 0) {
+      const int v = queue[--top];
+      pi[v] = PotentialFromParent(v);
+      for (int c = first_child[v]; c >= 0; c = next_sib[c]) queue[top++] = c;
+    }
+  }
+
+  void InitialBasis();
+  void Pivot(int ei, int ej);
+  double Solve();
+};
+
+// Least cost per row: each row in turn ships its mass to its cheapest
+// columns that still have demand. The allocated cells form a forest (see
+// the top comment). Masses below kDust left over from rounding (the two
+// totals agree only to ~1e-16) are dropped, which changes the cost by less
+// than kDust x the largest cost.
+void EmdSolver::Impl::InitialBasis() {
+  constexpr double kDust = 1e-14;
+  const int root = n + m;
+  for (int v = 0; v <= root; ++v) {
+    first_child[v] = -1;
+    next_sib[v] = -1;
+    prev_sib[v] = -1;
+    parent[v] = -1;
+    flow[v] = 0.0;
+  }
+  for (int i = 0; i < n; ++i) rem_a[i] = supply[i];
+  for (int j = 0; j < m; ++j) rem_b[j] = demand[j];
+  int cells = 0;
+  int active_cols = 0;
+  for (int j = 0; j < m; ++j) active_cols += rem_b[j] > kDust ? 1 : 0;
+  for (int i = 0; i < n && active_cols > 0; ++i) {
+    const double* row = &cost[static_cast<size_t>(i) * cs];
+    while (rem_a[i] > kDust && active_cols > 0) {
+      int best = -1;
+      double best_c = kInf;
+      for (int j = 0; j < m; ++j) {
+        if (rem_b[j] > kDust && row[j] < best_c) {
+          best_c = row[j];
+          best = j;
+        }
+      }
+      const double f = std::min(rem_a[i], rem_b[best]);
+      rem_a[i] -= f;
+      rem_b[best] -= f;
+      cell_i[cells] = i;
+      cell_j[cells] = best;
+      cell_f[cells] = f;
+      ++cells;
+      if (rem_b[best] <= kDust) --active_cols;
+    }
+  }
+  assert(cells <= n + m - 1);
+  // Forest adjacency (CSR), then orientation by BFS from each component's
+  // first node, which hangs from R by a zero-flow artificial arc.
+  for (int v = 0; v <= root + 1; ++v) adj_start[v] = 0;
+  for (int c = 0; c < cells; ++c) {
+    ++adj_start[cell_i[c] + 1];
+    ++adj_start[n + cell_j[c] + 1];
+  }
+  for (int v = 0; v <= root; ++v) adj_start[v + 1] += adj_start[v];
+  for (int v = 0; v <= root; ++v) adj_fill[v] = adj_start[v];
+  for (int c = 0; c < cells; ++c) {
+    adj[adj_fill[cell_i[c]]++] = c;
+    adj[adj_fill[n + cell_j[c]]++] = c;
+  }
+  pi[root] = 0.0;
+  for (int s = 0; s < root; ++s) {
+    if (parent[s] != -1) continue;
+    Link(s, root);
+    pi[s] = 0.0;
+    int head = 0;
+    int tail = 0;
+    queue[tail++] = s;
+    while (head < tail) {
+      const int v = queue[head++];
+      for (int k = adj_start[v]; k < adj_start[v + 1]; ++k) {
+        const int c = adj[k];
+        const int w = (v < n) ? n + cell_j[c] : cell_i[c];
+        if (parent[w] != -1) continue;  // v's parent (acyclic: no other)
+        Link(w, v);
+        flow[w] = cell_f[c];
+        pi[w] = PotentialFromParent(w);
+        queue[tail++] = w;
+      }
+    }
+  }
+}
+
+// One pivot on entering arc ei -> n + ej (reduced cost < 0).
+void EmdSolver::Impl::Pivot(int ei, int ej) {
+  const int root = n + m;
+  const int first = ei;
+  const int second = n + ej;
+  // Apex: mark the path first..R, walk up from second to a marked node.
+  if (stamp == std::numeric_limits<int>::max()) {
+    std::fill(mark.begin(), mark.end(), 0);
+    stamp = 0;
+  }
+  ++stamp;
+  for (int v = first; v != -1; v = parent[v]) mark[v] = stamp;
+  int join = second;
+  while (mark[join] != stamp) join = parent[join];
+
+  // Leaving arc by Cunningham's rule (see the top comment). The cycle runs
+  // join -> ... -> first -> second -> ... -> join. On the first path an arc
+  // is traversed downwards, so it is backward (blocking) when it points up:
+  // a supply node below a demand node. On the second path an arc is
+  // traversed upwards, so it blocks when it points down: a demand node
+  // (below a supply node or R) or an artificial arc. Ties: on the first
+  // path the arc nearest `first` wins (strict <), on the second path the
+  // arc nearest the apex (<=): the last blocking arc in cycle order.
+  double delta = kInf;
+  int u_out = -1;
+  bool out_on_first = true;
+  for (int v = first; v != join; v = parent[v]) {
+    if (v < n && parent[v] != root && flow[v] < delta) {
+      delta = flow[v];
+      u_out = v;
+    }
+  }
+  for (int v = second; v != join; v = parent[v]) {
+    if ((v >= n || parent[v] == root) && flow[v] <= delta) {
+      delta = flow[v];
+      u_out = v;
+      out_on_first = false;
+    }
+  }
+  assert(u_out >= 0);
+  ++stats.pivots;
+  if (delta > 0.0) {
+    // No artificial arc lies on a cycle that moves mass (see the top
+    // comment), so every arc below is real.
+    for (int v = first; v != join; v = parent[v]) {
+      flow[v] += (v < n) ? -delta : delta;
+    }
+    for (int v = second; v != join; v = parent[v]) {
+      flow[v] += (v >= n) ? -delta : delta;
+    }
+  } else {
+    ++stats.degenerate_pivots;
+  }
+
+  // Re-hang the subtree cut off by the leaving arc: s is the entering arc's
+  // endpoint inside it, t the other endpoint. Parent links along s..u_out
+  // reverse, and each arc's flow moves to its new child endpoint.
+  const int s = out_on_first ? first : second;
+  const int t = out_on_first ? second : first;
+  int len = 0;
+  for (int v = s;; v = parent[v]) {
+    path[len++] = v;
+    if (v == u_out) break;
+  }
+  double carried = delta;  // flow of the entering arc
+  for (int k = 0; k < len; ++k) Unlink(path[k]);
+  for (int k = 0; k < len; ++k) {
+    const int v = path[k];
+    const double old = flow[v];
+    Link(v, k == 0 ? t : path[k - 1]);
+    flow[v] = carried;
+    carried = old;
+  }
+  UpdateSubtreePotentials(s);
+}
+
+double EmdSolver::Impl::Solve() {
+  stats = EmdStats{};
+  const int root = n + m;
+  InitialBasis();
+  const double tol = 1e-12 * std::max(MaxCost(cost.data(), cs, n, m), 1e-300);
+  // Safety net against a floating-point stall; never reached in tests (the
+  // strongly feasible tree excludes cycling in exact arithmetic).
+  const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
+  for (int j = m; j < cs; ++j) vpad[j] = -kInf;
+  int ei = 0;
+  int ej = 0;
+  while (stats.pivots < max_pivots) {
+    for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
+    if (!PriceDantzig(cost.data(), cs, n, pi.data(), vpad.data(), tol, &ei,
+                      &ej)) {
+      break;
+    }
+    Pivot(ei, ej);
+  }
+  assert(stats.pivots < max_pivots);
+  double total = 0.0;
+  double moved = 0.0;
+  for (int v = 0; v < root; ++v) {
+    const int p = parent[v];
+    if (p == root || flow[v] == 0.0) continue;
+    const int i = v < n ? v : p;
+    const int j = (v < n ? p : v) - n;
+    total += flow[v] * cost[static_cast<size_t>(i) * cs + j];
+    moved += flow[v];
+  }
+  return moved > 0.0 ? total / moved : 0.0;
+}
+
+EmdSolver::EmdSolver() : impl_(new Impl) {}
+EmdSolver::~EmdSolver() { delete impl_; }
+EmdSolver::EmdSolver(EmdSolver&& other) noexcept : impl_(other.impl_) {
+  other.impl_ = nullptr;
+}
+EmdSolver& EmdSolver::operator=(EmdSolver&& other) noexcept {
+  std::swap(impl_, other.impl_);
+  return *this;
+}
+
+double EmdSolver::Distance(const PreparedSignature& a,
+                           const PreparedSignature& b) {
+  assert(a.size() >= 1 && a.size() <= kMaxFeatures);
+  assert(b.size() >= 1 && b.size() <= kMaxFeatures);
+  if (impl_ == nullptr) impl_ = new Impl;
+  Impl& s = *impl_;
+  s.n = a.size();
+  s.m = b.size();
+  s.cs = b.stride();
+  s.Reserve(s.n, s.m, s.cs);
+  GroundDistanceMatrix(a, b, s.cost.data(), s.cs);
+  for (int i = 0; i < s.n; ++i) s.supply[i] = a.weight(i);
+  for (int j = 0; j < s.m; ++j) s.demand[j] = b.weight(j);
+  return s.Solve();
+}
+
+const EmdStats& EmdSolver::Stats() const { return impl_->stats; }
+
+std::vector<EmdSolver::FlowEntry> EmdSolver::LastFlow() const {
+  std::vector<FlowEntry> out;
+  const Impl& s = *impl_;
+  const int root = s.n + s.m;
+  for (int v = 0; v < root; ++v) {
+    const int p = s.parent[v];
+    if (p == root || s.flow[v] <= 0.0) continue;
+    const int i = v < s.n ? v : p;
+    const int j = (v < s.n ? p : v) - s.n;
+    out.push_back({i, j, s.flow[v]});
+  }
+  return out;
+}
+
+double Emd(const PreparedSignature& a, const PreparedSignature& b) {
+  thread_local EmdSolver solver;
+  return solver.Distance(a, b);
+}
+
+// Centroid bound (Rubner et al. [22], section 4.3). With phi and the norm N
+// of ground_distance.h, Dist(x, y) = N(phi(x) - phi(y)). Let f be any
+// feasible plan: f_ij >= 0, sum_j f_ij = w_i, sum_i f_ij = w'_j, and
+// sum_ij f_ij = 1 (equal total masses, both 1). Then
+//   centroid(a) - centroid(b) = sum_i w_i phi(a_i) - sum_j w'_j phi(b_j)
+//                             = sum_ij f_ij (phi(a_i) - phi(b_j)),
+// and by the triangle inequality and homogeneity of the norm N,
+//   N(centroid(a) - centroid(b)) <= sum_ij f_ij N(phi(a_i) - phi(b_j))
+//                                 = sum_ij f_ij Dist(a_i, b_j).
+// This holds for every plan, so also for the optimal one, whose cost is the
+// EMD (total flow 1, so no normalization). Equal masses are essential: with
+// unequal totals the first equality fails.
+double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
+  const double* ca = a.centroid();
+  const double* cb = b.centroid();
+  const int ba = a.bands();
+  const int bb = b.bands();
+  const int common = std::min(ba, bb);
+  double result = std::abs(ca[0] - cb[0]);
+  for (int block = 0; block < 3; ++block) {
+    const double* x = ca + 1 + block * ba;
+    const double* y = cb + 1 + block * bb;
+    double s = 0.0;
+    for (int d = 0; d < common; ++d) s += (x[d] - y[d]) * (x[d] - y[d]);
+    for (int d = common; d < ba; ++d) s += x[d] * x[d];
+    for (int d = common; d < bb; ++d) s += y[d] * y[d];
+    result += std::sqrt(s);
+  }
+  return result;
+}
+
+}  // namespace tpr::index

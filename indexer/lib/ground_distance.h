@@ -1,0 +1,160 @@
+// Ground distance between two topological features (Tam & Lau 2007, Eq. 7)
+// and signature preparation for the EMD (section 6.1).
+//
+// Eq. 7 compares two features by their Normalized Integral Geodesic G'_norm
+// and their three geometric surface vectors K, A, H (5.3):
+//   Dist(U1, U2) = W1 |G'1 - G'2| + W2 L2norm(K1, K2) + W3 L2norm(A1, A2)
+//                + W4 L2norm(H1, H2).
+// The paper leaves L2norm undefined. Here it is a FIXED scaling of the
+// Euclidean distance, L2norm(X1, X2) = c_X * ||X1 - X2||_2, with c_X an
+// option shared by every signature of an index (never a per-pair
+// normalization such as dividing by ||X1|| + ||X2||, which breaks the
+// triangle inequality). Band vectors of different lengths are compared as
+// if the shorter one were padded with zeros.
+//
+// Why Dist is a metric. Let phi map a feature to the concatenated vector
+//   phi(U) = (W1 G', W2 c_K K, W3 c_A A, W4 c_H H)        (zero-padded)
+// and let N(v) = |v_G| + ||v_K||_2 + ||v_A||_2 + ||v_H||_2 on that space.
+// N is a norm (a sum of norms of the blocks: positive homogeneous,
+// subadditive, zero only at v = 0), and Dist(U1, U2) = N(phi(U1) - phi(U2)).
+// Hence Dist is non-negative, symmetric and satisfies the triangle
+// inequality; Dist(U1, U2) = 0 iff phi(U1) = phi(U2). Two different
+// features with equal coordinates (or features differing only in a block
+// whose weight is 0) are at distance 0: on features Dist is a pseudometric,
+// and a true metric on their images phi(U). That is all the EMD needs:
+// Rubner et al. [22] prove that the EMD between signatures of equal total
+// mass is a metric whenever the ground distance is a metric; with a
+// pseudometric it is a pseudometric on signatures and a metric on the
+// images of signatures (two signatures whose features have equal images and
+// masses are at EMD 0, which is the right answer for retrieval anyway).
+// The norm form is also what makes the centroid lower bound of emd.h valid.
+//
+//   GroundDistanceOptions options;                       // equal weights
+//   absl::StatusOr<PreparedSignature> p = Prepare(signature, options);
+//   double d = GroundDistance(*p, 0, *q, 2);             // feature 0 vs 2
+#ifndef TPR_INDEXER_LIB_GROUND_DISTANCE_H_
+#define TPR_INDEXER_LIB_GROUND_DISTANCE_H_
+
+#include <cstddef>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "indexer/lib/signature.h"
+
+namespace tpr::index {
+
+// GroundDistanceOptions: the weights W1..W4 of Eq. 7 and the fixed scales of
+// its L2norm terms. Every signature of one index must be prepared with the
+// same options, or distances between them mean nothing.
+struct GroundDistanceOptions {
+  // W1..W4 of Eq. 7: relative importance of G'_norm, K, A and H. Must be
+  // >= 0, finite, and sum to 1 within 1e-6 (section 6.1). The paper gives no
+  // values; default 0.25 each (no block favoured).
+  double w1 = 0.25;
+  double w2 = 0.25;
+  double w3 = 0.25;
+  double w4 = 0.25;
+  // c_K: L2norm(K1, K2) = c_K ||K1 - K2||_2. K holds per-band
+  // area-weighted Gaussian curvature x total area, whose area-weighted sum
+  // over the bands is the total curvature 4 pi of a genus-0 surface; the
+  // scale brings it to order 1. Must be > 0 and finite. Default 1/(4 pi).
+  double k_scale = 0.07957747154594767;
+  // c_A: A holds band area / total area (entries >= 0, summing to at most
+  // 1), so ||A1 - A2||_2 <= sqrt(2); the scale maps that range onto [0, 1].
+  // Must be > 0 and finite. Default 1/sqrt(2).
+  double a_scale = 0.7071067811865476;
+  // c_H: H holds segment thickness / sqrt(total area), already of order 1
+  // or less. Must be > 0 and finite. Default 1.
+  double h_scale = 1.0;
+};
+
+// ValidateOptions returns OK when `options` meets the constraints above,
+// INVALID_ARGUMENT naming the offending field otherwise. O(1); thread-safe.
+absl::Status ValidateOptions(const GroundDistanceOptions& options);
+
+// ValidateSignature returns OK when `signature` can be matched:
+// INVALID_ARGUMENT if it has no feature, more than kMaxFeatures features, a
+// weight that is negative or not finite, weights not summing to 1 within
+// 1e-6 (Eq. 6), band vectors K, A, H of unequal lengths (within a feature
+// or across the signature's features), or any non-finite coordinate. The
+// message names the feature index at fault. O(total size); thread-safe.
+absl::Status ValidateSignature(const Signature& signature);
+
+// kMaxFeatures: the largest signature the EMD solver accepts (the paper
+// averages 30 features per model; 200 leaves room for detailed meshes).
+inline constexpr int kMaxFeatures = 200;
+
+// PreparedSignature: what the index stores for one signature. An immutable,
+// flat structure-of-arrays copy holding the scaled coordinates phi(U) of
+// every feature (dimension-major, padded so that a ground-distance row is a
+// vectorizable loop), the masses normalized to sum to 1, and the centroid
+// sum_i w_i phi(U_i) used by EmdLowerBound. Copyable and movable; built only
+// by Prepare. Thread-safe to read from any number of threads.
+class PreparedSignature {
+ public:
+  PreparedSignature() = default;
+
+  // size returns the number of features (0 only for a default-constructed
+  // object, which no function below accepts).
+  int size() const { return size_; }
+  // bands returns the length of the K, A and H vectors.
+  int bands() const { return bands_; }
+  // weight returns the normalized mass of feature i, 0 <= i < size().
+  double weight(int i) const { return weights_[static_cast<size_t>(i)]; }
+  // weights returns all masses (size() values summing to 1).
+  const double* weights() const { return weights_.data(); }
+  // MemoryBytes returns the heap bytes this object holds.
+  size_t MemoryBytes() const {
+    return (weights_.capacity() + coords_.capacity() + centroid_.capacity()) *
+           sizeof(double);
+  }
+
+  // Layout (for emd.cc and the lower bound; not a stable interface):
+  // stride() >= size() is the padded row length, a multiple of 8. Row 0 of
+  // coords() holds W1 G'; rows 1 .. bands() hold W2 c_K K; the next bands()
+  // rows W3 c_A A; the next bands() rows W4 c_H H. Row r, feature i is
+  // coords()[r * stride() + i]; padding entries are 0.
+  int stride() const { return stride_; }
+  const double* coords() const { return coords_.data(); }
+  // centroid returns sum_i weight(i) phi(U_i): 1 + 3 bands() values in row
+  // order.
+  const double* centroid() const { return centroid_.data(); }
+
+ private:
+  friend absl::StatusOr<PreparedSignature> Prepare(
+      const Signature& signature, const GroundDistanceOptions& options);
+
+  int size_ = 0;
+  int bands_ = 0;
+  int stride_ = 0;
+  std::vector<double> weights_;
+  std::vector<double> coords_;
+  std::vector<double> centroid_;
+};
+
+// Prepare validates `signature` and `options` (see ValidateSignature and
+// ValidateOptions; INVALID_ARGUMENT otherwise) and returns its prepared
+// form. Weights are divided by their sum so that they sum to 1 to rounding.
+// Cost O(features x bands); thread-safe.
+absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
+                                          const GroundDistanceOptions& options);
+
+// GroundDistance returns Dist(U_i of a, U_j of b) of Eq. 7 under the options
+// both were prepared with. Preconditions (asserted in debug builds):
+// 0 <= i < a.size(), 0 <= j < b.size(). Cost O(bands); thread-safe.
+double GroundDistance(const PreparedSignature& a, int i,
+                      const PreparedSignature& b, int j);
+
+// GroundDistanceMatrix writes the a.size() x b.size() matrix of ground
+// distances into `out`, row i at out[i * out_stride], with
+// out_stride >= b.stride(); entries past b.size() in a row are unspecified.
+// This is the vectorized kernel the EMD uses; results equal GroundDistance
+// to rounding. Cost O(a.size() x b.size() x bands); thread-safe.
+void GroundDistanceMatrix(const PreparedSignature& a,
+                          const PreparedSignature& b, double* out,
+                          int out_stride);
+
+}  // namespace tpr::index
+
+#endif  // TPR_INDEXER_LIB_GROUND_DISTANCE_H_
