@@ -6,6 +6,8 @@
 #include <string>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 
