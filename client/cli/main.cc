@@ -36,7 +36,10 @@
 #include "absl/strings/str_split.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
+#if __has_include("extractor/lib/mesh_writer.h")
 #include "extractor/lib/mesh_writer.h"
+#define TPR_HAVE_MESH_WRITER 1
+#endif
 #include "tpr/client.h"
 
 namespace {
@@ -547,7 +550,11 @@ int RunInspect(const Globals& g, const std::string& mesh_path, const std::string
       }
     }
   }
+#ifdef TPR_HAVE_MESH_WRITER
   absl::Status written = tpr::extract::WritePlyWithColours(loaded->mesh, colours, out);
+#else
+  absl::Status written = absl::UnimplementedError("this build has no mesh writer");
+#endif
   if (!written.ok()) return Fail(out, written);
   if (g.json) {
     std::printf("{\"file\":%s,\"out\":%s,\"points\":%d,\"rings\":%d,\"vertices\":%zu}\n",
