@@ -1,0 +1,130 @@
+#include "indexer/service/indexer_service.h"
+
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "common/grpc_status.h"
+
+namespace tpr::indexer {
+namespace {
+
+absl::Status CancelledStatus(grpc::ServerContext* context) {
+  // Past its deadline gRPC cancels the call; either way the client is gone.
+  return context->IsCancelled() ? absl::CancelledError("call cancelled or deadline exceeded")
+                                : absl::OkStatus();
+}
+
+}  // namespace
+
+IndexerService::IndexerService(IndexerCore* core, ServiceOptions options)
+    : core_(core), options_(std::move(options)) {}
+
+grpc::Status IndexerService::Finish(const char* method, const absl::Status& status) const {
+  if (options_.log && !status.ok()) {
+    switch (status.code()) {
+      case absl::StatusCode::kInternal:
+      case absl::StatusCode::kDataLoss:
+      case absl::StatusCode::kUnavailable:
+      case absl::StatusCode::kUnknown:
+        options_.log(absl::StrCat(method, " failed: ", status.ToString()));
+        break;
+      default:
+        break;
+    }
+  }
+  return tpr::ToGrpcStatus(status);
+}
+
+grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
+                                    const tpr::v1::UpsertRequest* request,
+                                    tpr::v1::UpsertResponse* response) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Upsert", c);
+  absl::StatusOr<bool> created = core_->Upsert(*request);
+  if (created.ok()) response->set_created(*created);
+  return Finish("Upsert", created.status());
+}
+
+grpc::Status IndexerService::BatchUpsert(grpc::ServerContext* context,
+                                         grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
+                                         tpr::v1::BatchUpsertResponse* response) {
+  IndexerCore::BatchWriter batch(core_);
+  tpr::v1::UpsertRequest request;
+  while (reader->Read(&request)) {
+    absl::Status st = batch.Add(std::move(request));
+    if (!st.ok()) return Finish("BatchUpsert", st);
+    request.Clear();
+  }
+  // Read() also ends when the client cancels: then the models of the last
+  // group are written anyway (keeping the "models before are kept" promise)
+  // but the call reports the cancellation.
+  absl::StatusOr<tpr::v1::BatchUpsertResponse> counts = batch.Finish();
+  if (!counts.ok()) return Finish("BatchUpsert", counts.status());
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("BatchUpsert", c);
+  *response = std::move(*counts);
+  return grpc::Status::OK;
+}
+
+grpc::Status IndexerService::Delete(grpc::ServerContext* context,
+                                    const tpr::v1::DeleteRequest* request,
+                                    tpr::v1::DeleteResponse*) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Delete", c);
+  return Finish("Delete", core_->Delete(request->id()));
+}
+
+grpc::Status IndexerService::Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+                                 tpr::v1::Model* response) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Get", c);
+  absl::StatusOr<tpr::v1::Model> model = core_->Get(request->id());
+  if (model.ok()) *response = std::move(*model);
+  return Finish("Get", model.status());
+}
+
+grpc::Status IndexerService::List(grpc::ServerContext* context,
+                                  const tpr::v1::ListRequest* request,
+                                  tpr::v1::ListResponse* response) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("List", c);
+  absl::StatusOr<tpr::v1::ListResponse> page = core_->List(*request);
+  if (page.ok()) *response = std::move(*page);
+  return Finish("List", page.status());
+}
+
+grpc::Status IndexerService::Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest*,
+                                   tpr::v1::StatsResponse* response) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Stats", c);
+  *response = core_->Stats();
+  return grpc::Status::OK;
+}
+
+grpc::Status IndexerService::Search(grpc::ServerContext* context,
+                                    const tpr::v1::SearchRequest* request,
+                                    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
+  // Admission: a slot or RESOURCE_EXHAUSTED, never an unbounded queue.
+  if (searches_.fetch_add(1) >= options_.max_concurrent_searches) {
+    searches_.fetch_sub(1);
+    return Finish("Search", absl::ResourceExhaustedError(absl::StrCat(
+                                "too many concurrent searches (limit ",
+                                options_.max_concurrent_searches, "); retry later")));
+  }
+  struct Release {
+    std::atomic<int>* n;
+    ~Release() { n->fetch_sub(1); }
+  } release{&searches_};
+
+  absl::StatusOr<std::unique_ptr<SearchSession>> session =
+      core_->StartSearch(*request, [context] { return context->IsCancelled(); });
+  if (!session.ok()) return Finish("Search", session.status());
+  tpr::v1::SearchResponse response;
+  while (std::optional<tpr::v1::Neighbor> n = (*session)->Next()) {
+    *response.mutable_neighbor() = std::move(*n);
+    // Write fails once the client has gone: stop working for it.
+    if (!writer->Write(response)) {
+      return Finish("Search", absl::CancelledError("client stopped reading the stream"));
+    }
+  }
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Search", c);
+  *response.mutable_stats() = (*session)->Stats();
+  writer->Write(response);
+  return grpc::Status::OK;
+}
+
+}  // namespace tpr::indexer

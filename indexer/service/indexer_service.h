@@ -1,0 +1,65 @@
+// IndexerService: the tpr.v1.Indexer gRPC service (indexer.proto), a thin
+// shell over IndexerCore. Each handler checks the call's cancellation and
+// deadline, hands the request to the core and maps its absl::Status with
+// tpr::ToGrpcStatus (common/grpc_status.h); no logic lives here.
+//
+//   auto core = IndexerCore::Open(options);
+//   IndexerService service(core->get(), ServiceOptions{});
+//   auto server = tpr::common::StartServer(server_options, {&service});
+//
+// Uses gRPC's synchronous API: a search is CPU-bound (EMDs), so it runs on a
+// thread of the server's pool (bounded by ServerOptions::max_threads) rather
+// than on the callback executor that also moves bytes.
+#ifndef TPR_INDEXER_SERVICE_INDEXER_SERVICE_H_
+#define TPR_INDEXER_SERVICE_INDEXER_SERVICE_H_
+
+#include <atomic>
+#include <string>
+
+#include "indexer/service/indexer_core.h"
+#include "tpr/v1/indexer.grpc.pb.h"
+
+namespace tpr::indexer {
+
+// ServiceOptions: limits applied by the wire layer.
+struct ServiceOptions {
+  // Searches running at once; one more gets RESOURCE_EXHAUSTED at once
+  // rather than queueing behind CPU-bound work. Default 16.
+  int max_concurrent_searches = 16;
+  // Receives one line per notable event (failed calls). Default: none.
+  std::function<void(const std::string&)> log;
+};
+
+// IndexerService: see the file comment. Thread-safe. `core` must outlive it.
+class IndexerService final : public tpr::v1::Indexer::Service {
+ public:
+  IndexerService(IndexerCore* core, ServiceOptions options);
+
+  grpc::Status Upsert(grpc::ServerContext* context, const tpr::v1::UpsertRequest* request,
+                      tpr::v1::UpsertResponse* response) override;
+  grpc::Status BatchUpsert(grpc::ServerContext* context,
+                           grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
+                           tpr::v1::BatchUpsertResponse* response) override;
+  grpc::Status Delete(grpc::ServerContext* context, const tpr::v1::DeleteRequest* request,
+                      tpr::v1::DeleteResponse* response) override;
+  grpc::Status Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+                   tpr::v1::Model* response) override;
+  grpc::Status List(grpc::ServerContext* context, const tpr::v1::ListRequest* request,
+                    tpr::v1::ListResponse* response) override;
+  grpc::Status Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest* request,
+                     tpr::v1::StatsResponse* response) override;
+  grpc::Status Search(grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
+                      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
+
+ private:
+  // Logs failures that are the server's fault (not the caller's input).
+  grpc::Status Finish(const char* method, const absl::Status& status) const;
+
+  IndexerCore* core_;
+  const ServiceOptions options_;
+  std::atomic<int> searches_{0};
+};
+
+}  // namespace tpr::indexer
+
+#endif  // TPR_INDEXER_SERVICE_INDEXER_SERVICE_H_

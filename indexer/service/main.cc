@@ -1,0 +1,77 @@
+// tpr-indexer: the stateful index service. Parses flags, opens the data
+// directory (IndexerCore), serves tpr.v1.Indexer with health and reflection,
+// and on SIGTERM/SIGINT finishes in-flight calls, persists the VP-tree and
+// exits 0.
+//
+//   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
+#include <cstdlib>
+#include <string>
+
+#include "CLI/CLI.hpp"
+#include "absl/strings/str_cat.h"
+#include "common/server_lifecycle.h"
+#include "indexer/service/indexer_core.h"
+#include "indexer/service/indexer_service.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"tpr-indexer: stores TPR signatures and answers EMD k-NN searches"};
+  tpr::common::ServerOptions server_options;
+  server_options.listen_address = "127.0.0.1:7002";
+  server_options.log_name = "tpr-indexer";
+  std::string data_dir;
+  int threads = 0;
+  int max_searches = 16;
+  int max_k = 10000;
+  app.add_option("--listen", server_options.listen_address, "HOST:PORT to listen on")
+      ->capture_default_str();
+  app.add_option("--data-dir", data_dir, "Directory of the RocksDB store (created if missing)")
+      ->required();
+  app.add_option("--threads", threads,
+                 "Upper bound on server threads (0: gRPC's default)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--max-concurrent-searches", max_searches,
+                 "Searches running at once; more get RESOURCE_EXHAUSTED")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--max-k", max_k, "Largest k a search may ask for")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--shutdown-grace-ms", server_options.shutdown_grace_ms,
+                 "On SIGTERM, how long in-flight calls may finish (ms)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  // gRPC needs a few threads of its own besides the handlers.
+  if (threads > 0) server_options.max_threads = threads + 2;
+
+  const std::string name = server_options.log_name;
+  auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };
+
+  tpr::indexer::CoreOptions core_options;
+  core_options.data_dir = data_dir;
+  core_options.max_k = max_k;
+  core_options.log = log;
+  absl::StatusOr<std::unique_ptr<tpr::indexer::IndexerCore>> core =
+      tpr::indexer::IndexerCore::Open(core_options);
+  if (!core.ok()) {
+    log(absl::StrCat("cannot open the data directory: ", core.status().ToString()));
+    return 1;
+  }
+  tpr::indexer::ServiceOptions service_options;
+  service_options.max_concurrent_searches = max_searches;
+  service_options.log = log;
+  tpr::indexer::IndexerService service(core->get(), service_options);
+
+  absl::StatusOr<tpr::common::StartedServer> started =
+      tpr::common::StartServer(server_options, {&service});
+  if (!started.ok()) {
+    log(started.status().ToString());
+    return 1;
+  }
+  const int code = tpr::common::ServeUntilSignal(*started->server, server_options, started->port);
+  started->server.reset();
+  (*core)->Close();
+  log("data directory closed");
+  return code;
+}

@@ -1,0 +1,131 @@
+// Durable storage of tpr-indexer: the source of truth for the stored models
+// and the persisted VP-tree, in RocksDB under the --data-dir. This is the only
+// file of the project that includes RocksDB.
+//
+//   absl::StatusOr<std::unique_ptr<Storage>> db = Storage::Open(dir);
+//   TPR_RETURN_IF_ERROR((*db)->Write({{"cat/1", &model}}));   // synced
+//   absl::StatusOr<tpr::v1::Model> m = (*db)->GetModel("cat/1");
+//
+// Layout (RocksDB column families):
+//   "models"   key = model id (raw bytes, so RocksDB's bytewise order is id
+//              order), value = 8-byte little-endian write sequence number
+//              followed by the serialized tpr.v1.Model (signature, label,
+//              metadata, added_unix_micros).
+//   "default"  key "tree" = the VP-tree bytes of the last persist
+//              (SignatureIndex::SerializeTree), key "tree_seq" = 8-byte
+//              little-endian write sequence number that tree reflects,
+//              key "last_seq" = the last sequence number any write used
+//              (written in the same batch as the models).
+// Every model write takes the next sequence number. A model whose sequence
+// number is greater than "tree_seq" was written after the tree was
+// persisted: on reopen it is certainly not in the tree (IndexerCore logs how
+// many). SignatureIndex::Load itself puts every model that is not in the
+// tree, or whose signature changed, into its insert buffer, by comparing
+// signature fingerprints. Tree and marker are written in one atomic batch.
+//
+// Durability: every Write and Delete uses WriteOptions::sync = true, so an
+// acknowledged write survives kill -9 and power loss (RocksDB replays the
+// synced write-ahead log on open). Batch upserts are grouped by the caller
+// into one Write (one fsync per group).
+#ifndef TPR_INDEXER_SERVICE_STORAGE_H_
+#define TPR_INDEXER_SERVICE_STORAGE_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "tpr/v1/indexer.pb.h"
+
+namespace tpr::indexer {
+
+// StorageOptions: how Storage::Open configures RocksDB.
+struct StorageOptions {
+  // Sync the write-ahead log before every acknowledged write. Turning this
+  // off breaks the kill -9 promise; only benchmarks that measure its cost
+  // should. Default true.
+  bool sync_writes = true;
+  // Create the directory and database when missing. Default true.
+  bool create_if_missing = true;
+};
+
+// PersistedTree: the VP-tree bytes of the last persist and the write
+// sequence number they reflect.
+struct PersistedTree {
+  std::string bytes;
+  uint64_t seq = 0;
+};
+
+// ModelWrite: one mutation of a Storage::Write batch: a put when `model` is
+// non-null, else a delete of `id`.
+struct ModelWrite {
+  std::string id;
+  const tpr::v1::Model* model = nullptr;
+};
+
+// Storage: RocksDB-backed model store. Thread-safe (RocksDB is); the caller
+// orders writes against its in-memory index (IndexerCore holds its writer
+// lock across a Write and the index update).
+class Storage {
+ public:
+  // Open opens or creates the database in `dir`. Returns INVALID_ARGUMENT for
+  // an empty dir, UNAVAILABLE when RocksDB cannot open it (locked by another
+  // process, unreadable), DATA_LOSS when it is corrupt. Cost: RocksDB
+  // recovery (WAL replay), typically milliseconds to a second.
+  static absl::StatusOr<std::unique_ptr<Storage>> Open(
+      const std::string& dir, const StorageOptions& options = {});
+
+  ~Storage();
+  Storage(const Storage&) = delete;
+  Storage& operator=(const Storage&) = delete;
+
+  // Write applies `writes` atomically in one RocksDB batch (synced when
+  // options.sync_writes) and assigns each put the next sequence number.
+  // Returns INTERNAL on an I/O error (then nothing was written). Cost: one
+  // fsync plus O(total bytes). Thread-safe.
+  absl::Status Write(const std::vector<ModelWrite>& writes);
+
+  // GetModel returns the stored model `id`; NOT_FOUND when absent, DATA_LOSS
+  // when its bytes do not parse. Cost: one point lookup. Thread-safe.
+  absl::StatusOr<tpr::v1::Model> GetModel(const std::string& id) const;
+
+  // ForEachModel calls `fn(seq, model)` for every stored model in ascending
+  // id order, stopping at the first non-OK status, which it returns. Used
+  // once at open. Cost: a full scan. Thread-safe (reads a snapshot).
+  absl::Status ForEachModel(
+      const std::function<absl::Status(uint64_t seq, tpr::v1::Model&& model)>&
+          fn) const;
+
+  // SaveTree persists `tree_bytes` with marker `seq`, atomically and synced.
+  // `seq` must be a last_seq() value read BEFORE the tree was serialized:
+  // then every write after the marker is certainly not reflected in the
+  // tree (writes at or below it may still sit in the index's buffer, which
+  // SignatureIndex::Load detects by signature fingerprint). Returns
+  // INTERNAL/UNAVAILABLE on an I/O error. Cost: one fsync + O(bytes).
+  // Thread-safe.
+  absl::Status SaveTree(const std::string& tree_bytes, uint64_t seq);
+
+  // LoadTree returns the last persisted tree; NOT_FOUND when none was ever
+  // saved. Cost: one lookup. Thread-safe.
+  absl::StatusOr<PersistedTree> LoadTree() const;
+
+  // last_seq returns the sequence number of the last model write (0 when
+  // none). Thread-safe.
+  uint64_t last_seq() const;
+
+  // DiskBytes returns the bytes the data directory occupies on disk (sum of
+  // its files' sizes). Cost: one directory listing. Thread-safe.
+  int64_t DiskBytes() const;
+
+ private:
+  struct Impl;
+  explicit Storage(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tpr::indexer
+
+#endif  // TPR_INDEXER_SERVICE_STORAGE_H_
