@@ -43,6 +43,22 @@ struct MeshStats {
   int64_t unreferenced_vertices = 0;
 };
 
+// ComputeMeshStats returns the vertex, face, area, boundary-edge, component
+// and genus figures of `mesh`; the dropped_* and unreferenced_vertices
+// counters are left 0 (intake fills them in).
+//
+// Components are connected components of faces (two faces are connected when
+// they share an edge). Vertices count only when a face references them. The
+// genus is summed over components c from the Euler characteristic with
+// boundary: genus_c = (2 - V_c + E_c - F_c - B_c) / 2, where B_c is the
+// number of boundary loops (connected pieces of the boundary-edge graph) of c.
+// A closed sphere gives 0, a torus 1, a disk 0, an annulus 0.
+//
+// Precondition: every index in range (asserted in debug builds); the figures
+// are meaningful for meshes satisfying the intake guarantees listed on Mesh.
+// Cost: O(F log F) time, O(V + F) memory. Thread-safe (pure function).
+MeshStats ComputeMeshStats(const Mesh& mesh);
+
 }  // namespace tpr::extract
 
 #endif  // TPR_EXTRACTOR_LIB_MESH_H_
