@@ -1,0 +1,693 @@
+// VP-tree build, best-first ranked search and serialization (Tam & Lau 2007
+// section 6.2). Design notes:
+// - Every distance computed while partitioning (item x to the vantage point
+//   of each ancestor) is kept. A node stores [min, max] of those distances
+//   over its subtree for every ancestor, and a leaf item its own row, so a
+//   search bounds a subtree or an item by the triangle inequality against
+//   ALL ancestors' vantage points, not only the parent's, at no metric cost.
+//   Memory is O(n log n) doubles (about 14 per item at n = 100k).
+// - The search is the incremental nearest-neighbour algorithm of Hjaltason
+//   and Samet: one priority queue holds nodes (keyed by lower bound) and
+//   items (keyed by a lower bound that is refined lazily: stored distances,
+//   then the caller's cheap bound, then the metric). An item is returned
+//   when its exact distance is the smallest key left, hence certain; the
+//   metric is evaluated only for items whose bounds fall below the answer.
+// - Computed bounds are deflated by a relative 1e-9 before use: the metric
+//   (an EMD from a simplex) satisfies the triangle inequality only to
+//   rounding, and an overestimated bound could reorder ties or lose an item.
+#include "indexer/lib/vp_tree.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <queue>
+#include <random>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace tpr::index {
+
+namespace {
+
+constexpr uint32_t kNone = 0xffffffffu;
+constexpr double kRelativeSlack = 1e-9;
+
+// A triangle-inequality bound, made safe against the metric's rounding.
+double Deflate(double bound, double scale) {
+  const double b = bound - kRelativeSlack * scale;
+  return b > 0.0 ? b : 0.0;
+}
+
+}  // namespace
+
+struct VpTree::Node {
+  uint32_t parent = kNone;
+  uint32_t vp = kNone;  // kNone: a leaf
+  uint32_t inner = kNone;
+  uint32_t outer = kNone;
+  uint32_t begin = 0;  // leaf bucket: leaf_items[begin, end)
+  uint32_t end = 0;
+  uint32_t depth = 0;         // number of ancestors (derived)
+  uint64_t range_offset = 0;  // ranges[range_offset + 2 j], j < depth (derived)
+};
+
+struct VpTree::Data {
+  uint32_t n_items = 0;
+  size_t height = 0;
+  std::vector<Node> nodes;
+  std::vector<uint32_t> leaf_items;
+  // Per node, per ancestor (root first): min and max distance from that
+  // ancestor's vantage point to the items of the node's subtree.
+  std::vector<double> ranges;
+  // Per item: the node holding it, and its distances to the vantage points
+  // of that node's ancestors (root first) at item_dists[item_row[item]].
+  std::vector<uint32_t> item_holder;
+  std::vector<uint64_t> item_row;
+  std::vector<double> item_dists;
+};
+
+VpTree::VpTree() : data_(std::make_unique<Data>()) {}
+VpTree::~VpTree() = default;
+VpTree::VpTree(VpTree&&) noexcept = default;
+VpTree& VpTree::operator=(VpTree&&) noexcept = default;
+
+size_t VpTree::size() const { return data_->n_items; }
+size_t VpTree::height() const { return data_->height; }
+size_t VpTree::node_count() const { return data_->nodes.size(); }
+
+// ---------------------------------------------------------------------------
+// Build
+
+class VpTreeBuilder {
+ public:
+  VpTreeBuilder(size_t n, const PairDistance& distance,
+                const VpTreeOptions& options, const std::atomic<bool>* cancel)
+      : n_(n), distance_(distance), options_(options), cancel_(cancel) {}
+
+  absl::StatusOr<VpTree> Run() {
+    if (options_.leaf_size < 1) {
+      return absl::InvalidArgumentError("VpTreeOptions.leaf_size must be >= 1");
+    }
+    if (options_.vantage_candidates < 1 || options_.vantage_sample < 1) {
+      return absl::InvalidArgumentError(
+          "VpTreeOptions.vantage_candidates and vantage_sample must be >= 1");
+    }
+    if (options_.build_threads < 1) {
+      return absl::InvalidArgumentError(
+          "VpTreeOptions.build_threads must be >= 1");
+    }
+    if (n_ >= kNone) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("VP-tree of ", n_, " items: at most 2^32 - 2"));
+    }
+    if (n_ > 0 && !distance_) {
+      return absl::InvalidArgumentError("VP-tree build without a distance");
+    }
+    VpTree tree;
+    data_ = tree.data_.get();
+    data_->n_items = static_cast<uint32_t>(n_);
+    data_->item_holder.assign(n_, kNone);
+    rows_.assign(n_, {});
+    work_.resize(n_);
+    for (size_t i = 0; i < n_; ++i) work_[i] = static_cast<uint32_t>(i);
+    if (n_ > 0) BuildNode(kNone, 0, 0, static_cast<uint32_t>(n_));
+    if (cancelled_) return absl::CancelledError("VP-tree build cancelled");
+    // Flatten the per-item rows.
+    data_->item_row.resize(n_);
+    size_t total = 0;
+    for (size_t i = 0; i < n_; ++i) total += rows_[i].size();
+    data_->item_dists.reserve(total);
+    for (size_t i = 0; i < n_; ++i) {
+      data_->item_row[i] = data_->item_dists.size();
+      data_->item_dists.insert(data_->item_dists.end(), rows_[i].begin(),
+                               rows_[i].end());
+      std::vector<double>().swap(rows_[i]);
+    }
+    return tree;
+  }
+
+ private:
+  bool Cancelled() {
+    if (!cancelled_ && cancel_ != nullptr && cancel_->load()) cancelled_ = true;
+    return cancelled_;
+  }
+
+  // Computes out[i] = d(vp, items[i]) for all i, split across threads for
+  // large nodes (each thread writes only its own slots).
+  void DistancesTo(uint32_t vp, const uint32_t* items, size_t count,
+                   double* out) {
+    const size_t threads = static_cast<size_t>(options_.build_threads);
+    if (threads <= 1 || count < 256) {
+      for (size_t i = 0; i < count; ++i) out[i] = distance_(vp, items[i]);
+      return;
+    }
+    std::vector<std::thread> pool;
+    const size_t chunk = (count + threads - 1) / threads;
+    for (size_t t = 1; t < threads; ++t) {
+      const size_t b = std::min(count, t * chunk);
+      const size_t e = std::min(count, b + chunk);
+      pool.emplace_back([this, vp, items, out, b, e] {
+        for (size_t i = b; i < e; ++i) out[i] = distance_(vp, items[i]);
+      });
+    }
+    for (size_t i = 0; i < std::min(count, chunk); ++i) {
+      out[i] = distance_(vp, items[i]);
+    }
+    for (std::thread& t : pool) t.join();
+  }
+
+  // Picks the vantage point of work_[lo, hi): among a few random candidates,
+  // the one whose distances to a random sample spread the most (a point
+  // near the "corner" of the data splits it best; NMSLIB's heuristic).
+  uint32_t ChooseVantage(uint32_t node, uint32_t lo, uint32_t hi) {
+    const size_t m = hi - lo;
+    const size_t candidates = options_.vantage_candidates;
+    const size_t sample = options_.vantage_sample;
+    // Seeded per node so the tree does not depend on thread timing.
+    std::mt19937_64 rng(options_.seed * 0x9e3779b97f4a7c15ull + node);
+    std::uniform_int_distribution<uint32_t> pick(lo, hi - 1);
+    if (candidates <= 1 || m < 4 * sample) return pick(rng);
+    std::vector<uint32_t> sampled(sample);
+    for (uint32_t& s : sampled) s = work_[pick(rng)];
+    std::vector<double> d(sample);
+    uint32_t best = lo;
+    double best_spread = -1.0;
+    for (size_t c = 0; c < candidates; ++c) {
+      const uint32_t pos = pick(rng);
+      DistancesTo(work_[pos], sampled.data(), sample, d.data());
+      double mean = 0.0;
+      for (double v : d) mean += v;
+      mean /= static_cast<double>(sample);
+      double var = 0.0;
+      for (double v : d) var += (v - mean) * (v - mean);
+      if (var > best_spread) {
+        best_spread = var;
+        best = pos;
+      }
+    }
+    return best;
+  }
+
+  // Builds the subtree over work_[lo, hi) whose items all have `depth`
+  // ancestor distances in rows_. Returns its node index.
+  uint32_t BuildNode(uint32_t parent, uint32_t depth, uint32_t lo,
+                     uint32_t hi) {
+    const uint32_t index = static_cast<uint32_t>(data_->nodes.size());
+    data_->nodes.emplace_back();
+    {
+      VpTree::Node& node = data_->nodes.back();
+      node.parent = parent;
+      node.depth = depth;
+      node.range_offset = data_->ranges.size();
+    }
+    data_->height = std::max<size_t>(data_->height, depth);
+    for (uint32_t a = 0; a < depth; ++a) {
+      double mn = std::numeric_limits<double>::infinity();
+      double mx = 0.0;
+      for (uint32_t p = lo; p < hi; ++p) {
+        const double v = rows_[work_[p]][a];
+        mn = std::min(mn, v);
+        mx = std::max(mx, v);
+      }
+      data_->ranges.push_back(mn);
+      data_->ranges.push_back(mx);
+    }
+    if (Cancelled()) return index;
+    if (hi - lo <= options_.leaf_size) {
+      VpTree::Node& node = data_->nodes[index];
+      node.begin = static_cast<uint32_t>(data_->leaf_items.size());
+      for (uint32_t p = lo; p < hi; ++p) {
+        data_->leaf_items.push_back(work_[p]);
+        data_->item_holder[work_[p]] = index;
+      }
+      node.end = static_cast<uint32_t>(data_->leaf_items.size());
+      return index;
+    }
+    const uint32_t pos = ChooseVantage(index, lo, hi);
+    std::swap(work_[lo], work_[pos]);
+    const uint32_t vp = work_[lo];
+    data_->item_holder[vp] = index;
+    const size_t m = hi - lo - 1;
+    std::vector<double> d(m);
+    DistancesTo(vp, &work_[lo + 1], m, d.data());
+    std::vector<std::pair<double, uint32_t>> order(m);
+    for (size_t i = 0; i < m; ++i) {
+      const uint32_t item = work_[lo + 1 + i];
+      rows_[item].push_back(d[i]);
+      order[i] = {d[i], item};
+    }
+    // Median split; (distance, item) keeps it deterministic under ties. The
+    // stored ranges, not the split rule, carry correctness.
+    std::sort(order.begin(), order.end());
+    for (size_t i = 0; i < m; ++i) work_[lo + 1 + i] = order[i].second;
+    const uint32_t mid = lo + 1 + static_cast<uint32_t>(m / 2);
+    uint32_t inner = kNone;
+    uint32_t outer = kNone;
+    if (mid > lo + 1) inner = BuildNode(index, depth + 1, lo + 1, mid);
+    if (hi > mid) outer = BuildNode(index, depth + 1, mid, hi);
+    VpTree::Node& node = data_->nodes[index];
+    node.vp = vp;
+    node.inner = inner;
+    node.outer = outer;
+    return index;
+  }
+
+  const size_t n_;
+  const PairDistance& distance_;
+  const VpTreeOptions options_;
+  const std::atomic<bool>* cancel_;
+  bool cancelled_ = false;
+  VpTree::Data* data_ = nullptr;
+  std::vector<std::vector<double>> rows_;
+  std::vector<uint32_t> work_;
+};
+
+absl::StatusOr<VpTree> VpTree::Build(size_t n, const PairDistance& distance,
+                                     const VpTreeOptions& options,
+                                     const std::atomic<bool>* cancel) {
+  return VpTreeBuilder(n, distance, options, cancel).Run();
+}
+
+// ---------------------------------------------------------------------------
+// Search
+
+class VpCursor : public NeighborCursor {
+ public:
+  VpCursor(const VpTree::Data* data, QuerySpec spec)
+      : data_(data), spec_(std::move(spec)), queue_(Later{this}) {
+    if (!data_->nodes.empty()) {
+      dq_.assign(data_->nodes.size(), std::numeric_limits<double>::quiet_NaN());
+      queue_.push({0.0, 0, kNode});
+    }
+    for (uint32_t item : spec_.extra_items) PushItem(item, 0.0);
+  }
+
+  std::optional<ItemNeighbor> Next() override {
+    while (!queue_.empty()) {
+      const Entry e = queue_.top();
+      queue_.pop();
+      switch (e.kind) {
+        case kNode:
+          Expand(e);
+          break;
+        case kItemStored:
+          if (spec_.lower_bound) {
+            ++stats_.lower_bounds;
+            const double lb = spec_.lower_bound(e.index);
+            const double key = std::max(e.key, Deflate(lb, lb));
+            if (!(key <= spec_.radius)) break;
+            queue_.push({key, e.index, kItemBound});
+            break;
+          }
+          [[fallthrough]];
+        case kItemBound: {
+          ++stats_.emd_computations;
+          const double d = spec_.distance(e.index);
+          if (d <= spec_.radius) queue_.push({d, e.index, kItemExact});
+          break;
+        }
+        case kItemExact:
+          return ItemNeighbor{e.index, e.key};
+      }
+    }
+    return std::nullopt;
+  }
+
+  const SearchStats& stats() const override { return stats_; }
+
+ private:
+  enum Kind : uint8_t { kNode, kItemStored, kItemBound, kItemExact };
+  struct Entry {
+    double key;
+    uint32_t index;  // node or item
+    Kind kind;
+  };
+  // Heap order: smaller key first; at equal keys every bound (node or
+  // unrefined item) before any exact item, so that an exact item is
+  // returned only when nothing left can tie with it and precede it; among
+  // exact ties, tie_less.
+  struct Later {
+    const VpCursor* self;
+    bool operator()(const Entry& a, const Entry& b) const {
+      if (a.key != b.key) return a.key > b.key;
+      const bool a_exact = a.kind == kItemExact;
+      const bool b_exact = b.kind == kItemExact;
+      if (a_exact != b_exact) return a_exact;
+      if (a_exact) {
+        return self->spec_.tie_less ? self->spec_.tie_less(b.index, a.index)
+                                    : b.index < a.index;
+      }
+      if (a.kind != b.kind) return a.kind > b.kind;
+      return a.index > b.index;
+    }
+  };
+
+  void PushItem(uint32_t item, double bound) {
+    if (spec_.accept && !spec_.accept(item)) return;
+    if (!(bound <= spec_.radius)) return;
+    queue_.push({bound, item, kItemStored});
+  }
+
+  // Collects the query's distances to the vantage points of `node`'s
+  // ancestors, root first, into path_ (NaN where unknown).
+  void CollectPath(const VpTree::Node& node) {
+    path_.resize(node.depth);
+    uint32_t p = node.parent;
+    for (uint32_t j = node.depth; j-- > 0;) {
+      path_[j] = dq_[p];
+      p = data_->nodes[p].parent;
+    }
+  }
+
+  // Lower bound on d(query, x) for x below `child` from its stored ranges.
+  double NodeBound(uint32_t child, double floor) {
+    const VpTree::Node& node = data_->nodes[child];
+    CollectPath(node);
+    double bound = floor;
+    const double* r = &data_->ranges[node.range_offset];
+    for (uint32_t j = 0; j < node.depth; ++j) {
+      const double q = path_[j];
+      if (std::isnan(q)) continue;
+      const double lo = r[2 * j];
+      const double hi = r[2 * j + 1];
+      if (q < lo) {
+        bound = std::max(bound, Deflate(lo - q, lo));
+      } else if (q > hi) {
+        bound = std::max(bound, Deflate(q - hi, q));
+      }
+    }
+    return bound;
+  }
+
+  void Expand(const Entry& e) {
+    ++stats_.nodes_visited;
+    const VpTree::Node& node = data_->nodes[e.index];
+    if (node.vp == kNone) {
+      CollectPath(node);
+      for (uint32_t p = node.begin; p < node.end; ++p) {
+        const uint32_t item = data_->leaf_items[p];
+        const double* row = &data_->item_dists[data_->item_row[item]];
+        double bound = e.key;
+        for (uint32_t j = 0; j < node.depth; ++j) {
+          const double q = path_[j];
+          if (std::isnan(q)) continue;
+          bound = std::max(bound, Deflate(std::fabs(q - row[j]),
+                                          std::max(q, row[j])));
+        }
+        PushItem(item, bound);
+      }
+      return;
+    }
+    ++stats_.emd_computations;
+    const double d = spec_.distance(node.vp);
+    dq_[e.index] = d;
+    if ((!spec_.accept || spec_.accept(node.vp)) && d <= spec_.radius) {
+      queue_.push({d, node.vp, kItemExact});
+    }
+    for (uint32_t child : {node.inner, node.outer}) {
+      if (child == kNone) continue;
+      const double bound = NodeBound(child, e.key);
+      if (bound <= spec_.radius) queue_.push({bound, child, kNode});
+    }
+  }
+
+  const VpTree::Data* data_;
+  QuerySpec spec_;
+  SearchStats stats_;
+  std::vector<double> dq_;    // per node: d(query, vantage point)
+  std::vector<double> path_;  // scratch
+  std::priority_queue<Entry, std::vector<Entry>, Later> queue_;
+};
+
+std::unique_ptr<NeighborCursor> VpTree::Search(QuerySpec spec) const {
+  return std::make_unique<VpCursor>(data_.get(), std::move(spec));
+}
+
+std::vector<ItemNeighbor> VpTree::Knn(QuerySpec spec, size_t k,
+                                      SearchStats* stats) const {
+  std::vector<ItemNeighbor> out;
+  if (k == 0) {
+    if (stats != nullptr) *stats = SearchStats{};
+    return out;
+  }
+  std::unique_ptr<NeighborCursor> cursor = Search(std::move(spec));
+  while (out.size() < k) {
+    std::optional<ItemNeighbor> next = cursor->Next();
+    if (!next) break;
+    out.push_back(*next);
+  }
+  if (stats != nullptr) *stats = cursor->stats();
+  return out;
+}
+
+std::vector<ItemNeighbor> VpTree::Range(QuerySpec spec,
+                                        SearchStats* stats) const {
+  return Knn(std::move(spec), static_cast<size_t>(-1), stats);
+}
+
+// ---------------------------------------------------------------------------
+// Serialization: little-endian fixed-width fields, FNV-1a 64 checksum last.
+//   "TPRVPT" u16 version | u32 n_items | u32 n_nodes
+//   per node: u32 parent, vp, inner, outer, begin, end
+//   u32 n_leaf_items, u32 each | u64 n_ranges, f64 each
+//   u64 n_item_dists, f64 each | u64 checksum of everything before
+
+namespace {
+
+constexpr char kMagic[6] = {'T', 'P', 'R', 'V', 'P', 'T'};
+constexpr uint16_t kVersion = 1;
+
+uint64_t Fnv1a(const char* p, size_t n) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (size_t i = 0; i < n; ++i) {
+    h ^= static_cast<unsigned char>(p[i]);
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+void PutU(std::string* out, uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) out->push_back(static_cast<char>(v >> (8 * i)));
+}
+void PutF(std::string* out, double v) {
+  uint64_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  PutU(out, bits, 8);
+}
+
+class Reader {
+ public:
+  explicit Reader(absl::string_view bytes) : bytes_(bytes) {}
+  bool U(int bytes, uint64_t* v) {
+    if (bytes_.size() - pos_ < static_cast<size_t>(bytes)) return false;
+    *v = 0;
+    for (int i = 0; i < bytes; ++i) {
+      *v |= static_cast<uint64_t>(static_cast<unsigned char>(bytes_[pos_ + i]))
+            << (8 * i);
+    }
+    pos_ += bytes;
+    return true;
+  }
+  bool U32(uint32_t* v) {
+    uint64_t w;
+    if (!U(4, &w)) return false;
+    *v = static_cast<uint32_t>(w);
+    return true;
+  }
+  bool F(double* v) {
+    uint64_t bits;
+    if (!U(8, &bits)) return false;
+    std::memcpy(v, &bits, sizeof bits);
+    return true;
+  }
+  size_t remaining() const { return bytes_.size() - pos_; }
+
+ private:
+  absl::string_view bytes_;
+  size_t pos_ = 0;
+};
+
+absl::Status Corrupt(absl::string_view what) {
+  return absl::DataLossError(absl::StrCat("corrupt VP-tree bytes: ", what));
+}
+
+}  // namespace
+
+std::string VpTree::Serialize() const {
+  const Data& d = *data_;
+  std::string out(kMagic, sizeof kMagic);
+  PutU(&out, kVersion, 2);
+  PutU(&out, d.n_items, 4);
+  PutU(&out, d.nodes.size(), 4);
+  for (const Node& n : d.nodes) {
+    for (uint32_t v : {n.parent, n.vp, n.inner, n.outer, n.begin, n.end}) {
+      PutU(&out, v, 4);
+    }
+  }
+  PutU(&out, d.leaf_items.size(), 4);
+  for (uint32_t v : d.leaf_items) PutU(&out, v, 4);
+  PutU(&out, d.ranges.size(), 8);
+  for (double v : d.ranges) PutF(&out, v);
+  PutU(&out, d.item_dists.size(), 8);
+  for (double v : d.item_dists) PutF(&out, v);
+  PutU(&out, Fnv1a(out.data(), out.size()), 8);
+  return out;
+}
+
+class VpTreeReader {
+ public:
+  // Records `node` as the holder of `item`; false for an unknown item or
+  // one held twice.
+  static bool Claim(VpTree::Data* d, uint32_t item, uint32_t node) {
+    if (item >= d->n_items || d->item_holder[item] != kNone) return false;
+    d->item_holder[item] = node;
+    return true;
+  }
+
+  static absl::StatusOr<VpTree> Read(absl::string_view bytes) {
+    if (bytes.size() < sizeof kMagic + 2 ||
+        std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
+      return absl::InvalidArgumentError("not VP-tree bytes (bad magic)");
+    }
+    Reader r(bytes.substr(sizeof kMagic));
+    uint64_t version;
+    r.U(2, &version);
+    if (version != kVersion) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "VP-tree bytes of version ", version, "; this build reads ", kVersion));
+    }
+    if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
+    const size_t body = bytes.size() - 8;
+    Reader tail(bytes.substr(body));
+    uint64_t checksum;
+    tail.U(8, &checksum);
+    if (checksum != Fnv1a(bytes.data(), body)) {
+      return Corrupt("checksum mismatch");
+    }
+    r = Reader(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+
+    VpTree tree;
+    VpTree::Data& d = *tree.data_;
+    uint32_t n_nodes;
+    if (!r.U32(&d.n_items) || !r.U32(&n_nodes)) return Corrupt("truncated header");
+    if (d.n_items == kNone) return Corrupt("item count");
+    if (static_cast<uint64_t>(n_nodes) * 24 > r.remaining()) {
+      return Corrupt("node count exceeds the bytes");
+    }
+    if ((n_nodes == 0) != (d.n_items == 0)) return Corrupt("empty tree mismatch");
+    d.nodes.resize(n_nodes);
+    for (VpTree::Node& n : d.nodes) {
+      r.U32(&n.parent);
+      r.U32(&n.vp);
+      r.U32(&n.inner);
+      r.U32(&n.outer);
+      r.U32(&n.begin);
+      r.U32(&n.end);
+    }
+    uint32_t n_leaf;
+    if (!r.U32(&n_leaf) || static_cast<uint64_t>(n_leaf) * 4 > r.remaining()) {
+      return Corrupt("leaf item count");
+    }
+    d.leaf_items.resize(n_leaf);
+    for (uint32_t& v : d.leaf_items) r.U32(&v);
+
+    // Every item is a vantage point or in a bucket: check the count before
+    // allocating per-item arrays from it.
+    uint64_t internal = 0;
+    for (const VpTree::Node& n : d.nodes) internal += n.vp != kNone ? 1 : 0;
+    if (internal + n_leaf != d.n_items) return Corrupt("item count");
+
+    // Structure: node i's parent precedes it and names it as a child, so
+    // the nodes form one tree rooted at 0; depths and offsets follow.
+    d.item_holder.assign(d.n_items, kNone);
+    uint64_t range_total = 0;
+    uint64_t next_leaf = 0;
+    for (uint32_t i = 0; i < n_nodes; ++i) {
+      VpTree::Node& n = d.nodes[i];
+      if (i == 0) {
+        if (n.parent != kNone) return Corrupt("root has a parent");
+        n.depth = 0;
+      } else {
+        if (n.parent >= i) return Corrupt(absl::StrCat("node ", i, " parent"));
+        const VpTree::Node& p = d.nodes[n.parent];
+        if (p.inner != i && p.outer != i) {
+          return Corrupt(absl::StrCat("node ", i, " not a child of its parent"));
+        }
+        n.depth = p.depth + 1;
+      }
+      n.range_offset = range_total;
+      range_total += 2ull * n.depth;
+      d.height = std::max<size_t>(d.height, n.depth);
+      if (n.vp == kNone) {
+        if (n.inner != kNone || n.outer != kNone || n.begin != next_leaf ||
+            n.end < n.begin || n.end > n_leaf) {
+          return Corrupt(absl::StrCat("leaf ", i));
+        }
+        next_leaf = n.end;
+        for (uint32_t p = n.begin; p < n.end; ++p) {
+          if (!Claim(&d, d.leaf_items[p], i)) return Corrupt("leaf item");
+        }
+      } else {
+        if (n.begin != 0 || n.end != 0 || n.inner == n.outer) {
+          return Corrupt(absl::StrCat("node ", i));
+        }
+        for (uint32_t c : {n.inner, n.outer}) {
+          if (c == kNone) continue;
+          if (c <= i || c >= n_nodes || d.nodes[c].parent != i) {
+            return Corrupt(absl::StrCat("node ", i, " child"));
+          }
+        }
+        if (!Claim(&d, n.vp, i)) return Corrupt("vantage point");
+      }
+    }
+    if (next_leaf != n_leaf) return Corrupt("unreferenced leaf items");
+    uint64_t dist_total = 0;
+    for (uint32_t item = 0; item < d.n_items; ++item) {
+      if (d.item_holder[item] == kNone) {
+        return Corrupt(absl::StrCat("item ", item, " missing"));
+      }
+      dist_total += d.nodes[d.item_holder[item]].depth;
+    }
+
+    uint64_t n_ranges;
+    if (!r.U(8, &n_ranges) || n_ranges != range_total ||
+        n_ranges * 8 > r.remaining()) {
+      return Corrupt("range count");
+    }
+    d.ranges.resize(n_ranges);
+    for (size_t j = 0; j < n_ranges; ++j) {
+      r.F(&d.ranges[j]);
+      if (!(d.ranges[j] >= 0.0) || !std::isfinite(d.ranges[j])) {
+        return Corrupt("range value");
+      }
+      if (j % 2 == 1 && d.ranges[j - 1] > d.ranges[j]) {
+        return Corrupt("range min > max");
+      }
+    }
+    uint64_t n_dists;
+    if (!r.U(8, &n_dists) || n_dists != dist_total ||
+        n_dists * 8 != r.remaining()) {
+      return Corrupt("item distance count");
+    }
+    d.item_dists.resize(n_dists);
+    for (double& v : d.item_dists) {
+      r.F(&v);
+      if (!(v >= 0.0) || !std::isfinite(v)) return Corrupt("item distance");
+    }
+    d.item_row.resize(d.n_items);
+    uint64_t row = 0;
+    for (uint32_t item = 0; item < d.n_items; ++item) {
+      d.item_row[item] = row;
+      row += d.nodes[d.item_holder[item]].depth;
+    }
+    return tree;
+  }
+};
+
+absl::StatusOr<VpTree> VpTree::Deserialize(absl::string_view bytes) {
+  return VpTreeReader::Read(bytes);
+}
+
+}  // namespace tpr::index

@@ -1,0 +1,426 @@
+// VpTree against the brute-force oracle under cheap vector metrics (L1, L2),
+// over uniform, clustered and tie-heavy data: k-NN, ranked and range search,
+// filters, buffers, serialization and corrupt bytes.
+#include "indexer/lib/vp_tree.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "indexer/lib/brute_force_index.h"
+
+namespace tpr::index {
+namespace {
+
+using Point = std::vector<double>;
+
+double L2(const Point& a, const Point& b) {
+  double s = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) s += (a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(s);
+}
+
+double L1(const Point& a, const Point& b) {
+  double s = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) s += std::fabs(a[i] - b[i]);
+  return s;
+}
+
+// L-infinity <= L2 and <= L1: a valid cheap lower bound for both.
+double LInf(const Point& a, const Point& b) {
+  double s = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) s = std::max(s, std::fabs(a[i] - b[i]));
+  return s;
+}
+
+std::vector<Point> Uniform(size_t n, size_t dim, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<Point> points(n, Point(dim));
+  for (Point& p : points) {
+    for (double& x : p) x = u(rng);
+  }
+  return points;
+}
+
+std::vector<Point> Clustered(size_t n, size_t dim, size_t clusters,
+                             double spread, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> g(0.0, spread);
+  std::vector<Point> centers = Uniform(clusters, dim, seed + 1);
+  std::vector<Point> points(n, Point(dim));
+  for (Point& p : points) {
+    const Point& c = centers[rng() % clusters];
+    for (size_t i = 0; i < dim; ++i) p[i] = c[i] + g(rng);
+  }
+  return points;
+}
+
+// Integer lattice points, each repeated: many exactly equal distances.
+std::vector<Point> TieHeavy(size_t n, size_t dim, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<Point> points;
+  while (points.size() < n) {
+    Point p(dim);
+    for (double& x : p) x = static_cast<double>(rng() % 4);
+    const size_t copies = 1 + rng() % 3;
+    for (size_t c = 0; c < copies && points.size() < n; ++c) points.push_back(p);
+  }
+  return points;
+}
+
+using Metric = double (*)(const Point&, const Point&);
+
+VpTree BuildTree(const std::vector<Point>& points, Metric metric,
+                 VpTreeOptions options = {}) {
+  absl::StatusOr<VpTree> tree = VpTree::Build(
+      points.size(),
+      [&points, metric](uint32_t i, uint32_t j) {
+        return metric(points[i], points[j]);
+      },
+      options);
+  EXPECT_TRUE(tree.ok()) << tree.status();
+  return std::move(tree).value();
+}
+
+QuerySpec Spec(const std::vector<Point>& points, const Point& query,
+               Metric metric) {
+  QuerySpec spec;
+  spec.distance = [&points, &query, metric](uint32_t i) {
+    return metric(query, points[i]);
+  };
+  return spec;
+}
+
+void ExpectSame(const std::vector<ItemNeighbor>& got,
+                const std::vector<ItemNeighbor>& want, const std::string& ctx) {
+  ASSERT_EQ(got.size(), want.size()) << ctx;
+  for (size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].item, want[i].item) << ctx << " rank " << i;
+    EXPECT_EQ(got[i].distance, want[i].distance) << ctx << " rank " << i;
+  }
+}
+
+// Queries: half data points (exact hits, duplicates), half fresh points.
+std::vector<Point> Queries(const std::vector<Point>& points, size_t count,
+                           uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<Point> queries;
+  const size_t dim = points.empty() ? 4 : points[0].size();
+  std::vector<Point> fresh = Uniform(count, dim, seed + 7);
+  for (size_t q = 0; q < count; ++q) {
+    if (q % 2 == 0 && !points.empty()) {
+      queries.push_back(points[rng() % points.size()]);
+    } else {
+      queries.push_back(fresh[q]);
+    }
+  }
+  return queries;
+}
+
+void CheckKnnAgainstBruteForce(const std::vector<Point>& points, Metric metric,
+                               size_t num_queries, VpTreeOptions options,
+                               uint64_t seed) {
+  const VpTree tree = BuildTree(points, metric, options);
+  const BruteForceIndex oracle(points.size());
+  const std::vector<Point> queries = Queries(points, num_queries, seed);
+  const size_t ks[] = {1, 3, 10, 50};
+  for (size_t q = 0; q < queries.size(); ++q) {
+    const size_t k = ks[q % 4];
+    SearchStats stats;
+    int64_t calls = 0;
+    QuerySpec spec = Spec(points, queries[q], metric);
+    QuerySpec counted = spec;
+    counted.distance = [&](uint32_t i) {
+      ++calls;
+      return spec.distance(i);
+    };
+    const std::vector<ItemNeighbor> got = tree.Knn(counted, k, &stats);
+    const std::vector<ItemNeighbor> want = oracle.Knn(spec, k);
+    ExpectSame(got, want, "query " + std::to_string(q) + " k " + std::to_string(k));
+    EXPECT_EQ(stats.emd_computations, calls);
+    EXPECT_LE(stats.emd_computations, static_cast<int64_t>(points.size()));
+  }
+}
+
+TEST(VpTreeTest, MatchesBruteForceOnUniformData) {
+  CheckKnnAgainstBruteForce(Uniform(2000, 6, 11), L2, 1000, {}, 12);
+}
+
+TEST(VpTreeTest, MatchesBruteForceOnClusteredData) {
+  CheckKnnAgainstBruteForce(Clustered(3000, 10, 20, 0.02, 21), L1, 1000, {}, 22);
+}
+
+TEST(VpTreeTest, MatchesBruteForceWithTiesAndDuplicates) {
+  CheckKnnAgainstBruteForce(TieHeavy(1500, 3, 31), L1, 1000, {}, 32);
+}
+
+TEST(VpTreeTest, MatchesBruteForceForOtherShapes) {
+  const std::vector<Point> points = Clustered(700, 5, 7, 0.05, 41);
+  for (size_t leaf : {1, 2, 5, 64, 1000}) {
+    VpTreeOptions options;
+    options.leaf_size = leaf;
+    options.vantage_candidates = leaf % 2 == 0 ? 1 : 4;
+    options.vantage_sample = 4;
+    options.seed = leaf;
+    CheckKnnAgainstBruteForce(points, L2, 100, options, 42 + leaf);
+  }
+}
+
+TEST(VpTreeTest, SmallAndEmptyTrees) {
+  for (size_t n : {0, 1, 2, 3, 17}) {
+    const std::vector<Point> points = TieHeavy(n, 2, 50 + n);
+    const VpTree tree = BuildTree(points, L2);
+    EXPECT_EQ(tree.size(), n);
+    const BruteForceIndex oracle(n);
+    const Point query = {1.5, 0.5};
+    for (size_t k : {0, 1, 2, 5, 100}) {
+      const std::vector<ItemNeighbor> got =
+          tree.Knn(Spec(points, query, L2), k);
+      EXPECT_EQ(got.size(), std::min(k, n));
+      ExpectSame(got, oracle.Knn(Spec(points, query, L2), k),
+                 "n " + std::to_string(n) + " k " + std::to_string(k));
+    }
+  }
+}
+
+TEST(VpTreeTest, RankedSearchYieldsTheWholeBruteForceOrder) {
+  const std::vector<Point> points = Clustered(1500, 4, 8, 0.03, 61);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  for (const Point& query : Queries(points, 20, 62)) {
+    std::unique_ptr<NeighborCursor> cursor = tree.Search(Spec(points, query, L2));
+    std::vector<ItemNeighbor> got;
+    while (std::optional<ItemNeighbor> next = cursor->Next()) got.push_back(*next);
+    EXPECT_FALSE(cursor->Next().has_value());
+    ExpectSame(got, oracle.Range(Spec(points, query, L2)), "ranked");
+    EXPECT_EQ(cursor->stats().emd_computations,
+              static_cast<int64_t>(points.size()));
+  }
+}
+
+TEST(VpTreeTest, RangeSearchMatchesBruteForce) {
+  const std::vector<Point> points = Clustered(2000, 6, 15, 0.04, 71);
+  const VpTree tree = BuildTree(points, L1);
+  const BruteForceIndex oracle(points.size());
+  std::mt19937_64 rng(72);
+  std::uniform_real_distribution<double> radius(0.0, 0.6);
+  for (const Point& query : Queries(points, 300, 73)) {
+    QuerySpec spec = Spec(points, query, L1);
+    spec.radius = radius(rng);
+    ExpectSame(tree.Range(spec), oracle.Range(spec), "range");
+  }
+  // A radius of exactly a stored distance keeps that item (<=).
+  QuerySpec spec = Spec(points, points[5], L1);
+  spec.radius = L1(points[5], points[9]);
+  const std::vector<ItemNeighbor> got = tree.Range(spec);
+  EXPECT_TRUE(std::any_of(got.begin(), got.end(),
+                          [](const ItemNeighbor& n) { return n.item == 9; }));
+}
+
+TEST(VpTreeTest, LowerBoundFilterKeepsResultsAndSavesDistances) {
+  const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 81);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  int64_t with_bound = 0;
+  int64_t without_bound = 0;
+  int64_t bounds = 0;
+  for (const Point& query : Queries(points, 300, 82)) {
+    QuerySpec spec = Spec(points, query, L2);
+    SearchStats plain;
+    const std::vector<ItemNeighbor> want = tree.Knn(spec, 10, &plain);
+    spec.lower_bound = [&points, &query](uint32_t i) {
+      return LInf(query, points[i]);
+    };
+    SearchStats filtered;
+    ExpectSame(tree.Knn(spec, 10, &filtered), oracle.Knn(spec, 10), "bound");
+    ExpectSame(want, oracle.Knn(spec, 10), "plain");
+    with_bound += filtered.emd_computations;
+    without_bound += plain.emd_computations;
+    bounds += filtered.lower_bounds;
+  }
+  EXPECT_GT(bounds, 0);
+  EXPECT_LE(with_bound, without_bound);
+}
+
+TEST(VpTreeTest, PrunesOnClusteredData) {
+  // Not a speed test: a count of metric evaluations, which must be far
+  // below n for a tree to be worth having on well-separated clusters.
+  const std::vector<Point> points = Clustered(5000, 6, 50, 0.01, 91);
+  const VpTree tree = BuildTree(points, L2);
+  int64_t total = 0;
+  const std::vector<Point> queries = Queries(points, 200, 92);
+  for (const Point& query : queries) {
+    SearchStats stats;
+    tree.Knn(Spec(points, query, L2), 10, &stats);
+    total += stats.emd_computations;
+    EXPECT_GT(stats.nodes_visited, 0);
+  }
+  EXPECT_LT(total / static_cast<int64_t>(queries.size()), 5000 / 5);
+}
+
+TEST(VpTreeTest, AcceptFilterExtraItemsAndTieOrder) {
+  // Items 0..n-1 in the tree, n..n+m-1 as an unindexed buffer; odd items
+  // rejected; ties broken in reverse item order.
+  const std::vector<Point> all = TieHeavy(1300, 2, 101);
+  const size_t n = 1000;
+  const std::vector<Point> tree_points(all.begin(), all.begin() + n);
+  const VpTree tree = BuildTree(tree_points, L1);
+  const BruteForceIndex oracle(n);
+  for (const Point& query : Queries(all, 200, 102)) {
+    QuerySpec spec = Spec(all, query, L1);
+    int accept_calls = 0;
+    std::vector<int> seen(all.size(), 0);
+    spec.accept = [&](uint32_t i) {
+      ++accept_calls;
+      ++seen[i];
+      return i % 2 == 0;
+    };
+    spec.tie_less = [](uint32_t a, uint32_t b) { return a > b; };
+    for (size_t i = n; i < all.size(); ++i) spec.extra_items.push_back(i);
+    const std::vector<ItemNeighbor> got = tree.Knn(spec, 25);
+    for (int s : seen) EXPECT_LE(s, 1);
+    spec.accept = [](uint32_t i) { return i % 2 == 0; };
+    ExpectSame(got, oracle.Knn(spec, 25), "filtered");
+    for (const ItemNeighbor& nb : got) EXPECT_EQ(nb.item % 2, 0u);
+  }
+}
+
+TEST(VpTreeTest, UnavailablePointsAreSkippedNotFatal) {
+  // NaN distances (signatures missing after a reload) for rejected items,
+  // vantage points included: results still exact over the rest.
+  const std::vector<Point> points = Clustered(1200, 4, 10, 0.05, 111);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  for (const Point& query : Queries(points, 200, 112)) {
+    QuerySpec spec = Spec(points, query, L2);
+    spec.distance = [&points, &query](uint32_t i) {
+      return i % 3 == 0 ? std::numeric_limits<double>::quiet_NaN()
+                        : L2(query, points[i]);
+    };
+    spec.accept = [](uint32_t i) { return i % 3 != 0; };
+    ExpectSame(tree.Knn(spec, 10), oracle.Knn(spec, 10), "nan");
+  }
+}
+
+TEST(VpTreeTest, SerializationRoundTripKeepsResults) {
+  const std::vector<Point> points = Clustered(2500, 5, 12, 0.03, 121);
+  const VpTree tree = BuildTree(points, L2);
+  const std::string bytes = tree.Serialize();
+  absl::StatusOr<VpTree> loaded = VpTree::Deserialize(bytes);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->size(), tree.size());
+  EXPECT_EQ(loaded->node_count(), tree.node_count());
+  EXPECT_EQ(loaded->height(), tree.height());
+  EXPECT_EQ(loaded->Serialize(), bytes);
+  const BruteForceIndex oracle(points.size());
+  for (const Point& query : Queries(points, 500, 122)) {
+    SearchStats a, b;
+    const std::vector<ItemNeighbor> got = loaded->Knn(Spec(points, query, L2), 7, &a);
+    ExpectSame(got, oracle.Knn(Spec(points, query, L2), 7), "reloaded");
+    tree.Knn(Spec(points, query, L2), 7, &b);
+    EXPECT_EQ(a.emd_computations, b.emd_computations);
+  }
+  absl::StatusOr<VpTree> empty = VpTree::Deserialize(VpTree().Serialize());
+  ASSERT_TRUE(empty.ok()) << empty.status();
+  EXPECT_EQ(empty->size(), 0u);
+}
+
+TEST(VpTreeTest, BuildIsDeterministicAcrossThreads) {
+  const std::vector<Point> points = Clustered(3000, 5, 12, 0.03, 131);
+  VpTreeOptions options;
+  const std::string one = BuildTree(points, L2, options).Serialize();
+  options.build_threads = 2;
+  EXPECT_EQ(BuildTree(points, L2, options).Serialize(), one);
+  options.seed = 99;
+  EXPECT_NE(BuildTree(points, L2, options).Serialize(), one);
+}
+
+TEST(VpTreeTest, BadOptionsAndCancellation) {
+  const std::vector<Point> points = Uniform(100, 3, 141);
+  PairDistance d = [&points](uint32_t i, uint32_t j) {
+    return L2(points[i], points[j]);
+  };
+  VpTreeOptions options;
+  options.leaf_size = 0;
+  EXPECT_EQ(VpTree::Build(points.size(), d, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  std::atomic<bool> cancel{true};
+  EXPECT_EQ(VpTree::Build(points.size(), d, {}, &cancel).status().code(),
+            absl::StatusCode::kCancelled);
+}
+
+// FNV-1a 64, written here independently of vp_tree.cc, to forge bytes whose
+// checksum is right but whose structure is not.
+uint64_t Fnv(const std::string& s, size_t n) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (size_t i = 0; i < n; ++i) {
+    h ^= static_cast<unsigned char>(s[i]);
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+void Reseal(std::string* bytes) {
+  const uint64_t h = Fnv(*bytes, bytes->size() - 8);
+  for (int i = 0; i < 8; ++i) (*bytes)[bytes->size() - 8 + i] = static_cast<char>(h >> (8 * i));
+}
+
+TEST(VpTreeTest, CorruptBytesAreErrorsNotCrashes) {
+  const std::vector<Point> points = Clustered(60, 3, 4, 0.05, 151);
+  VpTreeOptions options;
+  options.leaf_size = 3;
+  const std::string bytes = BuildTree(points, L2, options).Serialize();
+  auto is_error = [](const absl::Status& s) {
+    return s.code() == absl::StatusCode::kDataLoss ||
+           s.code() == absl::StatusCode::kInvalidArgument;
+  };
+  // Every truncation.
+  for (size_t len = 0; len < bytes.size(); ++len) {
+    EXPECT_TRUE(is_error(VpTree::Deserialize(bytes.substr(0, len)).status()))
+        << len;
+  }
+  // Every single-byte change, with the checksum left alone (DATA_LOSS or a
+  // bad header) and recomputed (structure checks must catch or accept it;
+  // accepted trees must still be searchable without crashing).
+  std::mt19937_64 rng(152);
+  int accepted = 0;
+  for (size_t pos = 0; pos < bytes.size(); ++pos) {
+    std::string bad = bytes;
+    bad[pos] = static_cast<char>(bad[pos] ^ (1 + rng() % 255));
+    EXPECT_TRUE(is_error(VpTree::Deserialize(bad).status())) << pos;
+    if (pos >= 8 && pos + 8 < bytes.size()) {
+      Reseal(&bad);
+      absl::StatusOr<VpTree> t = VpTree::Deserialize(bad);
+      if (t.ok()) {
+        ++accepted;
+        // Only stored distances can be wrong: the search must not crash.
+        t->Knn(Spec(points, points[0], L2), 5);
+      } else {
+        EXPECT_TRUE(is_error(t.status())) << t.status();
+      }
+    }
+  }
+  EXPECT_LT(accepted, static_cast<int>(bytes.size()));
+  EXPECT_EQ(VpTree::Deserialize("not a tree at all").status().code(),
+            absl::StatusCode::kInvalidArgument);
+  std::string version = bytes;
+  version[6] = 9;
+  EXPECT_EQ(VpTree::Deserialize(version).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  std::string checksum = bytes;
+  checksum.back() = static_cast<char>(checksum.back() ^ 1);
+  EXPECT_EQ(VpTree::Deserialize(checksum).status().code(),
+            absl::StatusCode::kDataLoss);
+}
+
+}  // namespace
+}  // namespace tpr::index
