@@ -57,6 +57,85 @@ double UnfoldedLength(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
   return std::hypot(xd - xc, yc + yd);
 }
 
+// BuildOneRings fills, per vertex, its mesh neighbours in fan order. Each
+// triangle (a, b, c) says that around a, b is followed by c (and so on
+// cyclically); chaining these links walks the fan. Fans are small (about 6),
+// so the per-vertex work is a quadratic scan over a few links.
+void BuildOneRings(const Mesh& mesh, std::vector<int64_t>* offsets,
+                   std::vector<int32_t>* targets) {
+  const int32_t n = static_cast<int32_t>(mesh.positions.size());
+  std::vector<int64_t> link_offsets(static_cast<size_t>(n) + 1, 0);
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) ++link_offsets[t[k] + 1];
+  }
+  for (int32_t v = 0; v < n; ++v) link_offsets[v + 1] += link_offsets[v];
+  std::vector<std::pair<int32_t, int32_t>> links(link_offsets[n]);
+  std::vector<int64_t> fill(link_offsets.begin(), link_offsets.end() - 1);
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      links[fill[t[k]]++] = {t[(k + 1) % 3], t[(k + 2) % 3]};
+    }
+  }
+  offsets->assign(static_cast<size_t>(n) + 1, 0);
+  targets->clear();
+  targets->reserve(links.size() + 16);
+  std::vector<char> used;
+  for (int32_t v = 0; v < n; ++v) {
+    const int64_t begin = link_offsets[v];
+    const int64_t count = link_offsets[v + 1] - begin;
+    used.assign(count, 0);
+    const size_t out_begin = targets->size();
+    auto emit = [&](int32_t u) {
+      if (u == v) return;
+      for (size_t i = out_begin; i < targets->size(); ++i) {
+        if ((*targets)[i] == u) return;
+      }
+      targets->push_back(u);
+    };
+    int64_t remaining = count;
+    while (remaining > 0) {
+      // Start at a link whose `from` is no link's `to` (a boundary edge),
+      // else at the first unused link.
+      int64_t start = -1;
+      for (int64_t i = 0; i < count && start < 0; ++i) {
+        if (used[i]) continue;
+        bool is_target = false;
+        for (int64_t j = 0; j < count; ++j) {
+          if (!used[j] && links[begin + j].second == links[begin + i].first) {
+            is_target = true;
+            break;
+          }
+        }
+        if (!is_target) start = i;
+      }
+      if (start < 0) {
+        for (int64_t i = 0; i < count; ++i) {
+          if (!used[i]) {
+            start = i;
+            break;
+          }
+        }
+      }
+      int64_t cur = start;
+      emit(links[begin + cur].first);
+      while (cur >= 0) {
+        used[cur] = 1;
+        --remaining;
+        const int32_t to = links[begin + cur].second;
+        emit(to);
+        cur = -1;
+        for (int64_t j = 0; j < count; ++j) {
+          if (!used[j] && links[begin + j].first == to) {
+            cur = j;
+            break;
+          }
+        }
+      }
+    }
+    (*offsets)[v + 1] = static_cast<int64_t>(targets->size());
+  }
+}
+
 }  // namespace
 
 MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
@@ -141,6 +220,8 @@ MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
     g.targets_[fill[e.u]] = e.v;
     g.lengths_[fill[e.u]++] = e.length;
   }
+
+  BuildOneRings(mesh, &g.ring_offsets_, &g.ring_targets_);
 
   // Components by breadth-first search over the rows.
   g.component_.assign(n, -1);

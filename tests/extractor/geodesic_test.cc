@@ -8,6 +8,8 @@
 #include <random>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "gtest/gtest.h"
 #include "tests/extractor/test_meshes.h"
 
@@ -124,11 +126,62 @@ TEST(GeodesicTest, VertexAreasSumToSurfaceArea) {
   EXPECT_LT(graph.total_area(), 4.0 * kPi);
   EXPECT_GT(graph.total_area(), 4.0 * kPi * 0.99);
   EXPECT_EQ(graph.num_components(), 1);
-  // Icosphere: every vertex has 5 or 6 mesh edges.
+  // Icosphere: every vertex has 5 or 6 mesh edges; the plain graph is the
+  // edge graph, the default one adds about as many unfolded arcs.
+  const MeshGraph plain = MeshGraph::Build(mesh, {false});
   for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-    EXPECT_GE(graph.neighbors(v).size(), 5u);
-    EXPECT_LE(graph.neighbors(v).size(), 6u);
+    EXPECT_GE(plain.neighbors(v).size(), 5u);
+    EXPECT_LE(plain.neighbors(v).size(), 6u);
+    EXPECT_EQ(graph.one_ring(v).size(), plain.neighbors(v).size());
+    EXPECT_GT(graph.neighbors(v).size(), plain.neighbors(v).size());
   }
+}
+
+// Whether u and w are both in a triangle with v.
+bool ShareTriangle(const Mesh& m, int32_t v, int32_t u, int32_t w) {
+  for (const auto& t : m.triangles) {
+    const bool hv = t[0] == v || t[1] == v || t[2] == v;
+    const bool hu = t[0] == u || t[1] == u || t[2] == u;
+    const bool hw = t[0] == w || t[1] == w || t[2] == w;
+    if (hv && hu && hw) return true;
+  }
+  return false;
+}
+
+TEST(GeodesicTest, OneRingIsTheOrderedFanOnClosedMeshes) {
+  const Mesh mesh = testing::Icosphere(2);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  const MeshGraph plain = MeshGraph::Build(mesh, {false});
+  for (int32_t v = 0; v < graph.num_vertices(); ++v) {
+    const auto ring = graph.one_ring(v);
+    std::vector<int32_t> sorted(ring.begin(), ring.end());
+    std::sort(sorted.begin(), sorted.end());
+    const auto nb = plain.neighbors(v);
+    EXPECT_EQ(sorted, std::vector<int32_t>(nb.begin(), nb.end()));
+    const Eigen::Vector3d& p = mesh.positions[v];
+    for (size_t i = 0; i < ring.size(); ++i) {
+      const int32_t a = ring[i];
+      const int32_t b = ring[(i + 1) % ring.size()];  // closed fan
+      EXPECT_TRUE(ShareTriangle(mesh, v, a, b)) << v;
+      // Counter-clockwise seen from outside (the icosphere is oriented so).
+      const Eigen::Vector3d n =
+          (mesh.positions[a] - p).cross(mesh.positions[b] - p);
+      EXPECT_GT(n.dot(p), 0.0) << v;
+    }
+  }
+}
+
+TEST(GeodesicTest, OneRingIsOpenAtTheBoundary) {
+  const Mesh mesh = testing::Tube(1.0, 2.0, 4, 12);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  // Vertex 0 lies on the first ring, a boundary loop: 4 neighbours, an open
+  // fan of 3 triangles.
+  const auto ring = graph.one_ring(0);
+  ASSERT_EQ(ring.size(), 4u);
+  for (size_t i = 0; i + 1 < ring.size(); ++i) {
+    EXPECT_TRUE(ShareTriangle(mesh, 0, ring[i], ring[i + 1]));
+  }
+  EXPECT_FALSE(ShareTriangle(mesh, 0, ring.back(), ring.front()));
 }
 
 class SolverFamilyTest : public ::testing::TestWithParam<int> {
