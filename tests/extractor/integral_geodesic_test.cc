@@ -1,0 +1,229 @@
+// Tests of the integral geodesic G (4.1), the hierarchical surface-centre
+// search (4.5) and source point selection (4.5), against analytic values
+// and the brute-force search over every vertex.
+#include "extractor/lib/integral_geodesic.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "extractor/lib/source_points.h"
+#include "tests/extractor/test_meshes.h"
+
+namespace tpr::extract {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+TEST(IntegralGeodesicTest, UnitSphereMatchesAnalyticIntegral) {
+  // On the unit sphere G(q) = int_0^pi theta * 2 pi sin(theta) dtheta
+  // = 2 pi^2 for every q.
+  const Mesh mesh = testing::Icosphere(4);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  const double exact = 2.0 * kPi * kPi;
+  for (int32_t q : {0, 100, 1000, 2000}) {
+    const double g = IntegralGeodesic(solver, q);
+    // Default graph: mean distance error about 1.5% (geodesic_test).
+    EXPECT_NEAR(g / exact, 1.0, 0.03) << q;
+  }
+}
+
+TEST(IntegralGeodesicTest, FieldVersionEqualsSweepVersion) {
+  const Mesh mesh = testing::Capsule(0.5, 2.0, 30, 20);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  const double g = IntegralGeodesic(solver, 7);
+  // Independent sum over the same field.
+  double sum = 0.0;
+  for (int32_t v = 0; v < graph.num_vertices(); ++v) {
+    sum += solver.distances()[v] * graph.vertex_areas()[v];
+  }
+  EXPECT_NEAR(g, sum, 1e-9 * sum);
+  EXPECT_EQ(IntegralGeodesicOfField(graph, solver.distances()), g);
+}
+
+TEST(IntegralGeodesicTest, OtherComponentsContributeNothing) {
+  const Mesh a = testing::Icosphere(2);
+  const Mesh both = testing::Union(a, testing::Icosphere(2, 3.0));
+  const MeshGraph ga = MeshGraph::Build(a);
+  const MeshGraph gb = MeshGraph::Build(both);
+  DijkstraSolver sa(ga);
+  DijkstraSolver sb(gb);
+  EXPECT_NEAR(IntegralGeodesic(sa, 5), IntegralGeodesic(sb, 5), 1e-9);
+}
+
+// Symmetric dumbbell: two unit balls joined by a thin neck along z.
+Mesh SymmetricDumbbell() { return testing::Dumbbell(1.0, 1.0, 0.3, 1.6, 70, 24); }
+
+TEST(IntegralGeodesicTest, MinimalAtTheNeckOfASymmetricDumbbell) {
+  const Mesh mesh = SymmetricDumbbell();
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  const SurfaceCentre brute = BruteForceSurfaceCentre(graph, solver);
+  const double half_length = 2.6;
+  // The minimum of G lies on the neck, near z = 0, the maximum at a pole.
+  EXPECT_LT(std::abs(mesh.positions[brute.vertex].z()), 0.1 * half_length);
+  EXPECT_GT(std::abs(mesh.positions[brute.g_max_vertex].z()), 0.95 * half_length);
+  // G grows monotonically (up to discretization) with |z| along the shape:
+  // compare the best vertex of each band of |z|.
+  std::vector<double> band_min(5, kUnreachable);
+  for (size_t i = 0; i < brute.evaluated_vertices.size(); ++i) {
+    const double z = std::abs(mesh.positions[brute.evaluated_vertices[i]].z());
+    const int band = std::min(4, static_cast<int>(z / half_length * 5));
+    band_min[band] = std::min(band_min[band], brute.evaluated_g[i]);
+  }
+  for (int b = 1; b < 5; ++b) EXPECT_GT(band_min[b], band_min[b - 1]) << b;
+}
+
+struct Case {
+  std::string name;
+  Mesh mesh;
+};
+
+std::vector<Case> SearchCases() {
+  std::vector<Case> cases;
+  cases.push_back({"symmetric dumbbell", SymmetricDumbbell()});
+  cases.push_back({"uneven dumbbell", testing::Dumbbell(1.0, 0.6, 0.25, 1.4, 70, 24)});
+  cases.push_back({"capsule", testing::Capsule(0.4, 3.0, 60, 20)});
+  cases.push_back({"sphere", testing::Icosphere(3)});
+  cases.push_back({"tube", testing::Tube(0.7, 3.0, 30, 20)});
+  return cases;
+}
+
+TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForce) {
+  for (const Case& c : SearchCases()) {
+    const MeshGraph graph = MeshGraph::Build(c.mesh);
+    DijkstraSolver solver(graph);
+    const SurfaceCentre brute = BruteForceSurfaceCentre(graph, solver);
+    const SurfaceCentre fast = FindSurfaceCentre(graph, solver, {});
+    const int32_t n = graph.num_vertices();
+    std::printf("%-20s n=%5d  brute min %.5f max %.5f | search min %.5f "
+                "(+%.3f%%) max %.5f (-%.3f%%) sweeps %d levels %d\n",
+                c.name.c_str(), n, brute.g_min, brute.g_max, fast.g_min,
+                100.0 * (fast.g_min / brute.g_min - 1.0), fast.g_max,
+                100.0 * (1.0 - fast.g_max / brute.g_max), fast.sweeps,
+                fast.levels);
+    ASSERT_GE(fast.vertex, 0) << c.name;
+    // The reported G is the exact G of the reported vertex.
+    EXPECT_NEAR(fast.g_min, IntegralGeodesic(solver, fast.vertex),
+                1e-9 * fast.g_min);
+    EXPECT_GE(fast.g_min, brute.g_min * (1.0 - 1e-12)) << c.name;
+    EXPECT_LE(fast.g_min, brute.g_min * 1.005) << c.name;
+    // MAX G from the swept extremes: a lower bound, close to the truth.
+    EXPECT_LE(fast.g_max, brute.g_max * (1.0 + 1e-12)) << c.name;
+    EXPECT_GE(fast.g_max, brute.g_max * 0.99) << c.name;
+    // psi of Table 4 is about 20; far fewer sweeps than vertices.
+    EXPECT_LE(fast.sweeps, 40) << c.name;
+    EXPECT_LT(fast.sweeps * 20, n) << c.name;
+    EXPECT_EQ(fast.evaluated_vertices.size(),
+              static_cast<size_t>(fast.sweeps)) << c.name;
+  }
+}
+
+TEST(SurfaceCentreTest, StaysOnTheLargestComponent) {
+  const Mesh small = testing::Icosphere(2, 0.5);
+  const Mesh big = SymmetricDumbbell();
+  const Mesh both = testing::Union(small, big);
+  const MeshGraph graph = MeshGraph::Build(both);
+  DijkstraSolver solver(graph);
+  const SurfaceCentre fast = FindSurfaceCentre(graph, solver, {});
+  const int32_t big_component = graph.largest_component();
+  ASSERT_GE(fast.vertex, 0);
+  EXPECT_EQ(graph.component()[fast.vertex], big_component);
+  for (int32_t v : fast.evaluated_vertices) {
+    EXPECT_EQ(graph.component()[v], big_component);
+  }
+  // Same answer quality as on the dumbbell alone.
+  const MeshGraph alone = MeshGraph::Build(big);
+  DijkstraSolver alone_solver(alone);
+  const SurfaceCentre brute = BruteForceSurfaceCentre(alone, alone_solver);
+  EXPECT_LE(fast.g_min, brute.g_min * 1.005);
+}
+
+TEST(SurfaceCentreTest, SweepCapIsHonoured) {
+  const Mesh mesh = SymmetricDumbbell();
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  IntegralGeodesicOptions options;
+  options.max_sweeps = 5;
+  const SurfaceCentre fast = FindSurfaceCentre(graph, solver, options);
+  EXPECT_LE(fast.sweeps, 5);
+  EXPECT_GE(fast.vertex, 0);
+}
+
+TEST(SourcePointsTest, DoubleSweepFindsTheTipsOfACapsule) {
+  const double radius = 0.4;
+  const double length = 4.0;
+  const Mesh mesh = testing::Capsule(radius, length, 90, 20);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  absl::StatusOr<SourcePoints> s = SelectSourcePoints(graph, solver, {});
+  ASSERT_TRUE(s.ok()) << s.status();
+  const double tip = 0.5 * length + radius;
+  const double za = mesh.positions[s->far_a].z();
+  const double zb = mesh.positions[s->far_b].z();
+  // The two tips, one at each end (the poles are at exactly +-tip).
+  EXPECT_NEAR(std::abs(za), tip, 0.05 * tip);
+  EXPECT_NEAR(std::abs(zb), tip, 0.05 * tip);
+  EXPECT_LT(za * zb, 0.0);
+  // Their distance is about length + pi * radius (over the caps).
+  EXPECT_NEAR(s->g_far_ab, length + kPi * radius, 0.05 * (length + kPi * radius));
+  // The centre is midway.
+  EXPECT_LT(std::abs(mesh.positions[s->centre].z()), 0.1 * tip);
+  EXPECT_EQ(s->sweeps, 2 + s->surface_centre.sweeps);
+  // far_a and far_b are among the vertices whose G was computed, so MAX G
+  // covers the extremes.
+  const auto& ev = s->surface_centre.evaluated_vertices;
+  EXPECT_NE(std::find(ev.begin(), ev.end(), s->far_a), ev.end());
+  EXPECT_NE(std::find(ev.begin(), ev.end(), s->far_b), ev.end());
+}
+
+TEST(SourcePointsTest, CentreOfDumbbellIsOnTheNeck) {
+  const Mesh mesh = SymmetricDumbbell();
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  absl::StatusOr<SourcePoints> s = SelectSourcePoints(graph, solver, {});
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_LT(std::abs(mesh.positions[s->centre].z()), 0.26);
+  EXPECT_LT(mesh.positions[s->far_a].z() * mesh.positions[s->far_b].z(), 0.0);
+}
+
+TEST(SourcePointsTest, RejectsBadInput) {
+  const Mesh mesh = testing::Icosphere(1);
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  IntegralGeodesicOptions bad;
+  bad.patches_per_level = 1;
+  EXPECT_EQ(SelectSourcePoints(graph, solver, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  bad = {};
+  bad.max_sweeps = 0;
+  EXPECT_EQ(SelectSourcePoints(graph, solver, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  bad = {};
+  bad.min_relative_change = std::nan("");
+  EXPECT_EQ(SelectSourcePoints(graph, solver, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+
+  const Mesh empty;
+  const MeshGraph empty_graph = MeshGraph::Build(empty);
+  DijkstraSolver empty_solver(empty_graph);
+  EXPECT_EQ(SelectSourcePoints(empty_graph, empty_solver, {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+
+  // Points without triangles: zero area.
+  Mesh dust;
+  dust.positions = {{0, 0, 0}, {1, 0, 0}};
+  const MeshGraph dust_graph = MeshGraph::Build(dust);
+  DijkstraSolver dust_solver(dust_graph);
+  EXPECT_EQ(SelectSourcePoints(dust_graph, dust_solver, {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(FindSurfaceCentre(empty_graph, empty_solver, {}).vertex, -1);
+}
+
+}  // namespace
+}  // namespace tpr::extract
