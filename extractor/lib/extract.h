@@ -7,6 +7,8 @@
 #define TPR_EXTRACTOR_LIB_EXTRACT_H_
 
 #include "absl/status/statusor.h"
+#include "extractor/lib/geodesic.h"
+#include "extractor/lib/integral_geodesic.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/lib/signature.h"
 
@@ -21,9 +23,27 @@ struct Options {
   // Critical Point Analysis: a cycle is valid when it has more than this
   // many vertices (4.3, "we choose n = 1"). Default 1.
   int cycle_min_vertices = 1;
-  // Topological Ring Extraction: a merge is a ring when its region length
-  // (Eq. 3) exceeds this fraction of MAX g_o. Default 0.05.
+  // Critical Point Analysis: how many edges from a saddle candidate the
+  // search of C(l_s)^+ goes (the paper's "around v", see
+  // CriticalPointOptions::search_hops). Must exceed cycle_min_vertices.
+  // Default 6.
+  int cycle_search_hops = 6;
+  // Topological Ring Extraction: a front's wavefront is a ring when its
+  // region length (Eq. 3) exceeds this fraction of MAX g_o (the paper gives
+  // no number, 4.6.2). Chosen by measurement on the synthetic classes (see
+  // tests/extractor/extract_test.cc): 0.05 keeps the joints of bipeds and
+  // quadrupeds and drops the slivers of near-simultaneous merges.
+  // Default 0.05.
   double ring_length_threshold = 0.05;
+  // Topological Ring Extraction: also stop once every saddle of the
+  // centre-sourced analysis is visited (4.6.3's shortcut); see
+  // RingOptions::stop_at_centre_saddles for why it is off. Default false.
+  bool ring_stop_at_centre_saddles = false;
+  // Surface-centre search (4.5) and MAX G estimate, see
+  // integral_geodesic.h. Defaults there.
+  IntegralGeodesicOptions integral_geodesic;
+  // How the mesh graph approximates geodesics, see geodesic.h.
+  GeodesicOptions geodesic;
   // Threads for independent Dijkstra sweeps; <= 1 runs on the caller's
   // thread. The result does not depend on it. Default 1.
   int threads = 1;
@@ -32,9 +52,20 @@ struct Options {
 };
 
 // ExtractSignature runs the whole TPR pipeline on a mesh that intake
-// validated. Errors: INVALID_ARGUMENT for options out of range or a mesh the
-// method cannot describe (the message says why). Thread-safe (no shared
-// state). Cost: about (7 + R + psi + mu + gamma) Dijkstra sweeps (Table 4).
+// validated: source points (4.5), Critical Point Analysis from each (4.3),
+// Topological Point Selection (4.4), Topological Ring Extraction (4.6) and
+// the geometric features of every point and ring (5). Only the largest
+// connected component (by area) is described; quantities are normalized by
+// its area. Meshes the paper handles poorly (genus > 0, boundaries, several
+// components) still get a signature, with a sentence in `warnings`. A mesh
+// on which no topological point is found (a sphere-like blob) gets one
+// point feature at the surface centre with weight 1 and a warning.
+// Errors: INVALID_ARGUMENT for options out of range, or a mesh with no
+// vertex, out-of-range indices, non-finite coordinates, or zero area (the
+// message says which). Thread-safe (no shared state). Cost: about
+// (7 + R + psi + mu + gamma) Dijkstra sweeps (Table 4); with threads > 1
+// the independent sweeps (the three analyses, the per-feature geodesics)
+// run in parallel, with identical results.
 absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
                                                const MeshStats& stats,
                                                const Options& options);

@@ -9,6 +9,10 @@
 #include <utility>
 #include <vector>
 
+#include <Eigen/Geometry>
+
+#include <Eigen/Geometry>  // cross(): declared in Core, defined here.
+
 namespace tpr::extract {
 namespace {
 

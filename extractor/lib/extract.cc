@@ -1,0 +1,300 @@
+// The TPR pipeline (sections 4 and 5): a short facade over the stage
+// modules, plus the per-stage timing, threading and degenerate-mesh policy.
+#include "extractor/lib/extract.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <memory>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "common/status_macros.h"
+#include "extractor/lib/critical_points.h"
+#include "extractor/lib/features.h"
+#include "extractor/lib/source_points.h"
+#include "extractor/lib/topological_points.h"
+#include "extractor/lib/topological_rings.h"
+
+namespace tpr::extract {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+class StageTimer {
+ public:
+  explicit StageTimer(std::vector<StageTiming>* timings) : timings_(timings) {}
+  void Finish(const char* stage) {
+    const Clock::time_point now = Clock::now();
+    timings_->push_back(
+        {stage, std::chrono::duration<double, std::milli>(now - start_).count()});
+    start_ = now;
+  }
+
+ private:
+  std::vector<StageTiming>* timings_;
+  Clock::time_point start_ = Clock::now();
+};
+
+// ParallelFor runs body(item, solver) for item in [0, count) on up to
+// `threads` threads, each with its own solver (solvers are not thread-safe;
+// the graph is). Items write to their own slots, so results do not depend on
+// the thread count.
+void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver, int count,
+                 int threads, const std::function<void(int, DijkstraSolver&)>& body) {
+  const int workers = std::min(std::max(threads, 1), count);
+  if (workers <= 1) {
+    for (int i = 0; i < count; ++i) body(i, caller_solver);
+    return;
+  }
+  std::atomic<int> next{0};
+  auto work = [&](DijkstraSolver& solver) {
+    for (int i = next++; i < count; i = next++) body(i, solver);
+  };
+  std::vector<std::thread> pool;
+  std::vector<std::unique_ptr<DijkstraSolver>> solvers;
+  for (int t = 1; t < workers; ++t) {
+    solvers.push_back(std::make_unique<DijkstraSolver>(graph));
+  }
+  for (int t = 1; t < workers; ++t) {
+    DijkstraSolver* s = solvers[t - 1].get();
+    pool.emplace_back([&work, s] { work(*s); });
+  }
+  work(caller_solver);
+  for (std::thread& t : pool) t.join();
+}
+
+absl::Status ValidateOptions(const Options& o) {
+  if (o.bands < 1 || o.bands > 1000) {
+    return absl::InvalidArgumentError(absl::StrCat("options: bands ", o.bands, " not in [1, 1000]"));
+  }
+  if (o.cycle_min_vertices < 0) {
+    return absl::InvalidArgumentError("options: cycle_min_vertices must be >= 0");
+  }
+  if (o.cycle_search_hops < o.cycle_min_vertices + 1) {
+    return absl::InvalidArgumentError(
+        "options: cycle_search_hops must be >= cycle_min_vertices + 1");
+  }
+  if (!(o.ring_length_threshold >= 0.0 && o.ring_length_threshold <= 1.0)) {
+    return absl::InvalidArgumentError("options: ring_length_threshold not in [0, 1]");
+  }
+  if (o.threads < 0 || o.threads > 256) {
+    return absl::InvalidArgumentError("options: threads not in [0, 256]");
+  }
+  return absl::OkStatus();
+}
+
+Feature MakeFeature(FeatureKind kind, double g_norm, SurfaceVectors vectors) {
+  Feature f;
+  f.kind = kind;
+  f.integral_geodesic = g_norm;
+  f.curvature = std::move(vectors.curvature);
+  f.area = std::move(vectors.area);
+  f.distance = std::move(vectors.distance);
+  return f;
+}
+
+}  // namespace
+
+absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats& stats,
+                                               const Options& options) {
+  TPR_RETURN_IF_ERROR(ValidateOptions(options));
+  ExtractResult result;
+  StageTimer timer(&result.timings);
+
+  // Stage: mesh graph, 1-ring links and angle defects.
+  TPR_ASSIGN_OR_RETURN(MeshGraph graph, MeshGraph::Create(mesh, options.geodesic));
+  const VertexLinks links = VertexLinks::Build(mesh);
+  const std::vector<double> defects = AngleDefects(mesh, links);
+  const int32_t main_component = graph.largest_component();
+  const double area = main_component >= 0 ? graph.component_areas()[main_component] : 0.0;
+  if (!(area > 0.0)) {
+    return absl::InvalidArgumentError("mesh has zero surface area");
+  }
+  if (stats.genus > 0) {
+    result.warnings.push_back(absl::StrCat(
+        "mesh has genus ", stats.genus, "; TPR analysis describes genus-0 surfaces poorly (7.4)"));
+  }
+  if (stats.boundary_edges > 0) {
+    result.warnings.push_back(absl::StrCat("mesh has ", stats.boundary_edges,
+                                           " boundary edges; TPR assumes closed surfaces (7.4)"));
+  }
+  if (graph.num_components() > 1) {
+    result.warnings.push_back(absl::StrCat(
+        "mesh has ", graph.num_components(),
+        " connected components; only the largest (by area) is described"));
+  }
+  timer.Finish("graph");
+
+  // Stage: source points (4.5).
+  DijkstraSolver solver(graph);
+  TPR_ASSIGN_OR_RETURN(SourcePoints sources,
+                       SelectSourcePoints(graph, solver, options.integral_geodesic));
+  const int32_t centre = sources.centre;
+  const double g_min = sources.surface_centre.g_min;
+  double g_max = sources.surface_centre.g_max;
+  timer.Finish("source_points");
+
+  // Stage: Critical Point Analysis from each source (4.3). The centre's
+  // analysis is last: its saddles end ring extraction (4.6.3) and its field
+  // gives MAX g_o (Eq. 1).
+  const std::vector<int32_t> source_list = {sources.far_a, sources.far_b, centre};
+  std::vector<CriticalPoints> sets(source_list.size());
+  std::vector<absl::Status> cpa_status(source_list.size());
+  CriticalPointOptions cpa_options;
+  cpa_options.cycle_min_vertices = options.cycle_min_vertices;
+  cpa_options.search_hops = options.cycle_search_hops;
+  ParallelFor(graph, solver, static_cast<int>(source_list.size()), options.threads,
+              [&](int i, DijkstraSolver&) {
+                absl::StatusOr<CriticalPoints> cp =
+                    AnalyzeCriticalPoints(graph, links, source_list[i], cpa_options);
+                if (cp.ok()) {
+                  sets[i] = std::move(*cp);
+                } else {
+                  cpa_status[i] = cp.status();
+                }
+              });
+  for (const absl::Status& s : cpa_status) TPR_RETURN_IF_ERROR(s);
+  const CriticalPoints& centre_set = sets.back();
+  double max_g_o = 0.0;
+  for (double d : centre_set.distances) {
+    if (d != kUnreachable) max_g_o = std::max(max_g_o, d);
+  }
+  timer.Finish("critical_points");
+
+  // Stage: Topological Point Selection (4.4).
+  std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph, solver, sets);
+  int num_points = static_cast<int>(points.size());
+  timer.Finish("topological_points");
+
+  // Stage: integral geodesic at each point (Eq. 1 needs it; 5.1 reuses it)
+  // and, from the same sweep, the point's surface vectors (5.3).
+  std::vector<double> point_g(num_points, 0.0);
+  std::vector<SurfaceVectors> point_vectors(num_points);
+  ParallelFor(graph, solver, num_points, options.threads, [&](int i, DijkstraSolver& s) {
+    point_g[i] = IntegralGeodesic(s, points[i].vertex);
+    point_vectors[i] =
+        ComputeSurfaceVectors(graph, links, s.distances(), defects, options.bands, area);
+  });
+  // MAX G is an estimate from the centre search; the points are where G
+  // peaks (4.1), so they raise it and Eq. 1 stays non-negative.
+  for (double g : point_g) g_max = std::max(g_max, g);
+  timer.Finish("point_features");
+
+  // Stage: Topological Ring Extraction (4.6).
+  RingOptions ring_options;
+  ring_options.length_threshold = options.ring_length_threshold * max_g_o;
+  ring_options.stop_at_centre_saddles = options.ring_stop_at_centre_saddles;
+  std::vector<int32_t> point_vertices(num_points);
+  for (int i = 0; i < num_points; ++i) point_vertices[i] = points[i].vertex;
+  std::vector<double> start = RingStartTimes(point_g, g_min, g_max, max_g_o);
+  TPR_ASSIGN_OR_RETURN(
+      RingExtraction rings,
+      ExtractTopologicalRings(graph, point_vertices, start, centre_set.saddles, ring_options));
+  // A point whose wavefront never started (another front swept its vertex
+  // before its Eq. 1 start time) lies inside another feature's region, bounds
+  // no region and would get no effective area (5.2), so it carries no mass
+  // in the EMD (6.1): it is not a protrusion tip (typically a bump of a
+  // central body, near the surface centre). Drop it and run again without
+  // it (the other fronts are unaffected: it never swept a vertex).
+  std::vector<int> kept;
+  for (int i = 0; i < num_points; ++i) {
+    if (rings.fronts[i].started) kept.push_back(i);
+  }
+  if (static_cast<int>(kept.size()) < num_points) {
+    std::vector<TopologicalPoint> kept_points;
+    std::vector<double> kept_g, kept_start;
+    std::vector<SurfaceVectors> kept_vectors;
+    for (int i : kept) {
+      kept_points.push_back(points[i]);
+      kept_g.push_back(point_g[i]);
+      kept_start.push_back(start[i]);
+      kept_vectors.push_back(std::move(point_vectors[i]));
+    }
+    points = std::move(kept_points);
+    point_g = std::move(kept_g);
+    start = std::move(kept_start);
+    point_vectors = std::move(kept_vectors);
+    num_points = static_cast<int>(points.size());
+    point_vertices.resize(num_points);
+    for (int i = 0; i < num_points; ++i) point_vertices[i] = points[i].vertex;
+    TPR_ASSIGN_OR_RETURN(rings, ExtractTopologicalRings(graph, point_vertices, start,
+                                                        centre_set.saddles, ring_options));
+  }
+  std::vector<int32_t> ring_fronts;
+  for (int32_t f = 0; f < static_cast<int32_t>(rings.fronts.size()); ++f) {
+    if (rings.fronts[f].is_ring) ring_fronts.push_back(f);
+  }
+  const int num_rings = static_cast<int>(ring_fronts.size());
+  timer.Finish("topological_rings");
+
+  // Stage: ring features. One vertex-set sweep per ring gives g_vs for
+  // Eq. 4 and the bands of 5.3.
+  std::vector<double> ring_g(num_rings, 0.0);
+  std::vector<SurfaceVectors> ring_vectors(num_rings);
+  ParallelFor(graph, solver, num_rings, options.threads, [&](int k, DijkstraSolver& s) {
+    const Front& front = rings.fronts[ring_fronts[k]];
+    const std::vector<double>& d = s.Run(front.ring_vertices);
+    // Ancestor point w: the originating point farthest from the ring (5.1).
+    int w = front.points.front();
+    for (int p : front.points) {
+      if (d[point_vertices[p]] > d[point_vertices[w]]) w = p;
+    }
+    const double g_vs_o = d[centre] == kUnreachable ? 0.0 : d[centre];
+    const double g_vs_w = d[point_vertices[w]] == kUnreachable ? 0.0 : d[point_vertices[w]];
+    ring_g[k] = RingIntegralGeodesic(g_vs_o, g_vs_w, g_min, point_g[w]);
+    ring_vectors[k] = ComputeSurfaceVectors(graph, links, d, defects, options.bands, area);
+  });
+  timer.Finish("ring_features");
+
+  // Stage: effective areas (5.2) and the signature.
+  Signature& sig = result.signature;
+  sig.stats = stats;
+  if (num_points == 0) {
+    // No protrusion survived the vote (a blob): one point at the surface
+    // centre carries the whole area, so the signature stays comparable.
+    result.warnings.push_back(
+        "no topological point found; the signature is one point at the surface centre");
+    Feature f = MakeFeature(
+        FeatureKind::kPoint, NormalizeIntegralGeodesic(g_min, g_min, g_max),
+        ComputeSurfaceVectors(graph, links, centre_set.distances, defects, options.bands, area));
+    f.weight = 1.0;
+    sig.features.push_back(std::move(f));
+  } else {
+    const std::vector<double> weights = EffectiveAreas(graph, rings, num_points);
+    for (int i = 0; i < num_points; ++i) {
+      sig.features.push_back(MakeFeature(FeatureKind::kPoint,
+                                         NormalizeIntegralGeodesic(point_g[i], g_min, g_max),
+                                         std::move(point_vectors[i])));
+    }
+    for (int k = 0; k < num_rings; ++k) {
+      sig.features.push_back(MakeFeature(FeatureKind::kRing,
+                                         NormalizeIntegralGeodesic(ring_g[k], g_min, g_max),
+                                         std::move(ring_vectors[k])));
+    }
+    for (size_t i = 0; i < sig.features.size(); ++i) sig.features[i].weight = weights[i];
+  }
+  double weight_sum = 0.0;
+  for (const Feature& f : sig.features) weight_sum += f.weight;
+  assert(std::abs(weight_sum - 1.0) < 1e-9);
+  (void)weight_sum;
+
+  if (options.explain) {
+    Explanation e;
+    e.vertex_region = rings.vertex_region;
+    if (num_points == 0) {
+      e.feature_vertices.push_back({centre});
+    } else {
+      for (int i = 0; i < num_points; ++i) e.feature_vertices.push_back({point_vertices[i]});
+      for (int32_t f : ring_fronts) e.feature_vertices.push_back(rings.fronts[f].ring_vertices);
+    }
+    result.explanation = std::move(e);
+  }
+  timer.Finish("signature");
+  return result;
+}
+
+}  // namespace tpr::extract

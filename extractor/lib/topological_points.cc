@@ -1,0 +1,85 @@
+// Topological Point Selection (4.4).
+#include "extractor/lib/topological_points.h"
+
+#include <algorithm>
+#include <tuple>
+
+namespace tpr::extract {
+
+std::vector<TopologicalPoint> SelectTopologicalPoints(
+    const MeshGraph& graph, DijkstraSolver& solver,
+    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats) {
+  TopologicalPointStats local;
+  const int32_t n = graph.num_vertices();
+  const int num_sources = static_cast<int>(sets.size());
+
+  // Distance of every vertex to the nearest saddle of any source: the search
+  // radius of a maximum m is this distance at m (graph distances are
+  // symmetric), so one sweep serves every m.
+  std::vector<int32_t> saddles;
+  for (const CriticalPoints& cp : sets) {
+    saddles.insert(saddles.end(), cp.saddles.begin(), cp.saddles.end());
+  }
+  std::sort(saddles.begin(), saddles.end());
+  saddles.erase(std::unique(saddles.begin(), saddles.end()), saddles.end());
+  std::vector<double> to_saddle(n, kUnreachable);
+  if (!saddles.empty()) {
+    to_saddle = solver.Run(saddles);
+    ++local.sweeps;
+    local.vertices_visited += static_cast<int64_t>(solver.order().size());
+  }
+
+  // Per vertex: bit mask of the sources that have a maximum there.
+  std::vector<uint32_t> max_sources(n, 0);
+  struct Candidate {
+    double prominence;
+    int32_t vertex;
+  };
+  std::vector<Candidate> candidates;
+  for (int i = 0; i < num_sources && i < 32; ++i) {
+    for (int32_t m : sets[i].maxima) {
+      if (max_sources[m] == 0) candidates.push_back({to_saddle[m], m});
+      max_sources[m] |= 1u << i;
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+    return std::tie(b.prominence, a.vertex) < std::tie(a.prominence, b.vertex);
+  });
+
+  std::vector<char> visited(n, 0);
+  std::vector<TopologicalPoint> points;
+  for (const Candidate& c : candidates) {
+    const int32_t m = c.vertex;
+    if (visited[m]) continue;
+    RunOptions run;
+    run.max_distance = to_saddle[m];
+    solver.Run(m, run);
+    ++local.sweeps;
+    local.vertices_visited += static_cast<int64_t>(solver.order().size());
+    uint32_t voters = 0;
+    TopologicalPoint p;
+    p.radius = to_saddle[m];
+    for (int32_t v : solver.order()) {
+      if (max_sources[v] != 0 && !visited[v]) {
+        voters |= max_sources[v];
+        p.members.push_back(v);
+      }
+    }
+    p.votes = __builtin_popcount(voters);
+    if (2 * p.votes <= num_sources) {
+      visited[m] = 1;
+      continue;
+    }
+    p.vertex = p.members.front();
+    for (int32_t v : p.members) {
+      visited[v] = 1;
+      if (std::tie(to_saddle[v], p.vertex) > std::tie(to_saddle[p.vertex], v)) p.vertex = v;
+    }
+    std::sort(p.members.begin(), p.members.end());
+    points.push_back(std::move(p));
+  }
+  if (stats != nullptr) *stats = local;
+  return points;
+}
+
+}  // namespace tpr::extract
