@@ -1,0 +1,455 @@
+// tpr-indexer over the wire (in-process server on a loopback port): CRUD
+// round trips, searches against the brute-force EMD oracle, error codes,
+// concurrency, health, cancellation.
+#include <atomic>
+#include <set>
+#include <thread>
+
+#include "gtest/gtest.h"
+#include "tests/service/extsvc_test_util.h"
+#include "tests/service/indexer_testing.h"
+
+namespace tpr::indexer::testing {
+namespace {
+
+using ::tpr::testing::TempDir;
+
+tpr::v1::SearchRequest ById(const std::string& id, int k) {
+  tpr::v1::SearchRequest r;
+  r.set_id(id);
+  r.set_k(k);
+  return r;
+}
+
+tpr::v1::SearchRequest BySignature(const tpr::index::Signature& s, int k) {
+  tpr::v1::SearchRequest r;
+  *r.mutable_signature() = ToWire(s);
+  r.set_k(k);
+  return r;
+}
+
+class IndexerServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    CoreOptions core;
+    core.persist_interval_ms = 0;
+    // A small threshold so that the tree is rebuilt while tests write, and
+    // searches cover tree, buffer and tombstones.
+    core.index.rebuild_threshold = 16;
+    core.max_k = 1000;
+    server_ = std::make_unique<InProcessIndexer>(dir_.path(), core);
+    ASSERT_TRUE(server_->Start().ok());
+  }
+
+  void AddAll(const std::vector<TestModel>& models) {
+    for (const TestModel& m : models) {
+      grpc::ClientContext context;
+      tpr::v1::UpsertResponse response;
+      ASSERT_TRUE(server_->stub()->Upsert(&context, ToRequest(m), &response).ok());
+      ASSERT_TRUE(response.created());
+    }
+  }
+
+  TempDir dir_;
+  std::unique_ptr<InProcessIndexer> server_;
+};
+
+TEST_F(IndexerServiceTest, UpsertGetListDeleteStatsRoundTrip) {
+  std::vector<TestModel> models = MakeModels(10, 2, 11);
+  AddAll(models);
+  auto* stub = server_->stub();
+
+  // Upsert without overwrite: ALREADY_EXISTS; with overwrite: replaced and
+  // the time added kept.
+  tpr::v1::Model before;
+  {
+    grpc::ClientContext c;
+    tpr::v1::GetRequest g;
+    g.set_id(models[3].id);
+    ASSERT_TRUE(stub->Get(&c, g, &before).ok());
+    EXPECT_GT(before.added_unix_micros(), 0);
+    EXPECT_EQ(before.label(), models[3].label);
+    EXPECT_EQ(before.metadata().at("source"), "gen/" + models[3].id);
+    EXPECT_EQ(before.signature().SerializeAsString(),
+              ToWire(models[3].signature).SerializeAsString());
+  }
+  {
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse r;
+    EXPECT_EQ(stub->Upsert(&c, ToRequest(models[3]), &r).error_code(),
+              grpc::StatusCode::ALREADY_EXISTS);
+  }
+  TestModel relabelled = models[3];
+  relabelled.label = "class1";
+  relabelled.signature = models[4].signature;
+  {
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse r;
+    ASSERT_TRUE(stub->Upsert(&c, ToRequest(relabelled, /*overwrite=*/true), &r).ok());
+    EXPECT_FALSE(r.created());
+    grpc::ClientContext c2;
+    tpr::v1::GetRequest g;
+    g.set_id(models[3].id);
+    tpr::v1::Model after;
+    ASSERT_TRUE(stub->Get(&c2, g, &after).ok());
+    EXPECT_EQ(after.added_unix_micros(), before.added_unix_micros());
+    EXPECT_EQ(after.label(), "class1");
+    EXPECT_EQ(after.signature().SerializeAsString(),
+              ToWire(models[4].signature).SerializeAsString());
+  }
+
+  // List: pages of 3 concatenate to every id in order; label filter.
+  std::vector<std::string> listed;
+  std::string token;
+  int pages = 0;
+  do {
+    grpc::ClientContext c;
+    tpr::v1::ListRequest l;
+    l.set_page_size(3);
+    l.set_page_token(token);
+    tpr::v1::ListResponse r;
+    ASSERT_TRUE(stub->List(&c, l, &r).ok());
+    for (const auto& m : r.models()) {
+      listed.push_back(m.id());
+      EXPECT_EQ(m.signature().features_size(), 0);  // omitted in lists
+    }
+    token = r.next_page_token();
+    ++pages;
+  } while (!token.empty() && pages < 100);
+  std::vector<std::string> expected;
+  for (const TestModel& m : models) expected.push_back(m.id);
+  EXPECT_EQ(listed, expected);
+  EXPECT_EQ(pages, 4);
+  {
+    grpc::ClientContext c;
+    tpr::v1::ListRequest l;
+    l.set_label("class0");
+    tpr::v1::ListResponse r;
+    ASSERT_TRUE(stub->List(&c, l, &r).ok());
+    std::vector<std::string> got;
+    for (const auto& m : r.models()) got.push_back(m.id());
+    std::vector<std::string> want;
+    for (const TestModel& m : models) {
+      if (m.label == "class0" && m.id != models[3].id) want.push_back(m.id);
+    }
+    EXPECT_EQ(got, want);
+  }
+
+  // Delete, then NOT_FOUND for Get and a second Delete.
+  {
+    grpc::ClientContext c;
+    tpr::v1::DeleteRequest d;
+    d.set_id(models[0].id);
+    tpr::v1::DeleteResponse r;
+    ASSERT_TRUE(stub->Delete(&c, d, &r).ok());
+    grpc::ClientContext c2;
+    EXPECT_EQ(stub->Delete(&c2, d, &r).error_code(), grpc::StatusCode::NOT_FOUND);
+    grpc::ClientContext c3;
+    tpr::v1::GetRequest g;
+    g.set_id(models[0].id);
+    tpr::v1::Model m;
+    EXPECT_EQ(stub->Get(&c3, g, &m).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+
+  // Stats: 9 models; labels counted after the relabel and the delete.
+  {
+    grpc::ClientContext c;
+    tpr::v1::StatsResponse s;
+    ASSERT_TRUE(stub->Stats(&c, tpr::v1::StatsRequest(), &s).ok());
+    EXPECT_EQ(s.models(), 9);
+    EXPECT_EQ(s.indexed() + s.buffered(), 9);
+    // models 0,2,4,6,8 were class0; 0 deleted -> 4; class1 1,3,5,7,9 -> 5.
+    EXPECT_EQ(s.labels().at("class0"), 4);
+    EXPECT_EQ(s.labels().at("class1"), 5);
+    EXPECT_GT(s.disk_bytes(), 0);
+  }
+}
+
+TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
+  const std::vector<TestModel> models = MakeModels(80, 4, 21);
+  AddAll(models);
+  auto* stub = server_->stub();
+  const std::vector<TestModel> queries = MakeModels(6, 4, 99, "q");
+
+  for (const TestModel& q : queries) {
+    SCOPED_TRACE(q.id);
+    // Plain k-NN.
+    SearchResult r = RunSearch(stub, BySignature(q.signature, 7));
+    ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 7));
+    EXPECT_TRUE(r.got_stats);
+    EXPECT_GT(r.stats.emd_computations(), 0);
+    for (const auto& n : r.neighbors) {
+      EXPECT_EQ(n.label(), models[static_cast<size_t>(std::stoi(n.id().substr(1)))].label);
+    }
+
+    // k > n returns everything, ranked.
+    r = RunSearch(stub, BySignature(q.signature, 500));
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 500));
+
+    // Radius: the median distance keeps about half.
+    const std::vector<Hit> all = BruteForce(q.signature, models, 500);
+    const double radius = all[all.size() / 2].distance;
+    tpr::v1::SearchRequest req = BySignature(q.signature, 500);
+    req.set_radius(radius);
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 500, radius));
+
+    // Label filter, with k and radius.
+    req = BySignature(q.signature, 5);
+    req.set_label("class2");
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 5, 0, "class2"));
+    for (const auto& n : r.neighbors) EXPECT_EQ(n.label(), "class2");
+    req.set_radius(radius);
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(q.signature, models, 5, radius, "class2"));
+  }
+
+  // By stored id, with and without the query model itself.
+  for (int i : {0, 17, 79}) {
+    const TestModel& m = models[static_cast<size_t>(i)];
+    SearchResult r = RunSearch(stub, ById(m.id, 6));
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(m.signature, models, 6));
+    ASSERT_FALSE(r.neighbors.empty());
+    EXPECT_EQ(r.neighbors[0].id(), m.id);
+    EXPECT_EQ(r.neighbors[0].distance(), 0.0);
+    tpr::v1::SearchRequest req = ById(m.id, 6);
+    req.set_exclude_self(true);
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(m.signature, models, 6, 0, "", m.id));
+  }
+}
+
+TEST_F(IndexerServiceTest, SearchIsExactAfterDeletesAndOverwrites) {
+  std::vector<TestModel> models = MakeModels(60, 3, 31);
+  AddAll(models);
+  auto* stub = server_->stub();
+  const std::vector<TestModel> fresh = MakeModels(60, 3, 32);
+  std::vector<TestModel> live;
+  for (size_t i = 0; i < models.size(); ++i) {
+    if (i % 3 == 0) {
+      grpc::ClientContext c;
+      tpr::v1::DeleteRequest d;
+      d.set_id(models[i].id);
+      tpr::v1::DeleteResponse r;
+      ASSERT_TRUE(stub->Delete(&c, d, &r).ok());
+    } else if (i % 3 == 1) {
+      TestModel changed = models[i];
+      changed.signature = fresh[i].signature;
+      grpc::ClientContext c;
+      tpr::v1::UpsertResponse r;
+      ASSERT_TRUE(stub->Upsert(&c, ToRequest(changed, true), &r).ok());
+      live.push_back(changed);
+    } else {
+      live.push_back(models[i]);
+    }
+  }
+  for (const TestModel& q : MakeModels(4, 3, 33, "q")) {
+    SearchResult r = RunSearch(stub, BySignature(q.signature, 100));
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, live, 100));
+  }
+}
+
+TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
+  const std::vector<TestModel> models = MakeModels(10, 2, 41);
+  AddAll(models);
+  auto* stub = server_->stub();
+  auto search_code = [&](const tpr::v1::SearchRequest& r) {
+    SearchResult res = RunSearch(stub, r);
+    EXPECT_TRUE(res.neighbors.empty());
+    return res.status.error_code();
+  };
+  EXPECT_EQ(search_code(ById(models[0].id, 0)), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(search_code(ById(models[0].id, -3)), grpc::StatusCode::INVALID_ARGUMENT);
+  tpr::v1::SearchRequest negative = ById(models[0].id, 3);
+  negative.set_radius(-0.5);
+  EXPECT_EQ(search_code(negative), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(search_code(ById("no-such-model", 3)), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(search_code(ById(models[0].id, 1001)), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  tpr::v1::SearchRequest no_query;
+  no_query.set_k(3);
+  EXPECT_EQ(search_code(no_query), grpc::StatusCode::INVALID_ARGUMENT);
+
+  // Malformed signatures: weights not summing to 1, unequal band lengths,
+  // a feature without kind, no feature at all.
+  tpr::v1::Signature bad_weights = ToWire(models[0].signature);
+  bad_weights.mutable_features(0)->set_weight(bad_weights.features(0).weight() + 0.3);
+  tpr::v1::Signature bad_bands = ToWire(models[0].signature);
+  bad_bands.mutable_features(1)->add_curvature(0.1);
+  tpr::v1::Signature bad_kind = ToWire(models[0].signature);
+  bad_kind.mutable_features(2)->set_kind(tpr::v1::FEATURE_KIND_UNSPECIFIED);
+  for (const tpr::v1::Signature& bad :
+       {bad_weights, bad_bands, bad_kind, tpr::v1::Signature()}) {
+    tpr::v1::SearchRequest r;
+    *r.mutable_signature() = bad;
+    r.set_k(3);
+    EXPECT_EQ(search_code(r), grpc::StatusCode::INVALID_ARGUMENT);
+    tpr::v1::UpsertRequest u = ToRequest(models[1], true);
+    *u.mutable_model()->mutable_signature() = bad;
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse resp;
+    grpc::Status s = stub->Upsert(&c, u, &resp);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(s.error_message().find(models[1].id), std::string::npos) << s.error_message();
+  }
+
+  // Ids: empty and too long.
+  for (const std::string& id : {std::string(), std::string(1025, 'x')}) {
+    TestModel m = models[0];
+    m.id = id;
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse resp;
+    EXPECT_EQ(stub->Upsert(&c, ToRequest(m), &resp).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  // Oversized metadata.
+  {
+    tpr::v1::UpsertRequest u = ToRequest(models[2], true);
+    (*u.mutable_model()->mutable_metadata())["blob"] = std::string(70000, 'b');
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse resp;
+    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  }
+  // A rejected model was not written.
+  {
+    grpc::ClientContext c;
+    tpr::v1::GetRequest g;
+    g.set_id(models[1].id);
+    tpr::v1::Model m;
+    ASSERT_TRUE(stub->Get(&c, g, &m).ok());
+    EXPECT_EQ(m.signature().SerializeAsString(), ToWire(models[1].signature).SerializeAsString());
+  }
+
+  // Still serving, and exact.
+  SearchResult r = RunSearch(stub, ById(models[0].id, 4));
+  ASSERT_TRUE(r.status.ok());
+  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[0].signature, models, 4));
+}
+
+TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
+  const std::vector<TestModel> models = MakeModels(40, 2, 51);
+  auto* stub = server_->stub();
+  {
+    grpc::ClientContext c;
+    tpr::v1::BatchUpsertResponse resp;
+    auto writer = stub->BatchUpsert(&c, &resp);
+    for (size_t i = 0; i < 30; ++i) ASSERT_TRUE(writer->Write(ToRequest(models[i])));
+    // Duplicates without overwrite are skipped, with overwrite written.
+    ASSERT_TRUE(writer->Write(ToRequest(models[0])));
+    ASSERT_TRUE(writer->Write(ToRequest(models[1], true)));
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+    EXPECT_EQ(resp.written(), 31);
+    EXPECT_EQ(resp.skipped(), 1);
+  }
+  {
+    grpc::ClientContext c;
+    tpr::v1::BatchUpsertResponse resp;
+    auto writer = stub->BatchUpsert(&c, &resp);
+    for (size_t i = 30; i < 35; ++i) ASSERT_TRUE(writer->Write(ToRequest(models[i])));
+    TestModel bad = models[35];
+    bad.signature.features.clear();
+    writer->Write(ToRequest(bad));
+    for (size_t i = 36; i < 40; ++i) writer->Write(ToRequest(models[i]));
+    writer->WritesDone();
+    grpc::Status s = writer->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(s.error_message().find(models[35].id), std::string::npos);
+  }
+  grpc::ClientContext c;
+  tpr::v1::StatsResponse stats;
+  ASSERT_TRUE(stub->Stats(&c, tpr::v1::StatsRequest(), &stats).ok());
+  EXPECT_EQ(stats.models(), 35);  // 30 + the 5 before the bad one
+  std::vector<TestModel> kept(models.begin(), models.begin() + 35);
+  SearchResult r = RunSearch(stub, BySignature(models[39].signature, 50));
+  ASSERT_TRUE(r.status.ok());
+  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[39].signature, kept, 50));
+}
+
+TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
+  const std::vector<TestModel> base = MakeModels(60, 3, 61);
+  AddAll(base);
+  constexpr int kWriters = 3;
+  constexpr int kSearchers = 2;
+  constexpr int kWritesEach = 40;
+  std::vector<std::vector<TestModel>> written(kWriters);
+  std::atomic<int> errors{0};
+  std::atomic<int> searches{0};
+  std::atomic<bool> writers_done{false};
+  std::vector<std::thread> threads;
+  for (int w = 0; w < kWriters; ++w) {
+    threads.emplace_back([&, w] {
+      auto stub = tpr::v1::Indexer::NewStub(server_->channel());
+      written[static_cast<size_t>(w)] =
+          MakeModels(kWritesEach, 3, 100 + static_cast<uint64_t>(w), absl::StrCat("w", w, "-"));
+      for (const TestModel& m : written[static_cast<size_t>(w)]) {
+        grpc::ClientContext c;
+        tpr::v1::UpsertResponse r;
+        if (!stub->Upsert(&c, ToRequest(m), &r).ok()) ++errors;
+      }
+    });
+  }
+  for (int s = 0; s < kSearchers; ++s) {
+    threads.emplace_back([&, s] {
+      auto stub = tpr::v1::Indexer::NewStub(server_->channel());
+      const std::vector<TestModel> queries = MakeModels(5, 3, 200 + static_cast<uint64_t>(s), "q");
+      // Bounded: until the writers finish, at most 200 searches.
+      for (int i = 0; i < 200 && !writers_done.load(); ++i) {
+        SearchResult r = RunSearch(stub.get(), BySignature(queries[i % 5].signature, 10));
+        if (!r.status.ok() || r.neighbors.size() != 10 || !r.got_stats) ++errors;
+        for (size_t j = 1; j < r.neighbors.size(); ++j) {
+          if (r.neighbors[j].distance() < r.neighbors[j - 1].distance()) ++errors;
+        }
+        ++searches;
+      }
+    });
+  }
+  for (int w = 0; w < kWriters; ++w) threads[static_cast<size_t>(w)].join();
+  writers_done = true;
+  for (size_t t = kWriters; t < threads.size(); ++t) threads[t].join();
+  EXPECT_EQ(errors.load(), 0);
+  EXPECT_GT(searches.load(), 0);
+
+  std::vector<TestModel> all = base;
+  for (const auto& w : written) all.insert(all.end(), w.begin(), w.end());
+  for (const TestModel& q : MakeModels(4, 3, 300, "q")) {
+    SearchResult r = RunSearch(server_->stub(), BySignature(q.signature, 25));
+    ASSERT_TRUE(r.status.ok());
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, all, 25));
+  }
+}
+
+TEST_F(IndexerServiceTest, HealthAnswersServing) {
+  absl::StatusOr<int> health = HealthStatus(server_->channel());
+  ASSERT_TRUE(health.ok()) << health.status();
+  EXPECT_EQ(*health, 1);  // SERVING
+}
+
+TEST_F(IndexerServiceTest, ClientCancellationEndsTheStreamAndServerKeepsServing) {
+  const std::vector<TestModel> models = MakeModels(120, 3, 71);
+  AddAll(models);
+  grpc::ClientContext context;
+  auto reader = server_->stub()->Search(&context, BySignature(models[5].signature, 120));
+  tpr::v1::SearchResponse response;
+  ASSERT_TRUE(reader->Read(&response));
+  ASSERT_TRUE(response.has_neighbor());
+  context.TryCancel();
+  while (reader->Read(&response)) {
+  }
+  EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  SearchResult r = RunSearch(server_->stub(), BySignature(models[5].signature, 3));
+  ASSERT_TRUE(r.status.ok());
+  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[5].signature, models, 3));
+}
+
+}  // namespace
+}  // namespace tpr::indexer::testing

@@ -1,0 +1,246 @@
+// Helpers for the tpr-indexer tests: an in-process indexer (IndexerCore +
+// IndexerService on a loopback port, restartable on the same data dir),
+// wire conversion of generated signatures, a streaming search call, and the
+// brute-force oracle: every EMD computed directly (indexer/lib/emd.h), sorted
+// by (distance, id), independent of the VP-tree.
+//
+//   InProcessIndexer server(dir.path());
+//   ASSERT_TRUE(server.Start().ok());
+//   SearchResult r = RunSearch(server.stub(), request);
+#ifndef TPR_TESTS_SERVICE_INDEXER_TESTING_H_
+#define TPR_TESTS_SERVICE_INDEXER_TESTING_H_
+
+#include <algorithm>
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <grpcpp/client_context.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/impl/codegen/client_unary_call.h>
+#include <grpcpp/impl/codegen/rpc_method.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/byte_buffer.h>
+
+#include "absl/strings/str_cat.h"
+#include "common/grpc_status.h"
+#include "common/server_lifecycle.h"
+#include "indexer/lib/emd.h"
+#include "indexer/lib/ground_distance.h"
+#include "indexer/service/indexer_core.h"
+#include "indexer/service/indexer_service.h"
+#include "tests/indexer/signature_testing.h"
+#include "tpr/v1/indexer.grpc.pb.h"
+
+namespace tpr::indexer::testing {
+
+// ToWire returns `s` as the extractor would send it (the first feature a
+// point, the rest alternating rings and points; the kind is not matched).
+inline tpr::v1::Signature ToWire(const tpr::index::Signature& s) {
+  tpr::v1::Signature out;
+  for (size_t i = 0; i < s.features.size(); ++i) {
+    const tpr::index::Feature& f = s.features[i];
+    tpr::v1::Feature* w = out.add_features();
+    w->set_kind(i % 2 == 0 ? tpr::v1::FEATURE_KIND_POINT : tpr::v1::FEATURE_KIND_RING);
+    w->set_weight(f.weight);
+    w->set_integral_geodesic(f.g);
+    for (double x : f.k) w->add_curvature(x);
+    for (double x : f.a) w->add_area(x);
+    for (double x : f.h) w->add_distance(x);
+  }
+  out.set_extractor_version("test");
+  return out;
+}
+
+// A generated model: id, label and signature.
+struct TestModel {
+  std::string id;
+  std::string label;
+  tpr::index::Signature signature;
+};
+
+// Generates `n` models of `classes` classes (label "class<c>"), small
+// signatures (12 features x 8 bands) so that tests stay quick.
+inline std::vector<TestModel> MakeModels(int n, int classes, uint64_t seed,
+                                         const std::string& prefix = "m") {
+  tpr::index::testing::SignatureGeneratorOptions options;
+  options.seed = seed;
+  options.features = 12;
+  options.bands = 8;
+  options.classes = classes;
+  tpr::index::testing::SignatureGenerator gen(options);
+  std::vector<TestModel> out;
+  for (int i = 0; i < n; ++i) {
+    const int c = i % classes;
+    char id[64];
+    std::snprintf(id, sizeof(id), "%s%05d", prefix.c_str(), i);
+    out.push_back({id, absl::StrCat("class", c), gen.Member(c)});
+  }
+  return out;
+}
+
+inline tpr::v1::UpsertRequest ToRequest(const TestModel& m, bool overwrite = false) {
+  tpr::v1::UpsertRequest r;
+  r.mutable_model()->set_id(m.id);
+  r.mutable_model()->set_label(m.label);
+  (*r.mutable_model()->mutable_metadata())["source"] = absl::StrCat("gen/", m.id);
+  *r.mutable_model()->mutable_signature() = ToWire(m.signature);
+  r.set_overwrite(overwrite);
+  return r;
+}
+
+// One expected or received neighbour.
+struct Hit {
+  std::string id;
+  double distance = 0;
+};
+
+// BruteForce returns the exact ranking: EMD to every model accepted by
+// `label` (empty: all) and `exclude`, within `radius` (<= 0: all), sorted by
+// (distance, id), first k.
+inline std::vector<Hit> BruteForce(const tpr::index::Signature& query,
+                                   const std::vector<TestModel>& models, int k,
+                                   double radius = 0, const std::string& label = "",
+                                   const std::string& exclude = "") {
+  const tpr::index::GroundDistanceOptions ground;
+  const tpr::index::PreparedSignature q = *tpr::index::Prepare(query, ground);
+  std::vector<Hit> hits;
+  for (const TestModel& m : models) {
+    if (!label.empty() && m.label != label) continue;
+    if (m.id == exclude) continue;
+    const double d = tpr::index::Emd(q, *tpr::index::Prepare(m.signature, ground));
+    if (radius > 0 && d > radius) continue;
+    hits.push_back({m.id, d});
+  }
+  std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
+    return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
+  });
+  if (hits.size() > static_cast<size_t>(k)) hits.resize(static_cast<size_t>(k));
+  return hits;
+}
+
+// What a Search call returned.
+struct SearchResult {
+  grpc::Status status;
+  std::vector<tpr::v1::Neighbor> neighbors;
+  bool got_stats = false;
+  tpr::v1::SearchStats stats;
+};
+
+inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::SearchRequest& request) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  SearchResult result;
+  auto reader = stub->Search(&context, request);
+  tpr::v1::SearchResponse response;
+  while (reader->Read(&response)) {
+    if (response.has_neighbor()) result.neighbors.push_back(response.neighbor());
+    if (response.has_stats()) {
+      result.got_stats = true;
+      result.stats = response.stats();
+    }
+  }
+  result.status = reader->Finish();
+  return result;
+}
+
+// HealthStatus calls grpc.health.v1.Health/Check for the whole server ("")
+// with raw bytes (Debian's gRPC ships no C++ health client stub). The request
+// is the empty HealthCheckRequest, sent as one empty slice (an ByteBuffer
+// with no slice at all is rejected by gRPC as an invalid message); the
+// answer SERVING (field 1 = 1) serializes as 0x08 0x01. Returns the status
+// enum value (1 SERVING, 2 NOT_SERVING).
+inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  grpc::Slice empty("");
+  grpc::ByteBuffer request(&empty, 1);
+  grpc::ByteBuffer response;
+  const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
+                                         grpc::internal::RpcMethod::NORMAL_RPC);
+  grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
+      channel.get(), method, &context, request, &response);
+  if (!s.ok()) return tpr::FromGrpcStatus(s);
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read the answer");
+  std::string bytes;
+  for (const grpc::Slice& slice : slices) {
+    bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
+  }
+  if (bytes.empty()) return 0;  // UNKNOWN, the default, encodes as nothing
+  if (bytes.size() == 2 && bytes[0] == 0x08) return static_cast<int>(bytes[1]);
+  return absl::InternalError("unexpected health answer");
+}
+
+// An IndexerCore and IndexerService served on a free loopback port. Stop()
+// shuts the server down and closes the core (persisting the tree); Start()
+// again reopens the same data directory.
+class InProcessIndexer {
+ public:
+  explicit InProcessIndexer(std::string data_dir, CoreOptions core = {})
+      : core_options_(std::move(core)) {
+    core_options_.data_dir = std::move(data_dir);
+  }
+  ~InProcessIndexer() { Stop(); }
+
+  absl::Status Start(ServiceOptions service_options = {}) {
+    absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(core_options_);
+    if (!core.ok()) return core.status();
+    core_ = std::move(*core);
+    service_ = std::make_unique<IndexerService>(core_.get(), service_options);
+    server_options_.shutdown_grace_ms = 2000;
+    absl::StatusOr<tpr::common::StartedServer> started =
+        tpr::common::StartServer(server_options_, {service_.get()});
+    if (!started.ok()) return started.status();
+    server_ = std::move(started->server);
+    port_ = started->port;
+    channel_ = grpc::CreateChannel(absl::StrCat("127.0.0.1:", port_),
+                                   grpc::InsecureChannelCredentials());
+    stub_ = tpr::v1::Indexer::NewStub(channel_);
+    return absl::OkStatus();
+  }
+
+  void Stop() {
+    if (server_) tpr::common::ShutdownGracefully(*server_, server_options_);
+    stub_.reset();
+    channel_.reset();
+    server_.reset();
+    service_.reset();
+    core_.reset();  // Close(): persists the tree
+  }
+
+  tpr::v1::Indexer::Stub* stub() { return stub_.get(); }
+  std::shared_ptr<grpc::Channel> channel() { return channel_; }
+  IndexerCore* core() { return core_.get(); }
+  CoreOptions& core_options() { return core_options_; }
+
+ private:
+  CoreOptions core_options_;
+  tpr::common::ServerOptions server_options_;
+  std::unique_ptr<IndexerCore> core_;
+  std::unique_ptr<IndexerService> service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<tpr::v1::Indexer::Stub> stub_;
+};
+
+// ExpectSameRanking compares a received ranking with the oracle's: same ids
+// in the same order, distances equal to rounding, ranks 1..n.
+#define TPR_EXPECT_SAME_RANKING(received, expected)                              \
+  do {                                                                           \
+    const auto& r_ = (received);                                                 \
+    const auto& e_ = (expected);                                                 \
+    ASSERT_EQ(r_.size(), e_.size());                                             \
+    for (size_t i_ = 0; i_ < e_.size(); ++i_) {                                  \
+      EXPECT_EQ(r_[i_].id(), e_[i_].id) << "rank " << i_ + 1;                    \
+      EXPECT_NEAR(r_[i_].distance(), e_[i_].distance, 1e-9) << "rank " << i_ + 1; \
+      EXPECT_EQ(r_[i_].rank(), static_cast<int>(i_ + 1));                        \
+    }                                                                            \
+  } while (false)
+
+}  // namespace tpr::indexer::testing
+
+#endif  // TPR_TESTS_SERVICE_INDEXER_TESTING_H_
