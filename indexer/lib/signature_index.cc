@@ -1,0 +1,551 @@
+// SignatureIndex: an immutable VP-tree snapshot plus a small copy-on-write
+// buffer and tombstone set (Tam & Lau 2007 section 6.2 builds the tree once;
+// a service also needs writes). Why this shape:
+// - A search copies one shared_ptr under the mutex and then runs lock-free
+//   on an immutable snapshot, so it never blocks writers for more than that
+//   copy, and a streaming cursor may live for as long as its client reads.
+// - A write copies the buffer and tombstones (bounded by rebuild_threshold)
+//   into a new snapshot: O(threshold) per write, no reader ever waits.
+// - A rebuild takes the live set of one snapshot, builds outside the lock
+//   and replays the writes journaled meanwhile, so no write is lost and no
+//   answer is ever inexact.
+// - Tree items are numbered in id order, so the tree's (distance, item)
+//   order is the (distance, id) order; buffer items are numbered after them
+//   and ties across the two are settled by comparing ids.
+#include "indexer/lib/signature_index.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <unordered_map>
+
+#include "absl/strings/str_cat.h"
+#include "common/status_macros.h"
+#include "indexer/lib/emd.h"
+
+namespace tpr::index {
+
+namespace {
+
+using PreparedPtr = std::shared_ptr<const PreparedSignature>;
+
+uint64_t Fnv1a(const void* data, size_t n, uint64_t h = 0xcbf29ce484222325ull) {
+  const unsigned char* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+// Fingerprint of a prepared signature: its exact coordinates and masses.
+// Prepared coordinates already include the ground-distance weights, so a
+// signature prepared under other options does not match either.
+uint64_t Fingerprint(const PreparedSignature& p) {
+  const int32_t shape[3] = {p.size(), p.bands(), p.stride()};
+  uint64_t h = Fnv1a(shape, sizeof shape);
+  h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
+  const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
+  h = Fnv1a(p.coords(), sizeof(double) * rows * static_cast<size_t>(p.stride()), h);
+  return h;
+}
+
+struct BufferEntry {
+  std::string id;
+  PreparedPtr prepared;
+  uint64_t fingerprint = 0;
+};
+
+bool IdLess(const BufferEntry& e, const std::string& id) { return e.id < id; }
+
+}  // namespace
+
+// The tree and what it was built over; shared by every snapshot until the
+// next rebuild.
+struct TreePart {
+  VpTree tree;
+  std::vector<std::string> ids;       // item order, strictly increasing
+  std::vector<PreparedPtr> prepared;  // null: signature unavailable
+  std::vector<uint64_t> fingerprints;
+  std::unordered_map<std::string, uint32_t> item_of;
+};
+
+struct SignatureIndex::Snapshot {
+  std::shared_ptr<const TreePart> tree;
+  std::vector<BufferEntry> buffer;   // sorted by id
+  std::vector<uint32_t> tombstones;  // sorted tree items
+
+  bool Dead(uint32_t item) const {
+    return std::binary_search(tombstones.begin(), tombstones.end(), item);
+  }
+  void Kill(uint32_t item) {
+    auto it = std::lower_bound(tombstones.begin(), tombstones.end(), item);
+    if (it == tombstones.end() || *it != item) tombstones.insert(it, item);
+  }
+  // The live tree item for `id`, or -1.
+  int64_t LiveTreeItem(const std::string& id) const {
+    auto it = tree->item_of.find(id);
+    if (it == tree->item_of.end() || Dead(it->second)) return -1;
+    return it->second;
+  }
+  bool Upsert(const std::string& id, PreparedPtr prepared, uint64_t fingerprint) {
+    const int64_t item = LiveTreeItem(id);
+    if (item >= 0) Kill(static_cast<uint32_t>(item));
+    auto it = std::lower_bound(buffer.begin(), buffer.end(), id, IdLess);
+    if (it != buffer.end() && it->id == id) {
+      it->prepared = std::move(prepared);
+      it->fingerprint = fingerprint;
+      return true;
+    }
+    buffer.insert(it, BufferEntry{id, std::move(prepared), fingerprint});
+    return item >= 0;
+  }
+  bool Remove(const std::string& id) {
+    auto it = std::lower_bound(buffer.begin(), buffer.end(), id, IdLess);
+    if (it != buffer.end() && it->id == id) {
+      buffer.erase(it);
+      return true;  // an id is live in the buffer or the tree, never both
+    }
+    const int64_t item = LiveTreeItem(id);
+    if (item < 0) return false;
+    Kill(static_cast<uint32_t>(item));
+    return true;
+  }
+  size_t Pending() const { return buffer.size() + tombstones.size(); }
+};
+
+struct SignatureIndex::JournalEntry {
+  std::string id;
+  PreparedPtr prepared;  // null: a remove
+  uint64_t fingerprint = 0;
+};
+
+namespace {
+
+std::shared_ptr<TreePart> EmptyTree() { return std::make_shared<TreePart>(); }
+
+class IndexCursor : public SignatureIndex::Cursor {
+ public:
+  IndexCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
+              PreparedSignature query, double radius,
+              std::function<bool(const std::string&)> filter)
+      : snapshot_(std::move(snapshot)),
+        query_(std::move(query)),
+        filter_(std::move(filter)) {
+    const SignatureIndex::Snapshot* s = snapshot_.get();
+    const TreePart* t = s->tree.get();
+    n_tree_ = static_cast<uint32_t>(t->ids.size());
+    QuerySpec spec;
+    spec.distance = [this](uint32_t i) {
+      const PreparedSignature* p = Item(i);
+      return p == nullptr ? std::numeric_limits<double>::quiet_NaN()
+                          : Emd(query_, *p);
+    };
+    spec.lower_bound = [this](uint32_t i) {
+      const PreparedSignature* p = Item(i);
+      return p == nullptr ? 0.0 : EmdLowerBound(query_, *p);
+    };
+    spec.accept = [this, s, t](uint32_t i) {
+      if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i))) return false;
+      return !filter_ || filter_(Id(i));
+    };
+    spec.tie_less = [this](uint32_t a, uint32_t b) { return Id(a) < Id(b); };
+    for (size_t j = 0; j < s->buffer.size(); ++j) {
+      spec.extra_items.push_back(n_tree_ + static_cast<uint32_t>(j));
+    }
+    if (radius > 0.0) spec.radius = radius;
+    inner_ = t->tree.Search(std::move(spec));
+  }
+
+  std::optional<Neighbor> Next() override {
+    std::optional<ItemNeighbor> next = inner_->Next();
+    if (!next) return std::nullopt;
+    return Neighbor{Id(next->item), next->distance};
+  }
+  const SearchStats& stats() const override { return inner_->stats(); }
+
+ private:
+  const PreparedSignature* Item(uint32_t i) const {
+    if (i < n_tree_) return snapshot_->tree->prepared[i].get();
+    return snapshot_->buffer[i - n_tree_].prepared.get();
+  }
+  const std::string& Id(uint32_t i) const {
+    if (i < n_tree_) return snapshot_->tree->ids[i];
+    return snapshot_->buffer[i - n_tree_].id;
+  }
+
+  std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
+  PreparedSignature query_;
+  std::function<bool(const std::string&)> filter_;
+  uint32_t n_tree_ = 0;
+  // Last: its callbacks point into the members above.
+  std::unique_ptr<NeighborCursor> inner_;
+};
+
+}  // namespace
+
+SignatureIndex::SignatureIndex(IndexOptions options)
+    : options_(std::move(options)) {
+  auto s = std::make_shared<Snapshot>();
+  s->tree = EmptyTree();
+  snapshot_ = std::move(s);
+}
+
+SignatureIndex::~SignatureIndex() {
+  cancel_ = true;
+  std::thread background;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    background = std::move(background_);
+  }
+  if (background.joinable()) background.join();
+}
+
+std::shared_ptr<const SignatureIndex::Snapshot> SignatureIndex::snapshot()
+    const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return snapshot_;
+}
+
+void SignatureIndex::InstallLocked(std::shared_ptr<const Snapshot> next) {
+  snapshot_ = std::move(next);
+  if (options_.background_rebuild &&
+      snapshot_->Pending() > options_.rebuild_threshold &&
+      !background_running_ && !cancel_) {
+    StartBackgroundRebuildLocked();
+  }
+}
+
+void SignatureIndex::StartBackgroundRebuildLocked() {
+  // A finished thread has cleared background_running_ and only returns.
+  if (background_.joinable()) background_.join();
+  background_running_ = true;
+  background_ = std::thread([this] {
+    Rebuild();
+    std::lock_guard<std::mutex> lock(mu_);
+    background_running_ = false;
+    background_done_.notify_all();
+  });
+}
+
+void SignatureIndex::WaitForRebuild() {
+  std::unique_lock<std::mutex> lock(mu_);
+  background_done_.wait(lock, [this] { return !background_running_; });
+}
+
+absl::Status SignatureIndex::Upsert(const std::string& id,
+                                    const Signature& signature) {
+  if (id.empty()) return absl::InvalidArgumentError("empty model id");
+  absl::StatusOr<PreparedSignature> prepared = Prepare(signature, options_.ground);
+  if (!prepared.ok()) {
+    return absl::Status(prepared.status().code(),
+                        absl::StrCat("signature of '", id, "': ",
+                                     prepared.status().message()));
+  }
+  const uint64_t fingerprint = Fingerprint(*prepared);
+  auto shared = std::make_shared<const PreparedSignature>(*std::move(prepared));
+  std::lock_guard<std::mutex> lock(mu_);
+  auto next = std::make_shared<Snapshot>(*snapshot_);
+  next->Upsert(id, shared, fingerprint);
+  if (journal_ != nullptr) journal_->push_back({id, shared, fingerprint});
+  InstallLocked(std::move(next));
+  return absl::OkStatus();
+}
+
+bool SignatureIndex::Remove(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto next = std::make_shared<Snapshot>(*snapshot_);
+  if (!next->Remove(id)) return false;
+  if (journal_ != nullptr) journal_->push_back({id, nullptr, 0});
+  InstallLocked(std::move(next));
+  return true;
+}
+
+bool SignatureIndex::Contains(const std::string& id) const {
+  std::shared_ptr<const Snapshot> s = snapshot();
+  auto it = std::lower_bound(s->buffer.begin(), s->buffer.end(), id, IdLess);
+  if (it != s->buffer.end() && it->id == id) return true;
+  return s->LiveTreeItem(id) >= 0;
+}
+
+size_t SignatureIndex::size() const {
+  std::shared_ptr<const Snapshot> s = snapshot();
+  return s->tree->ids.size() - s->tombstones.size() + s->buffer.size();
+}
+
+size_t SignatureIndex::indexed() const {
+  std::shared_ptr<const Snapshot> s = snapshot();
+  return s->tree->ids.size() - s->tombstones.size();
+}
+
+size_t SignatureIndex::buffered() const { return snapshot()->buffer.size(); }
+
+absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
+    const Signature& query, double radius,
+    std::function<bool(const std::string& id)> filter) const {
+  absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
+  if (!prepared.ok()) {
+    return absl::Status(prepared.status().code(),
+                        absl::StrCat("query signature: ",
+                                     prepared.status().message()));
+  }
+  if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
+  return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
+      snapshot(), *std::move(prepared), radius, std::move(filter)));
+}
+
+std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,
+                                          SearchStats* stats) const {
+  std::vector<Neighbor> out;
+  if (stats != nullptr) *stats = SearchStats{};
+  if (k == 0) return out;
+  absl::StatusOr<std::unique_ptr<Cursor>> cursor = Search(query, 0.0, nullptr);
+  if (!cursor.ok()) return out;
+  while (out.size() < k) {
+    std::optional<Neighbor> next = (*cursor)->Next();
+    if (!next) break;
+    out.push_back(*std::move(next));
+  }
+  if (stats != nullptr) *stats = (*cursor)->stats();
+  return out;
+}
+
+void SignatureIndex::Rebuild() {
+  std::lock_guard<std::mutex> rebuild_lock(rebuild_mu_);
+  std::vector<JournalEntry> journal;
+  std::shared_ptr<const Snapshot> base;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    base = snapshot_;
+    journal_ = &journal;
+  }
+  // The live set of `base`, in id order (tree and buffer ids are disjoint).
+  struct Live {
+    const std::string* id;
+    PreparedPtr prepared;
+    uint64_t fingerprint;
+  };
+  std::vector<Live> live;
+  const TreePart& old = *base->tree;
+  for (uint32_t i = 0; i < old.ids.size(); ++i) {
+    if (old.prepared[i] != nullptr && !base->Dead(i)) {
+      live.push_back({&old.ids[i], old.prepared[i], old.fingerprints[i]});
+    }
+  }
+  for (const BufferEntry& e : base->buffer) {
+    live.push_back({&e.id, e.prepared, e.fingerprint});
+  }
+  std::sort(live.begin(), live.end(),
+            [](const Live& a, const Live& b) { return *a.id < *b.id; });
+  auto part = std::make_shared<TreePart>();
+  for (const Live& l : live) {
+    part->item_of.emplace(*l.id, static_cast<uint32_t>(part->ids.size()));
+    part->ids.push_back(*l.id);
+    part->prepared.push_back(l.prepared);
+    part->fingerprints.push_back(l.fingerprint);
+  }
+  const std::vector<PreparedPtr>& items = part->prepared;
+  absl::StatusOr<VpTree> tree = VpTree::Build(
+      items.size(),
+      [&items](uint32_t i, uint32_t j) { return Emd(*items[i], *items[j]); },
+      options_.tree, &cancel_);
+  std::lock_guard<std::mutex> lock(mu_);
+  journal_ = nullptr;
+  // Only cancellation (destruction) or invalid tree options fail here; the
+  // current snapshot then stays, still exact.
+  if (!tree.ok()) return;
+  part->tree = *std::move(tree);
+  auto next = std::make_shared<Snapshot>();
+  next->tree = std::move(part);
+  for (JournalEntry& e : journal) {
+    if (e.prepared != nullptr) {
+      next->Upsert(e.id, std::move(e.prepared), e.fingerprint);
+    } else {
+      next->Remove(e.id);
+    }
+  }
+  snapshot_ = std::move(next);
+}
+
+// ---------------------------------------------------------------------------
+// Persistence. Layout (little-endian), FNV-1a 64 checksum last:
+//   "TPRSIX" u16 version | f64 w1 w2 w3 w4 k_scale a_scale h_scale
+//   u32 n | n x (u32 id length, id bytes, u64 fingerprint)
+//   u64 tree length, VpTree::Serialize() bytes | u64 checksum
+
+namespace {
+
+constexpr char kMagic[6] = {'T', 'P', 'R', 'S', 'I', 'X'};
+constexpr uint16_t kVersion = 1;
+
+void PutU(std::string* out, uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) out->push_back(static_cast<char>(v >> (8 * i)));
+}
+
+std::vector<double> OptionValues(const GroundDistanceOptions& g) {
+  return {g.w1, g.w2, g.w3, g.w4, g.k_scale, g.a_scale, g.h_scale};
+}
+
+class Reader {
+ public:
+  explicit Reader(absl::string_view bytes) : bytes_(bytes) {}
+  bool U(int bytes, uint64_t* v) {
+    if (bytes_.size() - pos_ < static_cast<size_t>(bytes)) return false;
+    *v = 0;
+    for (int i = 0; i < bytes; ++i) {
+      *v |= static_cast<uint64_t>(static_cast<unsigned char>(bytes_[pos_ + i]))
+            << (8 * i);
+    }
+    pos_ += bytes;
+    return true;
+  }
+  bool Bytes(uint64_t n, absl::string_view* out) {
+    if (bytes_.size() - pos_ < n) return false;
+    *out = bytes_.substr(pos_, n);
+    pos_ += n;
+    return true;
+  }
+  size_t remaining() const { return bytes_.size() - pos_; }
+
+ private:
+  absl::string_view bytes_;
+  size_t pos_ = 0;
+};
+
+absl::Status Corrupt(absl::string_view what) {
+  return absl::DataLossError(absl::StrCat("corrupt index bytes: ", what));
+}
+
+}  // namespace
+
+std::string SignatureIndex::SerializeTree() const {
+  std::shared_ptr<const Snapshot> s = snapshot();
+  const TreePart& t = *s->tree;
+  std::string out(kMagic, sizeof kMagic);
+  PutU(&out, kVersion, 2);
+  for (double v : OptionValues(options_.ground)) {
+    uint64_t bits;
+    std::memcpy(&bits, &v, sizeof bits);
+    PutU(&out, bits, 8);
+  }
+  PutU(&out, t.ids.size(), 4);
+  for (size_t i = 0; i < t.ids.size(); ++i) {
+    PutU(&out, t.ids[i].size(), 4);
+    out += t.ids[i];
+    PutU(&out, t.fingerprints[i], 8);
+  }
+  const std::string tree = t.tree.Serialize();
+  PutU(&out, tree.size(), 8);
+  out += tree;
+  PutU(&out, Fnv1a(out.data(), out.size()), 8);
+  return out;
+}
+
+absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
+    absl::string_view tree_bytes,
+    const std::vector<std::pair<std::string, Signature>>& items,
+    IndexOptions options) {
+  TPR_RETURN_IF_ERROR(ValidateOptions(options.ground));
+  const absl::string_view bytes = tree_bytes;
+  if (bytes.size() < sizeof kMagic + 2 ||
+      std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
+    return absl::InvalidArgumentError("not signature-index bytes (bad magic)");
+  }
+  {
+    Reader r(bytes.substr(sizeof kMagic));
+    uint64_t version;
+    r.U(2, &version);
+    if (version != kVersion) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("signature-index bytes of version ", version,
+                       "; this build reads ", kVersion));
+    }
+  }
+  if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
+  const size_t body = bytes.size() - 8;
+  {
+    Reader tail(bytes.substr(body));
+    uint64_t checksum;
+    tail.U(8, &checksum);
+    if (checksum != Fnv1a(bytes.data(), body)) return Corrupt("checksum mismatch");
+  }
+  Reader r(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+  const std::vector<double> want = OptionValues(options.ground);
+  for (double w : want) {
+    uint64_t bits;
+    if (!r.U(8, &bits)) return Corrupt("truncated options");
+    double v;
+    std::memcpy(&v, &bits, sizeof v);
+    if (!(v == w)) {
+      return absl::FailedPreconditionError(
+          "the tree was built with other ground-distance options; rebuild it");
+    }
+  }
+  uint64_t n;
+  if (!r.U(4, &n) || n * 12 > r.remaining()) return Corrupt("item count");
+  auto part = std::make_shared<TreePart>();
+  part->ids.resize(n);
+  part->fingerprints.resize(n);
+  part->prepared.resize(n);
+  for (uint64_t i = 0; i < n; ++i) {
+    uint64_t len;
+    absl::string_view id;
+    if (!r.U(4, &len) || !r.Bytes(len, &id) || !r.U(8, &part->fingerprints[i])) {
+      return Corrupt("truncated id table");
+    }
+    part->ids[i] = std::string(id);
+    if (id.empty() || (i > 0 && !(part->ids[i - 1] < part->ids[i]))) {
+      return Corrupt("ids not strictly increasing");
+    }
+    part->item_of.emplace(part->ids[i], static_cast<uint32_t>(i));
+  }
+  uint64_t tree_len;
+  absl::string_view tree_part;
+  if (!r.U(8, &tree_len) || tree_len != r.remaining() ||
+      !r.Bytes(tree_len, &tree_part)) {
+    return Corrupt("tree length");
+  }
+  TPR_ASSIGN_OR_RETURN(part->tree, VpTree::Deserialize(tree_part));
+  if (part->tree.size() != n) return Corrupt("tree size differs from id table");
+
+  auto index = std::make_unique<SignatureIndex>(std::move(options));
+  auto snap = std::make_shared<Snapshot>();
+  std::vector<bool> seen(n, false);
+  std::unordered_map<std::string, bool> given;
+  for (const auto& [id, signature] : items) {
+    if (id.empty()) return absl::InvalidArgumentError("empty model id in items");
+    if (!given.emplace(id, true).second) {
+      return absl::InvalidArgumentError(absl::StrCat("duplicate id '", id, "' in items"));
+    }
+    absl::StatusOr<PreparedSignature> prepared =
+        Prepare(signature, index->options_.ground);
+    if (!prepared.ok()) {
+      return absl::Status(prepared.status().code(),
+                          absl::StrCat("signature of '", id, "': ",
+                                       prepared.status().message()));
+    }
+    const uint64_t fingerprint = Fingerprint(*prepared);
+    auto shared = std::make_shared<const PreparedSignature>(*std::move(prepared));
+    auto it = part->item_of.find(id);
+    if (it != part->item_of.end() && part->fingerprints[it->second] == fingerprint) {
+      part->prepared[it->second] = std::move(shared);
+      seen[it->second] = true;
+    } else {
+      // New, or changed since the tree was built: the stored distances do
+      // not describe it, so it is searched linearly until the next rebuild.
+      snap->buffer.push_back({id, std::move(shared), fingerprint});
+    }
+  }
+  std::sort(snap->buffer.begin(), snap->buffer.end(),
+            [](const BufferEntry& a, const BufferEntry& b) { return a.id < b.id; });
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!seen[i]) snap->tombstones.push_back(i);
+  }
+  snap->tree = std::move(part);
+  std::lock_guard<std::mutex> lock(index->mu_);
+  index->InstallLocked(std::move(snap));
+  return index;
+}
+
+}  // namespace tpr::index

@@ -1,0 +1,440 @@
+// SignatureIndex against a brute-force EMD oracle on realistic clustered
+// signatures: k-NN, ranked and radius search, ties, inserts and deletes with
+// and without rebuilds, background rebuilds under concurrent use, and
+// persistence (round trip, missing and changed items, corrupt bytes).
+#include "indexer/lib/signature_index.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <map>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "indexer/lib/emd.h"
+#include "tests/indexer/signature_testing.h"
+
+namespace tpr::index {
+namespace {
+
+using testing::SignatureGenerator;
+using testing::SignatureGeneratorOptions;
+
+// The oracle: every live signature, prepared independently, one EMD each.
+class Oracle {
+ public:
+  explicit Oracle(GroundDistanceOptions ground = {}) : ground_(ground) {}
+
+  void Upsert(const std::string& id, const Signature& s) {
+    live_[id] = *Prepare(s, ground_);
+  }
+  void Remove(const std::string& id) { live_.erase(id); }
+  size_t size() const { return live_.size(); }
+
+  std::vector<Neighbor> Search(const Signature& query, size_t k,
+                               double radius = 0.0,
+                               const std::function<bool(const std::string&)>&
+                                   filter = nullptr) const {
+    const PreparedSignature q = *Prepare(query, ground_);
+    std::vector<Neighbor> all;
+    for (const auto& [id, p] : live_) {
+      if (filter && !filter(id)) continue;
+      const double d = Emd(q, p);
+      if (radius > 0.0 && d > radius) continue;
+      all.push_back({id, d});
+    }
+    std::sort(all.begin(), all.end(), [](const Neighbor& a, const Neighbor& b) {
+      return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
+    });
+    if (all.size() > k) all.resize(k);
+    return all;
+  }
+
+ private:
+  GroundDistanceOptions ground_;
+  std::map<std::string, PreparedSignature> live_;
+};
+
+void ExpectSame(const std::vector<Neighbor>& got,
+                const std::vector<Neighbor>& want, const std::string& ctx) {
+  ASSERT_EQ(got.size(), want.size()) << ctx;
+  for (size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].id, want[i].id) << ctx << " rank " << i;
+    EXPECT_EQ(got[i].distance, want[i].distance) << ctx << " rank " << i;
+  }
+}
+
+std::string Id(int i) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "m%05d", i);
+  return buf;
+}
+
+IndexOptions ManualOptions() {
+  IndexOptions options;
+  options.background_rebuild = false;
+  options.tree.leaf_size = 8;
+  return options;
+}
+
+// Queries: members of the classes (near data) and unclustered signatures.
+std::vector<Signature> Queries(SignatureGenerator* gen, int count) {
+  std::vector<Signature> out;
+  for (int i = 0; i < count; ++i) {
+    out.push_back(i % 4 == 3 ? gen->Random(20 + i % 20) : gen->Next());
+  }
+  return out;
+}
+
+// CheckKnn compares k-NN over `queries`; `stored` bounds the EMDs a search
+// may compute (live entries plus tombstoned vantage points).
+void CheckKnn(const SignatureIndex& index, const Oracle& oracle,
+              const std::vector<Signature>& queries, const std::string& ctx,
+              size_t stored = 0) {
+  if (stored == 0) stored = index.size();
+  const size_t ks[] = {1, 5, 10, oracle.size() + 3};
+  for (size_t q = 0; q < queries.size(); ++q) {
+    const size_t k = ks[q % 4];
+    SearchStats stats;
+    ExpectSame(index.Knn(queries[q], k, &stats), oracle.Search(queries[q], k),
+               ctx + " query " + std::to_string(q) + " k " + std::to_string(k));
+    EXPECT_LE(stats.emd_computations, static_cast<int64_t>(stored));
+  }
+}
+
+TEST(SignatureIndexTest, EmptyIndex) {
+  SignatureIndex index(ManualOptions());
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  const Signature q = gen.Next();
+  EXPECT_EQ(index.size(), 0u);
+  EXPECT_TRUE(index.Knn(q, 5).empty());
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
+      index.Search(q, 0.0, nullptr);
+  ASSERT_TRUE(cursor.ok()) << cursor.status();
+  EXPECT_FALSE((*cursor)->Next().has_value());
+  index.Rebuild();
+  EXPECT_TRUE(index.Knn(q, 5).empty());
+  absl::StatusOr<std::unique_ptr<SignatureIndex>> loaded =
+      SignatureIndex::Load(index.SerializeTree(), {}, ManualOptions());
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ((*loaded)->size(), 0u);
+}
+
+TEST(SignatureIndexTest, KnnMatchesBruteForceBeforeAndAfterRebuild) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 3;
+  gopt.classes = 12;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  for (int i = 0; i < 300; ++i) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  const std::vector<Signature> queries = Queries(&gen, 60);
+  EXPECT_EQ(index.buffered(), 300u);
+  CheckKnn(index, oracle, queries, "buffer only");
+  index.Rebuild();
+  EXPECT_EQ(index.buffered(), 0u);
+  EXPECT_EQ(index.indexed(), 300u);
+  CheckKnn(index, oracle, queries, "tree");
+}
+
+TEST(SignatureIndexTest, DuplicateSignaturesTieByIdAndQueryHitsItself) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  std::vector<Signature> distinct;
+  for (int i = 0; i < 40; ++i) distinct.push_back(gen.Next());
+  for (int i = 0; i < 200; ++i) {
+    // Ids inserted out of order, five copies of each signature.
+    const int id = (i * 37) % 200;
+    ASSERT_TRUE(index.Upsert(Id(id), distinct[id % 40]).ok());
+    oracle.Upsert(Id(id), distinct[id % 40]);
+  }
+  index.Rebuild();
+  for (int i = 0; i < 40; ++i) {
+    const std::vector<Neighbor> got = index.Knn(distinct[i], 7);
+    ExpectSame(got, oracle.Search(distinct[i], 7), "dup " + std::to_string(i));
+    ASSERT_GE(got.size(), 5u);
+    EXPECT_EQ(got[0].distance, 0.0);
+    EXPECT_EQ(got[4].distance, 0.0);
+    EXPECT_EQ(got[0].id, Id(i));  // smallest id of the five copies
+  }
+}
+
+TEST(SignatureIndexTest, InsertsReplacementsAndDeletesStayExact) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 5;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  for (int i = 0; i < 250; ++i) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  index.Rebuild();
+  const std::vector<Signature> queries = Queries(&gen, 40);
+  // New ids, replaced ids (tree entries move to the buffer), deletes from
+  // the tree and from the buffer.
+  for (int i = 250; i < 300; ++i) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  for (int i = 0; i < 60; i += 3) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  for (int i = 1; i < 300; i += 7) {
+    EXPECT_TRUE(index.Remove(Id(i)));
+    oracle.Remove(Id(i));
+    EXPECT_FALSE(index.Contains(Id(i)));
+    EXPECT_FALSE(index.Remove(Id(i)));
+  }
+  EXPECT_FALSE(index.Remove("never-there"));
+  EXPECT_TRUE(index.Contains(Id(0)));
+  EXPECT_EQ(index.size(), oracle.size());
+  EXPECT_EQ(index.indexed() + index.buffered(), index.size());
+  CheckKnn(index, oracle, queries, "with buffer and tombstones", 300 + 20);
+  index.Rebuild();
+  EXPECT_EQ(index.buffered(), 0u);
+  EXPECT_EQ(index.size(), oracle.size());
+  CheckKnn(index, oracle, queries, "rebuilt");
+}
+
+TEST(SignatureIndexTest, RankedRadiusAndFilteredSearchMatchBruteForce) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 9;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  for (int i = 0; i < 300; ++i) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  index.Rebuild();
+  for (int i = 300; i < 330; ++i) {  // some in the buffer too
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  const std::vector<Signature> queries = Queries(&gen, 30);
+  for (size_t q = 0; q < queries.size(); ++q) {
+    // Whole ranking.
+    auto cursor = index.Search(queries[q], 0.0, nullptr);
+    ASSERT_TRUE(cursor.ok());
+    std::vector<Neighbor> got;
+    while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
+    const std::vector<Neighbor> all = oracle.Search(queries[q], 10000);
+    ExpectSame(got, all, "ranked " + std::to_string(q));
+    // Radius at the 20th distance (inclusive), and a filter on the ids.
+    const double radius = all[19].distance;
+    auto filter = [](const std::string& id) { return id.back() % 2 == 0; };
+    cursor = index.Search(queries[q], radius, filter);
+    ASSERT_TRUE(cursor.ok());
+    got.clear();
+    while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
+    ExpectSame(got, oracle.Search(queries[q], 10000, radius, filter),
+               "radius " + std::to_string(q));
+    // Stopping early costs less than draining.
+    cursor = index.Search(queries[q], 0.0, nullptr);
+    (*cursor)->Next();
+    EXPECT_LT((*cursor)->stats().emd_computations,
+              static_cast<int64_t>(index.size()));
+  }
+}
+
+TEST(SignatureIndexTest, PrunesOnClusteredData) {
+  // Work, not time: 1-NN over 600 clustered signatures must compute far
+  // fewer EMDs than a scan (the paper's 7.4 setting is 600 models).
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 13;
+  gopt.classes = 13;
+  SignatureGenerator gen(gopt);
+  IndexOptions options = ManualOptions();
+  SignatureIndex index(options);
+  for (int i = 0; i < 600; ++i) ASSERT_TRUE(index.Upsert(Id(i), gen.Next()).ok());
+  index.Rebuild();
+  int64_t emds = 0;
+  for (int q = 0; q < 50; ++q) {
+    SearchStats stats;
+    ASSERT_EQ(index.Knn(gen.Next(), 1, &stats).size(), 1u);
+    emds += stats.emd_computations;
+    EXPECT_GT(stats.lower_bounds, 0);
+  }
+  EXPECT_LT(emds / 50, 600 / 4);
+}
+
+TEST(SignatureIndexTest, MalformedInputIsInvalidArgument) {
+  SignatureIndex index(ManualOptions());
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  ASSERT_TRUE(index.Upsert("good", gen.Next()).ok());
+  Signature bad = gen.Next();
+  bad.features[0].weight = -1.0;
+  EXPECT_EQ(index.Upsert("bad", bad).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(index.Upsert("", gen.Next()).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(index.Upsert("empty", Signature{}).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(index.Contains("bad"));
+  EXPECT_EQ(index.size(), 1u);
+  EXPECT_EQ(index.Search(bad, 0.0, nullptr).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(index.Knn(bad, 3).empty());
+}
+
+TEST(SignatureIndexTest, BackgroundRebuildUnderConcurrentWritesAndReads) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 17;
+  SignatureGenerator gen(gopt);
+  IndexOptions options;
+  options.rebuild_threshold = 40;
+  options.tree.leaf_size = 8;
+  SignatureIndex index(options);
+  std::vector<Signature> data;
+  for (int i = 0; i < 300; ++i) data.push_back(gen.Next());
+  const std::vector<Signature> queries = Queries(&gen, 20);
+  std::atomic<bool> done{false};
+  std::atomic<int> searches{0};
+  std::thread reader([&] {
+    while (!done) {
+      const std::vector<Neighbor> got = index.Knn(queries[searches % 20], 5);
+      EXPECT_LE(got.size(), 5u);
+      for (size_t i = 1; i < got.size(); ++i) {
+        EXPECT_LE(got[i - 1].distance, got[i].distance);
+      }
+      ++searches;
+    }
+  });
+  Oracle oracle;
+  for (int i = 0; i < 300; ++i) {
+    ASSERT_TRUE(index.Upsert(Id(i), data[i]).ok());
+    oracle.Upsert(Id(i), data[i]);
+    if (i % 5 == 4) {
+      ASSERT_TRUE(index.Remove(Id(i - 2)));
+      oracle.Remove(Id(i - 2));
+    }
+  }
+  done = true;
+  reader.join();
+  index.WaitForRebuild();
+  EXPECT_GT(searches.load(), 0);
+  EXPECT_EQ(index.size(), oracle.size());
+  EXPECT_GT(index.indexed(), 0u);  // at least one rebuild folded the buffer
+  CheckKnn(index, oracle, queries, "after background rebuilds", 300);
+  index.Rebuild();
+  EXPECT_EQ(index.buffered(), 0u);
+  CheckKnn(index, oracle, queries, "after final rebuild");
+}
+
+TEST(SignatureIndexTest, SerializeAndLoadRoundTrip) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 23;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  std::map<std::string, Signature> live;
+  for (int i = 0; i < 300; ++i) {
+    live[Id(i)] = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), live[Id(i)]).ok());
+    oracle.Upsert(Id(i), live[Id(i)]);
+  }
+  index.Rebuild();
+  const std::string bytes = index.SerializeTree();
+  const std::vector<Signature> queries = Queries(&gen, 24);
+
+  // Same items: everything in the tree, nothing buffered, same results and
+  // the same work.
+  std::vector<std::pair<std::string, Signature>> items(live.begin(), live.end());
+  absl::StatusOr<std::unique_ptr<SignatureIndex>> loaded =
+      SignatureIndex::Load(bytes, items, ManualOptions());
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ((*loaded)->buffered(), 0u);
+  EXPECT_EQ((*loaded)->indexed(), 300u);
+  EXPECT_EQ((*loaded)->SerializeTree(), bytes);
+  CheckKnn(**loaded, oracle, queries, "reloaded");
+  for (const Signature& q : queries) {
+    SearchStats a, b;
+    index.Knn(q, 10, &a);
+    (*loaded)->Knn(q, 10, &b);
+    EXPECT_EQ(a.emd_computations, b.emd_computations);
+  }
+
+  // Items changed since the tree was written: some missing (tombstoned),
+  // some altered (buffered), some new (buffered).
+  for (int i = 0; i < 300; i += 11) {
+    live.erase(Id(i));
+    oracle.Remove(Id(i));
+  }
+  for (int i = 5; i < 300; i += 13) {
+    if (live.count(Id(i)) == 0) continue;
+    live[Id(i)] = gen.Next();
+    oracle.Upsert(Id(i), live[Id(i)]);
+  }
+  for (int i = 300; i < 320; ++i) {
+    live[Id(i)] = gen.Next();
+    oracle.Upsert(Id(i), live[Id(i)]);
+  }
+  items.assign(live.begin(), live.end());
+  loaded = SignatureIndex::Load(bytes, items, ManualOptions());
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ((*loaded)->size(), live.size());
+  EXPECT_GT((*loaded)->buffered(), 20u);
+  EXPECT_FALSE((*loaded)->Contains(Id(0)));
+  EXPECT_TRUE((*loaded)->Contains(Id(319)));
+  CheckKnn(**loaded, oracle, queries, "reloaded with changes", 320 + 20);
+  (*loaded)->Rebuild();
+  CheckKnn(**loaded, oracle, queries, "reloaded and rebuilt");
+
+  // Other ground-distance options: the stored distances mean nothing.
+  IndexOptions other = ManualOptions();
+  other.ground.w1 = 0.4;
+  other.ground.w2 = 0.1;
+  EXPECT_EQ(SignatureIndex::Load(bytes, items, other).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+  // A malformed item.
+  items[0].second.features.clear();
+  EXPECT_EQ(SignatureIndex::Load(bytes, items, ManualOptions()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(SignatureIndexTest, CorruptBytesAreErrors) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  SignatureIndex index(ManualOptions());
+  std::vector<std::pair<std::string, Signature>> items;
+  for (int i = 0; i < 40; ++i) {
+    items.emplace_back(Id(i), gen.Next());
+    ASSERT_TRUE(index.Upsert(items.back().first, items.back().second).ok());
+  }
+  index.Rebuild();
+  const std::string bytes = index.SerializeTree();
+  auto is_error = [](const absl::Status& s) {
+    return s.code() == absl::StatusCode::kDataLoss ||
+           s.code() == absl::StatusCode::kInvalidArgument;
+  };
+  for (size_t len = 0; len < bytes.size(); len += 1 + len / 16) {
+    EXPECT_TRUE(is_error(
+        SignatureIndex::Load(bytes.substr(0, len), items, ManualOptions()).status()))
+        << len;
+  }
+  std::mt19937_64 rng(29);
+  for (int trial = 0; trial < 300; ++trial) {
+    std::string bad = bytes;
+    const size_t pos = rng() % bad.size();
+    bad[pos] = static_cast<char>(bad[pos] ^ (1 + rng() % 255));
+    EXPECT_TRUE(is_error(SignatureIndex::Load(bad, items, ManualOptions()).status()))
+        << pos;
+  }
+  EXPECT_EQ(SignatureIndex::Load("garbage", items, ManualOptions()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace tpr::index
