@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <unordered_map>
 
 #include "absl/strings/str_cat.h"
@@ -249,6 +250,42 @@ absl::Status SignatureIndex::Upsert(const std::string& id,
   auto next = std::make_shared<Snapshot>(*snapshot_);
   next->Upsert(id, shared, fingerprint);
   if (journal_ != nullptr) journal_->push_back({id, shared, fingerprint});
+  InstallLocked(std::move(next));
+  return absl::OkStatus();
+}
+
+absl::Status SignatureIndex::UpsertBatch(
+    const std::vector<std::pair<std::string, Signature>>& entries) {
+  std::vector<JournalEntry> prepared;
+  prepared.reserve(entries.size());
+  for (const auto& [id, signature] : entries) {
+    if (id.empty()) return absl::InvalidArgumentError("empty model id");
+    absl::StatusOr<PreparedSignature> p = Prepare(signature, options_.ground);
+    if (!p.ok()) {
+      return absl::Status(p.status().code(),
+                          absl::StrCat("signature of '", id, "': ",
+                                       p.status().message()));
+    }
+    const uint64_t fingerprint = Fingerprint(*p);
+    prepared.push_back(
+        {id, std::make_shared<const PreparedSignature>(*std::move(p)), fingerprint});
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  auto next = std::make_shared<Snapshot>(*snapshot_);
+  // Merge instead of inserting one by one into the sorted buffer (O(b m)).
+  std::map<std::string, BufferEntry> merged;
+  for (BufferEntry& e : next->buffer) merged.emplace(e.id, std::move(e));
+  for (const JournalEntry& e : prepared) {
+    const int64_t item = next->LiveTreeItem(e.id);
+    if (item >= 0) next->Kill(static_cast<uint32_t>(item));
+    merged[e.id] = BufferEntry{e.id, e.prepared, e.fingerprint};
+  }
+  next->buffer.clear();
+  next->buffer.reserve(merged.size());
+  for (auto& [id, e] : merged) next->buffer.push_back(std::move(e));
+  if (journal_ != nullptr) {
+    journal_->insert(journal_->end(), prepared.begin(), prepared.end());
+  }
   InstallLocked(std::move(next));
   return absl::OkStatus();
 }

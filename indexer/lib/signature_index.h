@@ -96,6 +96,13 @@ class SignatureIndex {
   // ValidateSignature in ground_distance.h); the index is then unchanged.
   // Cost: one Prepare plus a copy of the buffer (O(rebuild_threshold)).
   absl::Status Upsert(const std::string& id, const Signature& signature);
+  // UpsertBatch is Upsert for many entries at once, applied atomically (one
+  // snapshot; later entries win over earlier ones with the same id). Use it
+  // to load many signatures: per-entry Upsert copies the buffer each time.
+  // Returns INVALID_ARGUMENT naming the first bad entry; nothing is applied
+  // then. Cost: one Prepare per entry plus O((buffer + m) log(buffer + m)).
+  absl::Status UpsertBatch(
+      const std::vector<std::pair<std::string, Signature>>& entries);
   // Remove deletes `id`; returns whether it was present.
   bool Remove(const std::string& id);
   // Contains returns whether `id` is present.

@@ -273,6 +273,36 @@ TEST(SignatureIndexTest, PrunesOnClusteredData) {
   EXPECT_LT(emds / 50, 600 / 4);
 }
 
+TEST(SignatureIndexTest, UpsertBatchEqualsUpsertsAndIsAtomic) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 31;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  std::vector<std::pair<std::string, Signature>> batch;
+  for (int i = 0; i < 200; ++i) batch.emplace_back(Id(i), gen.Next());
+  ASSERT_TRUE(index.UpsertBatch(batch).ok());
+  for (const auto& [id, s] : batch) oracle.Upsert(id, s);
+  index.Rebuild();
+  // A second batch: replacements of tree entries, a repeated id (the later
+  // wins), new ids.
+  batch.clear();
+  for (int i = 0; i < 200; i += 9) batch.emplace_back(Id(i), gen.Next());
+  batch.emplace_back(Id(500), gen.Next());
+  batch.emplace_back(Id(500), gen.Next());
+  ASSERT_TRUE(index.UpsertBatch(batch).ok());
+  for (const auto& [id, s] : batch) oracle.Upsert(id, s);
+  EXPECT_EQ(index.size(), oracle.size());
+  CheckKnn(index, oracle, Queries(&gen, 20), "batch", 201 + 23);
+  // One bad entry: nothing applied.
+  batch.clear();
+  batch.emplace_back(Id(600), gen.Next());
+  batch.emplace_back(Id(601), Signature{});
+  EXPECT_EQ(index.UpsertBatch(batch).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(index.Contains(Id(600)));
+  EXPECT_EQ(index.size(), oracle.size());
+}
+
 TEST(SignatureIndexTest, MalformedInputIsInvalidArgument) {
   SignatureIndex index(ManualOptions());
   SignatureGenerator gen(SignatureGeneratorOptions{});
