@@ -36,10 +36,7 @@
 #include "absl/strings/str_split.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
-#if __has_include("extractor/lib/mesh_writer.h")
 #include "extractor/lib/mesh_writer.h"
-#define TPR_HAVE_MESH_WRITER 1
-#endif
 #include "tpr/client.h"
 
 namespace {
@@ -526,7 +523,7 @@ int RunInspect(const Globals& g, const std::string& mesh_path, const std::string
   }
   const tpr::extract::Explanation& e = *r->explanation;
   const size_t n = loaded->mesh.positions.size();
-  std::vector<std::array<uint8_t, 3>> colours(n, std::array<uint8_t, 3>{128, 128, 128});
+  std::vector<tpr::extract::Rgb> colours(n, tpr::extract::Rgb{128, 128, 128});
   for (size_t v = 0; v < n && v < e.vertex_region.size(); ++v) {
     colours[v] = RegionColour(e.vertex_region[v]);
   }
@@ -550,11 +547,10 @@ int RunInspect(const Globals& g, const std::string& mesh_path, const std::string
       }
     }
   }
-#ifdef TPR_HAVE_MESH_WRITER
-  absl::Status written = tpr::extract::WritePlyWithColours(loaded->mesh, colours, out);
-#else
-  absl::Status written = absl::UnimplementedError("this build has no mesh writer");
-#endif
+  tpr::extract::MeshWriteOptions write_options;
+  write_options.format = tpr::extract::MeshWriteFormat::kPlyBinary;
+  write_options.vertex_colors = std::move(colours);
+  absl::Status written = tpr::extract::WriteMeshToFile(loaded->mesh, write_options, out);
   if (!written.ok()) return Fail(out, written);
   if (g.json) {
     std::printf("{\"file\":%s,\"out\":%s,\"points\":%d,\"rings\":%d,\"vertices\":%zu}\n",

@@ -1,0 +1,212 @@
+// The `tpr` command end to end: both service binaries on loopback, a
+// generated labelled folder added through `tpr add`, `tpr query --json`
+// streams compared with an in-process brute-force EMD ranking of the
+// signatures the indexer returns; re-runs, failures, get/list/stats/remove;
+// SIGTERM during a search stream.
+#include <signal.h>
+#include <stdio.h>
+#include <sys/wait.h>
+
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "tests/service/extsvc_test_util.h"
+#include "tpr/client.h"
+
+namespace tpr {
+namespace {
+
+using ::tpr::testing::Ranked;
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+// Runs `tpr ARGS` against `cluster` (addresses through the environment, as
+// a user would set them) and captures stdout and stderr.
+CommandResult RunTpr(testing::Cluster& cluster, const std::string& args) {
+  const std::string err_path = cluster.dir() + "/tpr.stderr";
+  const std::string command =
+      absl::StrCat("TPR_EXTRACTOR=", cluster.extractor_addresses(),
+                   " TPR_INDEXER=", cluster.indexer().address(), " ",
+                   testing::BinaryPath("tpr"), " ", args, " 2>", err_path);
+  CommandResult result;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return result;
+  char buffer[4096];
+  size_t n;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) result.out.append(buffer, n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(err_path);
+  std::stringstream err;
+  err << in.rdbuf();
+  result.err = err.str();
+  return result;
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::stringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty()) lines.push_back(line);
+  }
+  return lines;
+}
+
+// Parses one `tpr query --json` line.
+bool ParseNeighbor(const std::string& line, int* rank, std::string* id, std::string* label,
+                   double* distance) {
+  static const std::regex kLine(
+      R"re(^\{"rank":(\d+),"id":"([^"]*)","label":"([^"]*)","distance":([-+0-9.eE]+)\}$)re");
+  std::smatch m;
+  if (!std::regex_match(line, m, kLine)) return false;
+  *rank = std::stoi(m[1]);
+  *id = m[2];
+  *label = m[3];
+  *distance = std::stod(m[4]);
+  return true;
+}
+
+int JsonInt(const std::string& json, const std::string& key) {
+  const size_t at = json.find("\"" + key + "\":");
+  if (at == std::string::npos) return -1;
+  size_t start = at + key.size() + 3;
+  if (json[start] == '"') ++start;  // protobuf's JSON prints int64 as a string
+  return std::atoi(json.c_str() + start);
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override { ASSERT_TRUE(cluster_.Start().ok()); }
+  testing::Cluster cluster_;
+};
+
+TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
+  const std::string set = cluster_.dir() + "/set";
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files = testing::GenerateSet(set, 3, 2, 1500);
+  ASSERT_TRUE(files.ok()) << files.status();
+  testing::WriteFile(set + "/broken/bad.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n");
+
+  // One bad file: the others are still indexed, the failure is reported
+  // with its reason, and the exit code says something failed.
+  CommandResult add = RunTpr(cluster_, "--json add --jobs 3 " + set);
+  EXPECT_EQ(add.exit_code, 1) << add.err;
+  EXPECT_EQ(JsonInt(add.out, "added"), 6) << add.out;
+  EXPECT_EQ(JsonInt(add.out, "failed"), 1) << add.out;
+  EXPECT_NE(add.out.find("broken/bad.off"), std::string::npos) << add.out;
+  EXPECT_NE(add.out.find("INVALID_ARGUMENT"), std::string::npos) << add.out;
+
+  // Re-running skips what is there; --update replaces it.
+  CommandResult again = RunTpr(cluster_, "--json add " + set);
+  EXPECT_EQ(JsonInt(again.out, "skipped"), 6) << again.out;
+  EXPECT_EQ(JsonInt(again.out, "added"), 0) << again.out;
+  CommandResult update = RunTpr(cluster_, "--json add --update " + set);
+  EXPECT_EQ(JsonInt(update.out, "updated"), 6) << update.out;
+
+  // The oracle ranks the signatures the indexer holds.
+  absl::StatusOr<client::IndexerClient> indexer =
+      client::IndexerClient::Connect(cluster_.indexer().address());
+  ASSERT_TRUE(indexer.ok());
+  std::vector<std::pair<std::string, v1::Signature>> models;
+  std::map<std::string, std::string> labels;
+  for (const testing::GeneratedFile& f : *files) {
+    absl::StatusOr<v1::Model> m = indexer->Get(f.relative_path);
+    ASSERT_TRUE(m.ok()) << f.relative_path << ": " << m.status();
+    EXPECT_EQ(m->label(), f.label);  // label from the parent folder
+    models.emplace_back(m->id(), m->signature());
+    labels[m->id()] = m->label();
+  }
+  for (const auto& [id, signature] : models) {
+    CommandResult q = RunTpr(cluster_, "--json query -k 6 --id " + id);
+    ASSERT_EQ(q.exit_code, 0) << q.err;
+    std::vector<Ranked> streamed;
+    for (const std::string& line : Lines(q.out)) {
+      int rank;
+      std::string got_id, label;
+      double distance;
+      ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &distance)) << line;
+      EXPECT_EQ(rank, static_cast<int>(streamed.size()) + 1);
+      EXPECT_EQ(label, labels[got_id]);
+      streamed.push_back({distance, got_id});
+    }
+    absl::StatusOr<std::vector<Ranked>> expected = testing::BruteForceRanking(signature, models);
+    ASSERT_TRUE(expected.ok()) << expected.status();
+    ASSERT_EQ(streamed.size(), 6u);
+    EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << "query " << id;
+  }
+
+  // Query by mesh file, with a label filter and k.
+  const testing::GeneratedFile& f = files->back();
+  CommandResult by_mesh =
+      RunTpr(cluster_, "--json query -k 5 --label " + f.label + " " + set + "/" + f.relative_path);
+  ASSERT_EQ(by_mesh.exit_code, 0) << by_mesh.err;
+  std::vector<std::string> lines = Lines(by_mesh.out);
+  ASSERT_EQ(lines.size(), 2u) << by_mesh.out;  // two poses carry that label
+  int rank;
+  std::string id, label;
+  double distance;
+  ASSERT_TRUE(ParseNeighbor(lines[0], &rank, &id, &label, &distance));
+  EXPECT_EQ(id, f.relative_path);
+  EXPECT_EQ(distance, 0.0);
+
+  // Human output of the other subcommands, and their failures.
+  CommandResult human = RunTpr(cluster_, "query -k 2 --id " + f.relative_path);
+  EXPECT_EQ(human.exit_code, 0);
+  EXPECT_NE(human.out.find("rank"), std::string::npos);
+  EXPECT_EQ(RunTpr(cluster_, "get " + f.relative_path).exit_code, 0);
+  EXPECT_EQ(Lines(RunTpr(cluster_, "--json list").out).size(), 6u);
+  EXPECT_EQ(JsonInt(RunTpr(cluster_, "--json stats").out, "models"), 6);
+  EXPECT_EQ(RunTpr(cluster_, "remove " + f.relative_path).exit_code, 0);
+  EXPECT_EQ(RunTpr(cluster_, "get " + f.relative_path).exit_code, 1);
+  EXPECT_EQ(RunTpr(cluster_, "remove " + f.relative_path).exit_code, 1);
+  EXPECT_EQ(RunTpr(cluster_, "query --id no/such/id").exit_code, 1);
+  EXPECT_EQ(RunTpr(cluster_, "query -k 0 --id " + files->front().relative_path).exit_code, 1);
+  CommandResult extract = RunTpr(cluster_, "extract " + set + "/" + files->front().relative_path);
+  EXPECT_EQ(extract.exit_code, 0) << extract.err;
+  EXPECT_NE(extract.out.find("points"), std::string::npos);
+  EXPECT_EQ(RunTpr(cluster_, "extract " + set + "/broken/bad.off").exit_code, 1);
+}
+
+// SIGTERM while a search stream is open: the server stops accepting calls
+// but the open stream still delivers every neighbour, then the process
+// exits 0.
+TEST_F(CliTest, SigtermDuringASearchStreamEndsCleanly) {
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(cluster_.dir() + "/set", 2, 2, 800);
+  ASSERT_TRUE(files.ok());
+  CommandResult add = RunTpr(cluster_, "add " + cluster_.dir() + "/set");
+  ASSERT_EQ(add.exit_code, 0) << add.out << add.err;
+  absl::StatusOr<client::IndexerClient> indexer =
+      client::IndexerClient::Connect(cluster_.indexer().address());
+  ASSERT_TRUE(indexer.ok());
+  v1::SearchRequest request;
+  request.set_id(files->front().relative_path);
+  request.set_k(4);
+  std::unique_ptr<client::SearchStream> stream = indexer->Search(request);
+  v1::Neighbor n;
+  ASSERT_TRUE(stream->Next(&n));
+  int exit_code = -2;
+  std::thread stopper([&] { exit_code = cluster_.indexer().Stop(SIGTERM); });
+  int more = 0;
+  while (stream->Next(&n)) ++more;
+  const absl::Status finished = stream->Finish();
+  stopper.join();
+  // Either the stream completed (graceful) or the server cancelled it at the
+  // end of its grace period; both are clean ends, and the process exits 0.
+  EXPECT_TRUE(finished.ok() || absl::IsCancelled(finished) || absl::IsUnavailable(finished))
+      << finished;
+  if (finished.ok()) {
+    EXPECT_EQ(more, 3);
+  }
+  EXPECT_EQ(exit_code, 0);
+}
+
+}  // namespace
+}  // namespace tpr
