@@ -177,6 +177,10 @@ class IndexerCore {
   // after Close still work but their tree changes are not persisted.
   void Close();
 
+  // WaitForRebuild blocks until no background index rebuild runs (tests and
+  // benchmarks use it for a settled tree).
+  void WaitForRebuild() { index_->WaitForRebuild(); }
+
   // index returns the in-memory index (for tests and benchmarks).
   const tpr::index::SignatureIndex& index() const { return *index_; }
 
