@@ -185,7 +185,10 @@ inline void WriteFile(const std::string& path, const std::string& bytes) {
 inline absl::StatusOr<int> HealthCheck(const std::shared_ptr<grpc::Channel>& channel) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-  grpc::ByteBuffer request;  // empty HealthCheckRequest
+  // An empty HealthCheckRequest: a buffer holding one empty slice (a
+  // default-constructed ByteBuffer is "no message" and is refused).
+  grpc::Slice empty("", 0);
+  grpc::ByteBuffer request(&empty, 1);
   grpc::ByteBuffer response;
   const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
                                          grpc::internal::RpcMethod::NORMAL_RPC);
