@@ -14,36 +14,45 @@
 #include <vector>
 
 #include "benchmark/benchmark.h"
+#include "extractor/lib/extract.h"
 #include "extractor/lib/geodesic.h"
 #include "extractor/lib/integral_geodesic.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/lib/source_points.h"
+#include "extractor/synth/synth.h"
 #include "tests/extractor/test_meshes.h"
 
 namespace tpr::extract {
 namespace {
 
-// BenchMesh returns a closed, genus-0 mesh of about n vertices (a capsule
-// three times as long as wide, rings rotated half a step so triangles are
-// near equilateral, every vertex of degree 6 except the two poles' rings),
-// built once per size and cached for the whole run. Replace the body with
-// synth::GenerateShape(..., target_vertices = n) once tpr_synth provides it;
-// the sweep cost depends on n and degree, which both give.
+// BenchMesh returns the generated "biped_adult" shape (tpr_synth, rest
+// pose 0, seed 1) with target_vertices = n, built once per size and cached
+// for the whole run; BM_Extract and BM_Dijkstra share it so their ratio is
+// measured on the same mesh. Falls back to a capsule of about n vertices
+// (rings rotated half a step, degree 6) if generation fails.
 const Mesh& BenchMesh(int64_t n) {
   static std::mutex mu;
   static std::map<int64_t, std::unique_ptr<Mesh>> cache;
   std::lock_guard<std::mutex> lock(mu);
   auto it = cache.find(n);
   if (it != cache.end()) return *it->second;
-  // Capsule of radius 1 and length 4: perimeter 2 pi, profile length
-  // pi + 4. Equal spacing h on both: around = 2 pi / h, rings = (pi + 4) / h
-  // and n ~ around * rings.
-  const double kPi = 3.14159265358979323846;
-  const double h = std::sqrt(2.0 * kPi * (kPi + 4.0) / static_cast<double>(n));
-  const int around = std::max(8, static_cast<int>(std::lround(2.0 * kPi / h)));
-  const int rings = std::max(
-      4, static_cast<int>(std::lround(static_cast<double>(n) / around)) + 1);
-  auto mesh = std::make_unique<Mesh>(testing::Capsule(1.0, 4.0, rings, around));
+  synth::ShapeOptions options;
+  options.target_vertices = static_cast<int>(n);
+  options.seed = 1;
+  absl::StatusOr<Mesh> shape = synth::GenerateShape("biped_adult", 0, options);
+  std::unique_ptr<Mesh> mesh;
+  if (shape.ok()) {
+    mesh = std::make_unique<Mesh>(*std::move(shape));
+  } else {
+    // Capsule of radius 1 and length 4: perimeter 2 pi, profile length
+    // pi + 4. Equal spacing h on both: n ~ around * rings.
+    const double kPi = 3.14159265358979323846;
+    const double h = std::sqrt(2.0 * kPi * (kPi + 4.0) / static_cast<double>(n));
+    const int around = std::max(8, static_cast<int>(std::lround(2.0 * kPi / h)));
+    const int rings = std::max(
+        4, static_cast<int>(std::lround(static_cast<double>(n) / around)) + 1);
+    mesh = std::make_unique<Mesh>(testing::Capsule(1.0, 4.0, rings, around));
+  }
   const Mesh& ref = *mesh;
   cache.emplace(n, std::move(mesh));
   return ref;
@@ -99,6 +108,32 @@ void BM_BuildGraph(benchmark::State& state) {
   }
 }
 
+// The whole TPR extraction (ExtractSignature, sections 4-5) on the same
+// mesh as BM_Dijkstra/<n>; range(1) is Options::threads. Counters: the
+// feature counts and each stage's milliseconds in the last iteration.
+void BM_Extract(benchmark::State& state) {
+  const Mesh& mesh = BenchMesh(state.range(0));
+  const MeshStats stats = ComputeMeshStats(mesh);
+  Options options;
+  options.threads = static_cast<int>(state.range(1));
+  ExtractResult last;
+  for (auto _ : state) {
+    absl::StatusOr<ExtractResult> r = ExtractSignature(mesh, stats, options);
+    if (!r.ok()) {
+      state.SkipWithError("ExtractSignature failed");
+      break;
+    }
+    last = *std::move(r);
+  }
+  int points = 0, rings = 0;
+  for (const Feature& f : last.signature.features) {
+    (f.kind == FeatureKind::kPoint ? points : rings) += 1;
+  }
+  state.counters["points"] = points;
+  state.counters["rings"] = rings;
+  for (const StageTiming& t : last.timings) state.counters["ms_" + t.stage] = t.milliseconds;
+}
+
 // The sizes: 5k, 10k, 20k, 50k and 100k vertices.
 void Sizes(benchmark::internal::Benchmark* b) {
   for (int64_t n : {5000, 10000, 20000, 50000, 100000}) b->Arg(n);
@@ -107,6 +142,11 @@ void Sizes(benchmark::internal::Benchmark* b) {
 BENCHMARK(BM_Dijkstra)->Apply(Sizes);
 BENCHMARK(BM_DijkstraPlainEdges)->Apply(Sizes);
 BENCHMARK(BM_SourcePoints)->Apply(Sizes);
+BENCHMARK(BM_Extract)
+    ->ArgsProduct({{5000, 10000, 20000, 50000, 100000}, {1}})
+    ->Args({10000, 2})
+    ->Args({100000, 2})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_BuildGraph)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
