@@ -37,6 +37,8 @@
 #include <utility>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "absl/status/status.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -517,6 +519,8 @@ bool LooksLikeAsciiStl(string_view bytes) {
   size_t i = 0;
   while (i < bytes.size() && IsSpace(bytes[i])) ++i;
   if (!absl::StartsWith(bytes.substr(i), "solid")) return false;
+  // Control bytes early on mean binary data behind a "solid" header.
+  if (HasBinaryBytes(bytes.substr(0, 4096))) return false;
   // Binary files often start their 80-byte header with "solid" too; a size
   // that matches the binary layout exactly decides for binary.
   if (bytes.size() >= 84) {
@@ -644,6 +648,8 @@ enum class PlyEncoding { kAscii, kLittle, kBig };
 
 struct PlyProperty {
   std::string name;
+  std::string type;        // scalar type, or "<count type> <entry type>"
+
   int size = 0;          // scalar or list entry size in bytes
   bool is_float = false;
   bool is_signed = false;
@@ -726,13 +732,23 @@ absl::StatusOr<Scan> ScanPly(string_view bytes, const IntakeOptions& options) {
     const int64_t at = reader.number();
     if (HasBinaryBytes(line)) return InvalidAt(kFmt, at, "binary data in the header");
     SplitTokens(line, &tok);
-    if (tok.empty() || tok[0] == "comment" || tok[0] == "obj_info") continue;
+    if (tok.empty() || tok[0] == "comment") continue;
     if (tok[0] == "end_header") {
       have_end = true;
       break;
     }
+    if (tok[0] == "obj_info") {
+      return InvalidAt(kFmt, at, "'obj_info' header lines are not supported");
+    }
+    if (!have_format && tok[0] != "format") {
+      // OpenMesh takes the first three header tokens as the format line.
+      return InvalidAt(kFmt, at, "expected the 'format' line first");
+    }
     if (tok[0] == "format") {
-      if (tok.size() < 2) return InvalidAt(kFmt, at, "incomplete 'format' line");
+      double version = 0;
+      if (have_format || tok.size() != 3 || !ParseDouble(tok[2], &version)) {
+        return InvalidAt(kFmt, at, "expected 'format <encoding> 1.0'");
+      }
       if (tok[1] == "ascii") {
         encoding = PlyEncoding::kAscii;
       } else if (tok[1] == "binary_little_endian") {
@@ -772,6 +788,7 @@ absl::StatusOr<Scan> ScanPly(string_view bytes, const IntakeOptions& options) {
         }
         bool f = false, s = false;
         PlyType(tok[2], &p.count_size, &f, &s);
+        p.type = absl::StrCat("list ", tok[2], " ", tok[3]);
         if (!PlyType(tok[3], &p.size, &p.is_float, &p.is_signed) ||
             p.is_float) {
           return InvalidAt(kFmt, at,
@@ -794,6 +811,7 @@ absl::StatusOr<Scan> ScanPly(string_view bytes, const IntakeOptions& options) {
         p.role_indices = true;
       } else if (tok.size() == 3) {
         p.name = std::string(tok[2]);
+        p.type = std::string(tok[1]);
         if (!PlyType(tok[1], &p.size, &p.is_float, &p.is_signed)) {
           return InvalidAt(kFmt, at,
                            absl::StrCat("unknown property type ",
@@ -861,12 +879,38 @@ absl::StatusOr<Scan> ScanPly(string_view bytes, const IntakeOptions& options) {
                                     "them (truncated file or wrong count)"));
     }
   }
+  for (const auto& element : elements) {
+    if (element.count > std::numeric_limits<uint32_t>::max()) {
+      return InvalidAt(kFmt, element.line,
+                       absl::StrCat("element count ", element.count,
+                                    " exceeds the reader's 32-bit range"));
+    }
+  }
   if (nv > options.max_vertices) return TooManyVertices(nv, options);
   if (nf > options.max_faces) return TooManyFaces(nf, options);
 
   Scan scan;
   scan.vertices = nv;
   scan.faces = nf;
+  // OpenMesh's header parser is token-based and finds binary data by byte
+  // arithmetic around "end_header" (a comment just before it, or trailing
+  // blanks, misalign the body), so it gets a canonical header.
+  {
+    std::string& out = scan.canonical;
+    out.reserve(body.size() + 512);
+    absl::StrAppend(&out, "ply\nformat ",
+                    encoding == PlyEncoding::kAscii    ? "ascii"
+                    : encoding == PlyEncoding::kLittle ? "binary_little_endian"
+                                                       : "binary_big_endian",
+                    " 1.0\n");
+    for (const auto& element : elements) {
+      absl::StrAppend(&out, "element ", element.name, " ", element.count, "\n");
+      for (const auto& p : element.properties) {
+        absl::StrAppend(&out, "property ", p.type, " ", p.name, "\n");
+      }
+    }
+    absl::StrAppend(&out, "end_header\n", body);
+  }
   int64_t triangles = 0;
   if (encoding == PlyEncoding::kAscii) {
     // Token walk with line numbers, the way OpenMesh's `>>` reads.
@@ -908,12 +952,20 @@ absl::StatusOr<Scan> ScanPly(string_view bytes, const IntakeOptions& options) {
           int64_t n = 0;
           double d = 0;
           if (!p.is_list) {
-            const bool ok = p.is_float ? ParseDouble(token, &d)
-                                       : ParseInt(token, &n);
+            // OpenMesh reads these with `>>` into float or int, which fails
+            // (and poisons the stream) on non-finite or out-of-range text.
+            const bool ok =
+                p.is_float
+                    ? ParseDouble(token, &d) && std::fabs(d) <= kMaxFloat
+                    : ParseInt(token, &n) &&
+                          n <= std::numeric_limits<int32_t>::max() &&
+                          n >= std::numeric_limits<int32_t>::min();
             if (!ok) {
               return InvalidAt(kFmt, token_line,
                                absl::StrCat(element.name, " ", i, ": property ",
-                                            Quote(p.name), ": expected a number, got ",
+                                            Quote(p.name), ": expected a finite ",
+                                            p.is_float ? "float" : "32-bit integer",
+                                            ", got ",
                                             Quote(token)));
             }
             continue;
@@ -1094,7 +1146,7 @@ absl::Status RunOpenMesh(MeshFormat format, string_view bytes, const Scan& scan,
       break;
     }
     case MeshFormat::kPly: {
-      std::istringstream in(std::string(bytes), std::ios::in | std::ios::binary);
+      std::istringstream in(scan.canonical, std::ios::in | std::ios::binary);
       ok = OpenMesh::IO::IOManager().read(in, "ply", *importer, opt);
       break;
     }
@@ -1125,8 +1177,18 @@ MeshFormat GuessFormat(string_view bytes, string_view file_name) {
   if (absl::StartsWith(bytes, "ply\n") || absl::StartsWith(bytes, "ply\r")) {
     return MeshFormat::kPly;
   }
+  // Skip blanks and '#' comment lines (OFF and OBJ allow them).
   size_t i = 0;
-  while (i < bytes.size() && IsSpace(bytes[i])) ++i;
+  while (i < bytes.size()) {
+    if (IsSpace(bytes[i])) {
+      ++i;
+    } else if (bytes[i] == '#') {
+      const size_t end = bytes.find('\n', i);
+      i = end == string_view::npos ? bytes.size() : end + 1;
+    } else {
+      break;
+    }
+  }
   string_view rest = bytes.substr(i);
   if (absl::StartsWith(rest, "OFF")) return MeshFormat::kOff;
   if (absl::StartsWith(rest, "solid")) return MeshFormat::kStl;
