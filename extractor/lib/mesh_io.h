@@ -67,8 +67,15 @@ struct LoadedMesh {
 // LoadMeshFromBuffer parses `bytes` as `format` (guessing from `file_name`
 // and the bytes when kUnknown) and validates the result.
 // Errors: INVALID_ARGUMENT for malformed or non-manifold input (the message
-// names the line, face or vertex at fault), RESOURCE_EXHAUSTED above the
-// limits. Thread-safe. O(n log n) in the number of faces.
+// names the format and the line, face or vertex at fault), or when the format
+// cannot be guessed; RESOURCE_EXHAUSTED above the limits (a header whose
+// counts the bytes cannot hold is INVALID_ARGUMENT, checked first, so a lying
+// header never allocates); INTERNAL if OpenMesh's reader disagrees with the
+// scan (not seen on any input so far). Binary OFF and OFF header variants
+// (COFF, NOFF, ...) are INVALID_ARGUMENT. Thread-safe: the OpenMesh step is
+// serialized by a process-wide mutex (its readers are stateful singletons).
+// O(n log n) in the number of faces; about 0.15-0.35 s of CPU for 100k
+// vertices / 200k triangles.
 absl::StatusOr<LoadedMesh> LoadMeshFromBuffer(absl::string_view bytes,
                                               MeshFormat format,
                                               absl::string_view file_name,
