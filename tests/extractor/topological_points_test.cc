@@ -1,0 +1,126 @@
+// Topological Point Selection (4.4): the vote, the radius, the
+// representative, on hand-made critical sets and on real ones.
+#include "extractor/lib/topological_points.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "extractor/lib/critical_points.h"
+#include "extractor/lib/geodesic.h"
+#include "extractor/lib/source_points.h"
+#include "extractor/synth/synth.h"
+#include "gtest/gtest.h"
+#include "tests/extractor/test_meshes.h"
+
+namespace tpr::extract {
+namespace {
+
+// Capsule along z: vertex 0 is the top pole, the last the bottom pole.
+class CapsuleSets : public ::testing::Test {
+ protected:
+  CapsuleSets()
+      : mesh_(testing::Capsule(1.0, 4.0, 80, 24)),
+        graph_(MeshGraph::Build(mesh_)),
+        solver_(graph_) {}
+  int32_t Nearest(const Eigen::Vector3d& x) const {
+    int32_t best = 0;
+    for (int32_t v = 0; v < graph_.num_vertices(); ++v) {
+      if ((mesh_.positions[v] - x).norm() < (mesh_.positions[best] - x).norm()) best = v;
+    }
+    return best;
+  }
+  Mesh mesh_;
+  MeshGraph graph_;
+  DijkstraSolver solver_;
+};
+
+TEST_F(CapsuleSets, MajorityOfSourcesValidatesARegion) {
+  const int32_t top = 0;
+  const int32_t top_near = Nearest({0.2, 0.0, 2.95});
+  const int32_t bottom = graph_.num_vertices() - 1;
+  const int32_t middle = Nearest({1.0, 0.0, 0.0});
+  std::vector<CriticalPoints> sets(3);
+  // Saddle at the middle of the cylinder: radius from the top is about
+  // 3 (cap quarter circle pi/2 + 2 of cylinder = 3.57).
+  sets[0].saddles = {middle};
+  sets[0].maxima = {top};
+  sets[1].maxima = {top_near};  // A second source agrees on the top.
+  sets[2].maxima = {bottom};    // Only one source sees the bottom.
+  TopologicalPointStats stats;
+  const std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph_, solver_, sets, &stats);
+  ASSERT_EQ(points.size(), 1u);
+  EXPECT_EQ(points[0].votes, 2);
+  EXPECT_EQ(points[0].members, (std::vector<int32_t>{std::min(top, top_near),
+                                                     std::max(top, top_near)}));
+  // The representative is the member farthest from the saddle: the pole.
+  EXPECT_EQ(points[0].vertex, top);
+  EXPECT_NEAR(points[0].radius, M_PI / 2 + 2.0, 0.1);
+  EXPECT_GE(stats.sweeps, 2);
+}
+
+TEST_F(CapsuleSets, RadiusStopsTheSearchAtTheNearestSaddle) {
+  // Two sources see the top pole; the third sees a maximum beyond the
+  // saddle, which must not count towards the top's region.
+  const int32_t top = 0;
+  const int32_t near_saddle = Nearest({1.0, 0.0, 1.0});
+  const int32_t beyond = Nearest({1.0, 0.0, -1.0});
+  std::vector<CriticalPoints> sets(3);
+  sets[0].saddles = {near_saddle};
+  sets[0].maxima = {top};
+  sets[1].maxima = {beyond};
+  sets[2].maxima = {beyond};
+  const std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph_, solver_, sets);
+  // The top is seen by one source only within its radius: rejected. The
+  // maximum beyond the saddle has two sources: accepted.
+  ASSERT_EQ(points.size(), 1u);
+  EXPECT_EQ(points[0].vertex, beyond);
+  EXPECT_EQ(points[0].votes, 2);
+}
+
+TEST_F(CapsuleSets, NoSaddleMeansTheWholeSurfaceIsOneRegion) {
+  std::vector<CriticalPoints> sets(3);
+  sets[0].maxima = {0};
+  sets[1].maxima = {graph_.num_vertices() - 1};
+  sets[2].maxima = {};
+  const std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph_, solver_, sets);
+  ASSERT_EQ(points.size(), 1u);
+  EXPECT_EQ(points[0].votes, 2);
+  EXPECT_EQ(points[0].radius, kUnreachable);
+  EXPECT_EQ(points[0].members.size(), 2u);
+  EXPECT_TRUE(SelectTopologicalPoints(graph_, solver_, {}).empty());
+}
+
+// Real sets: three analyses on a star give one point per arm, each voted by
+// at least two sources, whatever the order of the sets.
+TEST(TopologicalPointsTest, StarGivesOnePointPerArm) {
+  synth::ShapeOptions o;
+  o.target_vertices = 5000;
+  absl::StatusOr<Mesh> m = synth::GenerateStar(6, o);
+  ASSERT_TRUE(m.ok());
+  const MeshGraph graph = MeshGraph::Build(*m);
+  const VertexLinks links = VertexLinks::Build(*m);
+  DijkstraSolver solver(graph);
+  // The paper's sources (4.5): two far points and the surface centre.
+  absl::StatusOr<SourcePoints> sp = SelectSourcePoints(graph, solver, {});
+  ASSERT_TRUE(sp.ok());
+  const int32_t a = sp->far_a, b = sp->far_b, c = sp->centre;
+  std::vector<CriticalPoints> sets;
+  for (int32_t s : {a, b, c}) {
+    absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(graph, links, s, {});
+    ASSERT_TRUE(cp.ok());
+    sets.push_back(*cp);
+  }
+  const std::vector<TopologicalPoint> p1 = SelectTopologicalPoints(graph, solver, sets);
+  std::reverse(sets.begin(), sets.end());
+  const std::vector<TopologicalPoint> p2 = SelectTopologicalPoints(graph, solver, sets);
+  EXPECT_EQ(p1.size(), 6u);
+  ASSERT_EQ(p1.size(), p2.size());
+  for (size_t i = 0; i < p1.size(); ++i) {
+    EXPECT_EQ(p1[i].vertex, p2[i].vertex);
+    EXPECT_GE(p1[i].votes, 2);
+  }
+}
+
+}  // namespace
+}  // namespace tpr::extract
