@@ -442,6 +442,12 @@ class Decimator {
     vertex_alive_.assign(n, 1);
     face_alive_.assign(mesh_.triangles.size(), 1);
     alive_vertices_ = static_cast<int64_t>(n);
+    // Reference normals from the field: the normals of MT's tiny triangles
+    // are noise, and judging fold-overs by them blocks their removal.
+    normal_.resize(n);
+    for (size_t v = 0; v < n; ++v) {
+      field_.ValueAndGradient(mesh_.positions[v], &normal_[v]);
+    }
     for (size_t f = 0; f < mesh_.triangles.size(); ++f) {
       for (int32_t v : mesh_.triangles[f]) {
         vertex_faces_[v].push_back(static_cast<int32_t>(f));
@@ -450,13 +456,62 @@ class Decimator {
   }
 
   Mesh Run(int64_t target) {
-    for (const auto& t : mesh_.triangles) {
+    // A collapse refused now (link condition, fold-over, quality) may pass
+    // once its neighbourhood has changed, so sweep again over all edges
+    // while sweeps make progress.
+    Criteria strict;
+    for (int sweep = 0; sweep < 8 && alive_vertices_ > target; ++sweep) {
+      const int64_t before = alive_vertices_;
+      Sweep(target, 1e300, strict);
+      if (alive_vertices_ == before) break;
+    }
+    // Clean-up: clusters of tiny triangles in creases and at sharp tips
+    // resist the strict tests; edges under a quarter of the mean length go
+    // with looser ones, even a little below the budget.
+    double mean = 0.0;
+    int64_t count = 0;
+    for (size_t f = 0; f < mesh_.triangles.size(); ++f) {
+      if (!face_alive_[f]) continue;
+      const auto& t = mesh_.triangles[f];
+      for (int e = 0; e < 3; ++e) {
+        mean += (mesh_.positions[t[e]] - mesh_.positions[t[(e + 1) % 3]]).norm();
+        ++count;
+      }
+    }
+    mean /= std::max<int64_t>(count, 1);
+    Criteria loose;
+    loose.fold_cos = 0.0;
+    loose.quality_floor = 0.05;
+    loose.quality_factor = 0.5;
+    for (int sweep = 0; sweep < 4; ++sweep) {
+      const int64_t before = alive_vertices_;
+      Sweep(target * 9 / 10, 0.0625 * mean * mean, loose);
+      if (alive_vertices_ == before) break;
+    }
+    return Compact();
+  }
+
+ private:
+  // When a collapse is accepted: every new triangle's normal within
+  // acos(fold_cos) of the field normal, and the ring's worst quality at
+  // least min(quality_floor, quality_factor * worst before).
+  struct Criteria {
+    double fold_cos = 0.3;
+    double quality_floor = 0.15;
+    double quality_factor = 0.9;
+  };
+
+  void Sweep(int64_t target, double max_len2, const Criteria& criteria) {
+    for (size_t f = 0; f < mesh_.triangles.size(); ++f) {
+      if (!face_alive_[f]) continue;
+      const auto& t = mesh_.triangles[f];
       for (int e = 0; e < 3; ++e) {
         if (t[e] < t[(e + 1) % 3]) Push(t[e], t[(e + 1) % 3]);
       }
     }
     while (alive_vertices_ > target && !heap_.empty()) {
       const Entry top = heap_.top();
+      if (top.len2 > max_len2) break;
       heap_.pop();
       if (!vertex_alive_[top.u] || !vertex_alive_[top.v]) continue;
       const double len2 =
@@ -465,15 +520,14 @@ class Decimator {
         if (Adjacent(top.u, top.v)) Push(top.u, top.v);
         continue;
       }
-      if (TryCollapse(top.u, top.v)) {
+      if (TryCollapse(top.u, top.v, criteria)) {
         Neighbours(top.u, &nu_);
         for (int32_t w : nu_) Push(top.u, w);
       }
     }
-    return Compact();
+    heap_ = {};
   }
 
- private:
   struct Entry {
     double len2;
     int32_t u, v;
@@ -512,7 +566,7 @@ class Decimator {
     out->erase(std::unique(out->begin(), out->end()), out->end());
   }
 
-  bool TryCollapse(int32_t u, int32_t v) {
+  bool TryCollapse(int32_t u, int32_t v, const Criteria& criteria) {
     int32_t shared[2];
     int shared_count = 0;
     for (int32_t f : vertex_faces_[v]) {
@@ -541,7 +595,20 @@ class Decimator {
 
     const Vector3d mid = 0.5 * (mesh_.positions[u] + mesh_.positions[v]);
     const Vector3d p = field_.Project(mid, max_step_);
+    Vector3d p_normal;
+    field_.ValueAndGradient(p, &p_normal);
     // Fold-over and quality test on every surviving face around u and v.
+    // Quality is judged over the whole ring: the worst triangle after must be
+    // no worse than the worst before (often one of the two removed ones), or
+    // above 0.15 anyway.
+    double worst_before = 1.0, worst_after = 1.0;
+    for (int32_t f : shared) {
+      const auto& t = mesh_.triangles[f];
+      worst_before = std::min(
+          worst_before, TriangleQuality(mesh_.positions[t[0]],
+                                        mesh_.positions[t[1]],
+                                        mesh_.positions[t[2]]));
+    }
     for (int32_t moved : {u, v}) {
       for (int32_t f : vertex_faces_[moved]) {
         if (f == shared[0] || f == shared[1]) continue;
@@ -551,13 +618,24 @@ class Decimator {
           before[e] = mesh_.positions[t[e]];
           after[e] = (t[e] == u || t[e] == v) ? p : before[e];
         }
-        const Vector3d n0 = (before[1] - before[0]).cross(before[2] - before[0]);
+        Vector3d reference = Vector3d::Zero();
+        for (int e = 0; e < 3; ++e) {
+          reference += (t[e] == u || t[e] == v) ? p_normal : normal_[t[e]];
+        }
         const Vector3d n1 = (after[1] - after[0]).cross(after[2] - after[0]);
-        if (n1.dot(n0) <= 0.5 * n0.norm() * n1.norm()) return false;
-        const double q0 = TriangleQuality(before[0], before[1], before[2]);
-        const double q1 = TriangleQuality(after[0], after[1], after[2]);
-        if (q1 < std::min(0.15, 0.9 * q0)) return false;
+        if (n1.dot(reference) <=
+            criteria.fold_cos * reference.norm() * n1.norm()) {
+          return false;
+        }
+        worst_before = std::min(
+            worst_before, TriangleQuality(before[0], before[1], before[2]));
+        worst_after = std::min(worst_after,
+                               TriangleQuality(after[0], after[1], after[2]));
       }
+    }
+    if (worst_after < std::min(criteria.quality_floor,
+                               criteria.quality_factor * worst_before)) {
+      return false;
     }
     for (int32_t f : shared) {
       face_alive_[f] = 0;
@@ -576,6 +654,7 @@ class Decimator {
     vertex_alive_[v] = 0;
     --alive_vertices_;
     mesh_.positions[u] = p;
+    normal_[u] = p_normal;
     return true;
   }
 
@@ -604,7 +683,83 @@ class Decimator {
   int64_t alive_vertices_ = 0;
   std::priority_queue<Entry> heap_;
   std::vector<int32_t> nu_, nv_;
+  std::vector<Vector3d> normal_;  // Field gradient at each vertex.
 };
+
+// Delaunay edge flips (step 5): MT and collapses leave obtuse "cap"
+// triangles that no short edge removes; flipping the shared edge of two
+// nearly coplanar triangles whose opposite angles sum past pi fixes them.
+// A flip never creates an existing edge and never leaves a vertex with fewer
+// than 3 neighbours, so the mesh stays a closed manifold of the same genus.
+// Each pass touches every face at most once and visits faces in id order,
+// so the result is deterministic. Returns the number of flips.
+int FlipEdges(Mesh& mesh) {
+  const int64_t n = static_cast<int64_t>(mesh.positions.size());
+  auto key = [n](int32_t a, int32_t b) {
+    if (a > b) std::swap(a, b);
+    return static_cast<int64_t>(a) * n + b;
+  };
+  std::unordered_map<int64_t, std::array<int32_t, 2>> edge_faces;
+  edge_faces.reserve(mesh.triangles.size() * 2);
+  std::vector<int32_t> valence(n, 0);
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const auto& t = mesh.triangles[f];
+    for (int e = 0; e < 3; ++e) {
+      auto [it, inserted] = edge_faces.try_emplace(
+          key(t[e], t[(e + 1) % 3]),
+          std::array<int32_t, 2>{static_cast<int32_t>(f), -1});
+      if (!inserted) it->second[1] = static_cast<int32_t>(f);
+      if (t[e] < t[(e + 1) % 3]) ++valence[t[e]], ++valence[t[(e + 1) % 3]];
+    }
+  }
+  auto angle = [&](int32_t apex, int32_t p, int32_t q) {
+    const Vector3d u = mesh.positions[p] - mesh.positions[apex];
+    const Vector3d w = mesh.positions[q] - mesh.positions[apex];
+    return std::atan2(u.cross(w).norm(), u.dot(w));
+  };
+  auto normal = [&](int32_t a, int32_t b, int32_t c) {
+    return Vector3d((mesh.positions[b] - mesh.positions[a])
+                        .cross(mesh.positions[c] - mesh.positions[a]));
+  };
+  std::vector<char> touched(mesh.triangles.size(), 0);
+  int flips = 0;
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    for (int e = 0; e < 3 && !touched[f]; ++e) {
+      const auto t = mesh.triangles[f];
+      const int32_t a = t[e], b = t[(e + 1) % 3], c = t[(e + 2) % 3];
+      const auto& faces = edge_faces.at(key(a, b));
+      const int32_t g = faces[0] == static_cast<int32_t>(f) ? faces[1] : faces[0];
+      if (g < 0 || touched[g]) continue;
+      const auto& tg = mesh.triangles[g];
+      int32_t d = -1;
+      for (int32_t w : tg) {
+        if (w != a && w != b) d = w;
+      }
+      if (d < 0 || d == c || valence[a] <= 3 || valence[b] <= 3) continue;
+      if (edge_faces.count(key(c, d))) continue;
+      if (angle(c, a, b) + angle(d, b, a) <= M_PI + 1e-9) continue;
+      const Vector3d nf = normal(a, b, c), ng = normal(b, a, d);
+      if (nf.dot(ng) < 0.9 * nf.norm() * ng.norm()) continue;
+      const Vector3d n1 = normal(c, a, d), n2 = normal(d, b, c);
+      const Vector3d avg = nf + ng;
+      if (n1.dot(avg) <= 0.0 || n2.dot(avg) <= 0.0) continue;
+      const auto& P = mesh.positions;
+      const double before = std::min(TriangleQuality(P[a], P[b], P[c]),
+                                     TriangleQuality(P[b], P[a], P[d]));
+      const double after = std::min(TriangleQuality(P[c], P[a], P[d]),
+                                    TriangleQuality(P[d], P[b], P[c]));
+      if (after <= before) continue;
+      mesh.triangles[f] = {c, a, d};
+      mesh.triangles[g] = {d, b, c};
+      touched[f] = touched[g] = 1;
+      --valence[a], --valence[b], ++valence[c], ++valence[d];
+      edge_faces.erase(key(a, b));
+      edge_faces[key(c, d)] = {static_cast<int32_t>(f), g};
+      ++flips;
+    }
+  }
+  return flips;
+}
 
 // Tangential relaxation with projection (step 5). Jacobi updates, so the
 // result does not depend on vertex order.
@@ -749,7 +904,10 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
   // A step never needs to exceed a few cells: vertices start near the surface.
   const double max_step = 2.0 * h;
   Mesh mesh = Decimator(std::move(fine), field, max_step).Run(target_vertices);
-  Relax(mesh, field, max_step, 4);
+  for (int round = 0; round < 4; ++round) {
+    FlipEdges(mesh);
+    Relax(mesh, field, max_step, 2);
+  }
   return mesh;
 }
 

@@ -362,44 +362,6 @@ uint64_t StreamSeed(uint64_t seed, uint64_t shape_id, uint64_t pose,
   return Mix(Mix(Mix(seed, shape_id), pose), purpose);
 }
 
-// Forward kinematics: each bone swings about its start by a random angle up
-// to limit * amount around a random axis perpendicular to it; children ride
-// on their parent's rigid motion.
-std::vector<Bone> Pose(const std::vector<TemplateBone>& bones, Rng& rng,
-                       double amount) {
-  const size_t n = bones.size();
-  std::vector<Matrix3d> rot(n);
-  std::vector<Bone> out(n);
-  for (size_t i = 0; i < n; ++i) {
-    const Bone& rest = bones[i].bone;
-    const Vector3d axis_dir = rest.end - rest.start;
-    // Random unit axis, made perpendicular to the bone (any axis for balls).
-    Vector3d axis(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(-1, 1));
-    const double angle = rng.Uniform(-1, 1) * bones[i].limit * amount;
-    if (axis_dir.squaredNorm() > 0.0) {
-      const Vector3d d = axis_dir.normalized();
-      axis -= d * d.dot(axis);
-    }
-    Matrix3d local = Matrix3d::Identity();
-    if (axis.norm() > 1e-6 && angle != 0.0) {
-      local = AngleAxisd(angle, axis.normalized()).toRotationMatrix();
-    }
-    Bone& b = out[i];
-    b = rest;
-    if (rest.parent < 0) {
-      rot[i] = local;
-      b.start = rest.start;
-    } else {
-      const Bone& pr = bones[rest.parent].bone;
-      const Bone& pp = out[rest.parent];
-      rot[i] = rot[rest.parent] * local;
-      b.start = pp.start + rot[rest.parent] * (rest.start - pr.start);
-    }
-    b.end = b.start + rot[i] * (rest.end - rest.start);
-  }
-  return out;
-}
-
 // Surface gap between bone i's sample point s (0..1) and bone j's capsule.
 double SampleGap(const Bone& bi, double s, const Bone& bj) {
   const Vector3d p = bi.start + s * (bi.end - bi.start);
@@ -424,26 +386,78 @@ double GapThreshold(const std::vector<TemplateBone>& bones) {
   return 2.0 * r_min;
 }
 
-// True when every pair of bones that is not parent and child keeps, at every
-// sample, the gap it had at rest or the threshold, whichever is smaller;
-// samples that overlap at rest (bones sharing a joint) are free.
-bool Separated(const std::vector<TemplateBone>& rest,
-               const std::vector<Bone>& posed, double threshold) {
-  const size_t n = rest.size();
-  for (size_t i = 0; i < n; ++i) {
-    for (size_t j = 0; j < n; ++j) {
-      if (i == j || rest[i].bone.parent == static_cast<int>(j) ||
-          rest[j].bone.parent == static_cast<int>(i)) {
-        continue;
+// True when bone i (posed) keeps the threshold gap to every earlier bone j
+// other than its parent, in both directions, at every sample that had it at
+// rest. Samples closer than that at rest lie next to a shared joint
+// (siblings, the torso beside a limb's root), where the surface blends
+// anyway and rotation about that joint barely moves them.
+bool SeparatedFromEarlier(const std::vector<TemplateBone>& rest,
+                          const std::vector<Bone>& posed, size_t i,
+                          double threshold) {
+  for (size_t j = 0; j < i; ++j) {
+    if (rest[i].bone.parent == static_cast<int>(j)) continue;
+    for (int k = 0; k < kGapSamples; ++k) {
+      const double s = static_cast<double>(k) / (kGapSamples - 1);
+      if (SampleGap(rest[i].bone, s, rest[j].bone) >= threshold &&
+          SampleGap(posed[i], s, posed[j]) < threshold) {
+        return false;
       }
-      for (int k = 0; k < kGapSamples; ++k) {
-        const double s = static_cast<double>(k) / (kGapSamples - 1);
-        const double rest_gap = SampleGap(rest[i].bone, s, rest[j].bone);
-        if (rest_gap <= 0.0) continue;
-        const double need = std::min(threshold, 0.9 * rest_gap);
-        if (SampleGap(posed[i], s, posed[j]) < need) return false;
+      if (SampleGap(rest[j].bone, s, rest[i].bone) >= threshold &&
+          SampleGap(posed[j], s, posed[i]) < threshold) {
+        return false;
       }
     }
+  }
+  return true;
+}
+
+// Forward kinematics with rejection, bone by bone (parents first): each bone
+// swings about its start by a random angle up to limit * amount around a
+// random axis perpendicular to it, and children ride on their parent's
+// rigid motion. A swing that brings the bone too close to an earlier bone is
+// redrawn, then shrunk, then dropped; redrawing one bone instead of the
+// whole skeleton keeps poses varied for many-limbed classes. Returns false
+// if even the unswung bone collides (a parent's pose left no room).
+bool Pose(const std::vector<TemplateBone>& bones, Rng& rng, double amount,
+          double threshold, std::vector<Bone>* out) {
+  const size_t n = bones.size();
+  std::vector<Matrix3d> rot(n);
+  out->assign(n, Bone());
+  for (size_t i = 0; i < n; ++i) {
+    const Bone& rest = bones[i].bone;
+    const Vector3d rest_dir = rest.end - rest.start;
+    const Matrix3d parent_rot =
+        rest.parent < 0 ? Matrix3d::Identity() : rot[rest.parent];
+    Bone& b = (*out)[i];
+    b = rest;
+    if (rest.parent >= 0) {
+      const Bone& pr = bones[rest.parent].bone;
+      b.start = (*out)[rest.parent].start + parent_rot * (rest.start - pr.start);
+    }
+    constexpr int kTries = 8;
+    bool placed = false;
+    for (int attempt = 0; attempt <= kTries && !placed; ++attempt) {
+      Matrix3d local = Matrix3d::Identity();
+      if (attempt < kTries) {
+        // Random unit axis perpendicular to the bone (any axis for balls).
+        Vector3d axis(rng.Uniform(-1, 1), rng.Uniform(-1, 1),
+                      rng.Uniform(-1, 1));
+        const double shrink = attempt < 4 ? 1.0 : std::pow(0.5, attempt - 3);
+        const double angle =
+            rng.Uniform(-1, 1) * bones[i].limit * amount * shrink;
+        if (rest_dir.squaredNorm() > 0.0) {
+          const Vector3d d = rest_dir.normalized();
+          axis -= d * d.dot(axis);
+        }
+        if (axis.norm() > 1e-6 && angle != 0.0) {
+          local = AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+        }
+      }
+      rot[i] = parent_rot * local;
+      b.end = b.start + rot[i] * rest_dir;
+      placed = SeparatedFromEarlier(bones, *out, i, threshold);
+    }
+    if (!placed) return false;
   }
   return true;
 }
@@ -501,19 +515,16 @@ Posed PoseTemplate(const std::vector<TemplateBone>& bones, uint64_t shape_id,
                    int pose_index, const ShapeOptions& options) {
   const double threshold = GapThreshold(bones);
   Posed posed;
-  std::vector<Bone> rest;
-  for (const auto& t : bones) rest.push_back(t.bone);
-  posed.skeleton.bones = rest;
-  // Up to 12 full-range draws, then draws damped towards the rest pose;
-  // the rest pose itself is the last resort and always separated.
-  for (int attempt = 0; attempt < 24; ++attempt) {
+  for (const auto& t : bones) posed.skeleton.bones.push_back(t.bone);
+  // A few full-range draws, then draws damped towards the rest pose, which
+  // is the last resort and always separated.
+  for (int attempt = 0; attempt < 12; ++attempt) {
     const double amount =
-        options.pose_amount *
-        (attempt < 12 ? 1.0 : std::pow(0.7, attempt - 11));
+        options.pose_amount * (attempt < 4 ? 1.0 : std::pow(0.7, attempt - 3));
     if (amount == 0.0) break;
     Rng rng(StreamSeed(options.seed, shape_id, pose_index, 1 + attempt));
-    std::vector<Bone> candidate = Pose(bones, rng, amount);
-    if (Separated(bones, candidate, threshold)) {
+    std::vector<Bone> candidate;
+    if (Pose(bones, rng, amount, threshold, &candidate)) {
       posed.skeleton.bones = std::move(candidate);
       break;
     }

@@ -1,0 +1,457 @@
+// Tests for the synthetic shape generator (extractor/synth/synth.h).
+//
+// The topology oracle below is written independently of the generator: a
+// directed-edge map for closedness, edge-manifoldness and orientation, link
+// cycles for vertex-manifoldness, a BFS for components and V - E + F for the
+// genus.
+#include "extractor/synth/synth.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <queue>
+#include <set>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "extractor/lib/mesh_io.h"
+#include "extractor/lib/mesh_writer.h"
+#include "gtest/gtest.h"
+
+namespace tpr::synth {
+namespace {
+
+using extract::Mesh;
+
+struct Topology {
+  bool closed_and_oriented = true;  // every directed edge once, reverse once
+  bool vertex_manifold = true;      // every vertex's link is one cycle
+  int64_t unreferenced = 0;
+  int64_t components = 0;
+  int64_t euler = 0;
+  double min_area_ratio = 1e300;    // min over triangles of area / mean edge^2
+  double volume = 0.0;              // signed; > 0 when outward oriented
+};
+
+Topology Analyse(const Mesh& mesh) {
+  Topology t;
+  const int64_t n = static_cast<int64_t>(mesh.positions.size());
+  std::map<std::pair<int32_t, int32_t>, int> directed;
+  for (const auto& tri : mesh.triangles) {
+    for (int e = 0; e < 3; ++e) ++directed[{tri[e], tri[(e + 1) % 3]}];
+  }
+  for (const auto& [edge, count] : directed) {
+    if (count != 1 || directed.count({edge.second, edge.first}) != 1) {
+      t.closed_and_oriented = false;
+    }
+  }
+  const int64_t edges = static_cast<int64_t>(directed.size()) / 2;
+  // Link of v: for each triangle (v, a, b) the link edge a -> b.
+  std::vector<std::map<int32_t, int32_t>> link(n);
+  std::vector<int> faces_at(n, 0);
+  for (const auto& tri : mesh.triangles) {
+    for (int e = 0; e < 3; ++e) {
+      const int32_t v = tri[e];
+      if (link[v].count(tri[(e + 1) % 3])) t.vertex_manifold = false;
+      link[v][tri[(e + 1) % 3]] = tri[(e + 2) % 3];
+      ++faces_at[v];
+    }
+  }
+  for (int64_t v = 0; v < n; ++v) {
+    if (faces_at[v] == 0) {
+      ++t.unreferenced;
+      continue;
+    }
+    const int32_t start = link[v].begin()->first;
+    int32_t cur = start;
+    int steps = 0;
+    do {
+      auto it = link[v].find(cur);
+      if (it == link[v].end()) {
+        t.vertex_manifold = false;
+        break;
+      }
+      cur = it->second;
+      ++steps;
+    } while (cur != start && steps <= faces_at[v]);
+    if (cur != start || steps != faces_at[v]) t.vertex_manifold = false;
+  }
+  // Components over vertices connected by triangle edges.
+  std::vector<std::vector<int32_t>> adjacency(n);
+  for (const auto& [edge, count] : directed) {
+    adjacency[edge.first].push_back(edge.second);
+  }
+  std::vector<char> seen(n, 0);
+  for (int64_t s = 0; s < n; ++s) {
+    if (seen[s] || faces_at[s] == 0) continue;
+    ++t.components;
+    std::queue<int32_t> queue;
+    queue.push(static_cast<int32_t>(s));
+    seen[s] = 1;
+    while (!queue.empty()) {
+      const int32_t v = queue.front();
+      queue.pop();
+      for (int32_t w : adjacency[v]) {
+        if (!seen[w]) {
+          seen[w] = 1;
+          queue.push(w);
+        }
+      }
+    }
+  }
+  t.euler = n - edges + static_cast<int64_t>(mesh.triangles.size());
+  double edge2 = 0.0;
+  for (const auto& [edge, count] : directed) {
+    edge2 += (mesh.positions[edge.first] - mesh.positions[edge.second])
+                 .squaredNorm();
+  }
+  edge2 /= std::max<size_t>(1, directed.size());
+  for (const auto& tri : mesh.triangles) {
+    const Eigen::Vector3d& a = mesh.positions[tri[0]];
+    const Eigen::Vector3d& b = mesh.positions[tri[1]];
+    const Eigen::Vector3d& c = mesh.positions[tri[2]];
+    t.min_area_ratio =
+        std::min(t.min_area_ratio, 0.5 * (b - a).cross(c - a).norm() / edge2);
+    t.volume += a.dot(b.cross(c)) / 6.0;
+  }
+  return t;
+}
+
+void ExpectClosedGenusZero(const Mesh& mesh, const std::string& what) {
+  const Topology t = Analyse(mesh);
+  EXPECT_TRUE(t.closed_and_oriented) << what;
+  EXPECT_TRUE(t.vertex_manifold) << what;
+  EXPECT_EQ(t.unreferenced, 0) << what;
+  EXPECT_EQ(t.components, 1) << what;
+  EXPECT_EQ(t.euler, 2) << what;
+  EXPECT_GT(t.volume, 0.0) << what << ": triangles face inwards";
+  // Far from zero-area: a triangle with 1e-4 of the mean squared edge is a
+  // sliver that geodesic code would trip on.
+  EXPECT_GT(t.min_area_ratio, 1e-4) << what;
+}
+
+// Largest distance from a vertex of `a` to its nearest vertex of `b`.
+double DirectedHausdorff(const Mesh& a, const Mesh& b) {
+  double worst = 0.0;
+  for (const auto& p : a.positions) {
+    double best = 1e300;
+    for (const auto& q : b.positions) best = std::min(best, (p - q).squaredNorm());
+    worst = std::max(worst, best);
+  }
+  return std::sqrt(worst);
+}
+
+TEST(SynthTest, AtLeastEightDistinctClassesIncludingSimilarPairs) {
+  const std::vector<std::string> names = ClassNames();
+  EXPECT_GE(names.size(), 8u);
+  EXPECT_EQ(std::set<std::string>(names.begin(), names.end()).size(),
+            names.size());
+  // Similar-skeleton pairs share the bone tree and differ in proportions.
+  for (const auto& [a, b] :
+       std::vector<std::pair<std::string, std::string>>{
+           {"biped_adult", "biped_child"},
+           {"quadruped_slender", "quadruped_stocky"}}) {
+    ShapeOptions rest;
+    rest.pose_amount = 0.0;
+    absl::StatusOr<Skeleton> sa = PoseSkeleton(a, 0, rest);
+    absl::StatusOr<Skeleton> sb = PoseSkeleton(b, 0, rest);
+    ASSERT_TRUE(sa.ok() && sb.ok()) << a << " " << b;
+    ASSERT_EQ(sa->bones.size(), sb->bones.size());
+    bool proportions_differ = false;
+    for (size_t i = 0; i < sa->bones.size(); ++i) {
+      EXPECT_EQ(sa->bones[i].parent, sb->bones[i].parent);
+      proportions_differ |=
+          std::abs(sa->bones[i].start_radius - sb->bones[i].start_radius) >
+          0.01;
+    }
+    EXPECT_TRUE(proportions_differ) << a << " vs " << b;
+    EXPECT_EQ(TipCount(*sa), TipCount(*sb));
+  }
+}
+
+class SynthClassTest
+    : public ::testing::TestWithParam<std::tuple<std::string, int>> {};
+
+TEST_P(SynthClassTest, ClosedManifoldGenusZeroNearTarget) {
+  const auto& [name, target] = GetParam();
+  for (int pose = 0; pose < 3; ++pose) {
+    ShapeOptions options;
+    options.target_vertices = target;
+    options.seed = 7;
+    absl::StatusOr<Mesh> mesh = GenerateShape(name, pose, options);
+    ASSERT_TRUE(mesh.ok()) << name << " pose " << pose << ": "
+                           << mesh.status();
+    const std::string what = name + " pose " + std::to_string(pose) + " @" +
+                             std::to_string(target);
+    ExpectClosedGenusZero(*mesh, what);
+    EXPECT_NEAR(static_cast<double>(mesh->positions.size()), target,
+                0.2 * target)
+        << what;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    AllClasses, SynthClassTest,
+    ::testing::Combine(::testing::ValuesIn(ClassNames()),
+                       ::testing::Values(2000, 10000)),
+    [](const ::testing::TestParamInfo<SynthClassTest::ParamType>& info) {
+      return std::get<0>(info.param) + "_" +
+             std::to_string(std::get<1>(info.param));
+    });
+
+TEST(SynthTest, SmallestAndLargerTargetsStayGenusZero) {
+  for (const std::string name : {"ant", "hand", "octopus", "biped_child"}) {
+    ShapeOptions options;
+    options.target_vertices = 1000;
+    absl::StatusOr<Mesh> mesh = GenerateShape(name, 1, options);
+    ASSERT_TRUE(mesh.ok()) << name << ": " << mesh.status();
+    ExpectClosedGenusZero(*mesh, name + " @1000");
+    EXPECT_NEAR(static_cast<double>(mesh->positions.size()), 1000, 200);
+  }
+  ShapeOptions big;
+  big.target_vertices = 60000;
+  absl::StatusOr<Mesh> mesh = GenerateShape("biped_adult", 2, big);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  ExpectClosedGenusZero(*mesh, "biped_adult @60000");
+  EXPECT_NEAR(static_cast<double>(mesh->positions.size()), 60000, 12000);
+}
+
+TEST(SynthTest, SameSeedSameBytes) {
+  for (const std::string name : {"quadruped_slender", "hand"}) {
+    ShapeOptions options;
+    options.target_vertices = 3000;
+    options.seed = 42;
+    options.random_rigid = true;
+    extract::MeshWriteOptions write;
+    write.format = extract::MeshWriteFormat::kPlyBinary;
+    absl::StatusOr<Mesh> a = GenerateShape(name, 4, options);
+    absl::StatusOr<Mesh> b = GenerateShape(name, 4, options);
+    ASSERT_TRUE(a.ok() && b.ok());
+    absl::StatusOr<std::string> bytes_a = extract::WriteMeshToString(*a, write);
+    absl::StatusOr<std::string> bytes_b = extract::WriteMeshToString(*b, write);
+    ASSERT_TRUE(bytes_a.ok() && bytes_b.ok());
+    EXPECT_EQ(*bytes_a, *bytes_b) << name;
+    // And a different seed changes them.
+    options.seed = 43;
+    absl::StatusOr<Mesh> c = GenerateShape(name, 4, options);
+    ASSERT_TRUE(c.ok());
+    EXPECT_NE(*extract::WriteMeshToString(*c, write), *bytes_a) << name;
+  }
+}
+
+TEST(SynthTest, DifferentPosesGiveDifferentGeometry) {
+  for (const std::string name : {"biped_adult", "octopus", "pliers", "snake"}) {
+    ShapeOptions options;
+    options.target_vertices = 1500;
+    absl::StatusOr<Mesh> a = GenerateShape(name, 0, options);
+    absl::StatusOr<Mesh> b = GenerateShape(name, 1, options);
+    ASSERT_TRUE(a.ok() && b.ok());
+    absl::StatusOr<Skeleton> s = PoseSkeleton(name, 0, options);
+    ASSERT_TRUE(s.ok());
+    // Skeleton size for scale: the largest bone-end distance from the root.
+    double extent = 0.0;
+    for (const Bone& bone : s->bones) {
+      extent = std::max(extent, (bone.end - s->bones[0].start).norm());
+    }
+    // Some part moved by more than 5% of the shape's size.
+    EXPECT_GT(std::max(DirectedHausdorff(*a, *b), DirectedHausdorff(*b, *a)),
+              0.05 * extent)
+        << name;
+  }
+}
+
+TEST(SynthTest, RestPoseIgnoresPoseIndex) {
+  ShapeOptions options;
+  options.target_vertices = 1500;
+  options.pose_amount = 0.0;
+  absl::StatusOr<Mesh> a = GenerateShape("bird", 0, options);
+  absl::StatusOr<Mesh> b = GenerateShape("bird", 5, options);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->positions, b->positions);
+  EXPECT_EQ(a->triangles, b->triangles);
+}
+
+TEST(SynthTest, RandomRigidIsASimilarityOfTheUnplacedMesh) {
+  ShapeOptions plain;
+  plain.target_vertices = 2000;
+  plain.seed = 3;
+  ShapeOptions rigid = plain;
+  rigid.random_rigid = true;
+  absl::StatusOr<Mesh> a = GenerateShape("ant", 2, plain);
+  absl::StatusOr<Mesh> b = GenerateShape("ant", 2, rigid);
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_EQ(a->triangles, b->triangles);
+  ASSERT_EQ(a->positions.size(), b->positions.size());
+  // Distances scale by one factor in [1, 2]; orientation is kept (no
+  // mirror): signed volume scales by its cube.
+  const size_t n = a->positions.size();
+  const double scale = (b->positions[n - 1] - b->positions[0]).norm() /
+                       (a->positions[n - 1] - a->positions[0]).norm();
+  EXPECT_GE(scale, 1.0);
+  EXPECT_LE(scale, 2.0);
+  for (size_t i = 1; i < n; i += 97) {
+    const double da = (a->positions[i] - a->positions[i / 2]).norm();
+    const double db = (b->positions[i] - b->positions[i / 2]).norm();
+    EXPECT_NEAR(db, scale * da, 1e-9 * (1 + db));
+  }
+  EXPECT_NEAR(Analyse(*b).volume, std::pow(scale, 3) * Analyse(*a).volume,
+              1e-9 * Analyse(*b).volume);
+  // The skeleton is reported in the placed frame.
+  absl::StatusOr<Skeleton> s = PoseSkeleton("ant", 2, rigid);
+  ASSERT_TRUE(s.ok());
+  double nearest = 1e300;
+  for (const auto& p : b->positions) {
+    nearest = std::min(nearest, (p - s->bones[0].start).norm());
+  }
+  EXPECT_LT(nearest, 3.0 * s->bones[0].start_radius);
+}
+
+// The arm tips are the far ends of the arms: vertices farther than `reach`
+// from the ball centre split into one surface patch per arm.
+int CountFarPatches(const Mesh& mesh, const Eigen::Vector3d& centre,
+                    double reach) {
+  const size_t n = mesh.positions.size();
+  std::vector<char> far(n);
+  for (size_t v = 0; v < n; ++v) far[v] = (mesh.positions[v] - centre).norm() > reach;
+  std::vector<std::vector<int32_t>> adjacency(n);
+  for (const auto& t : mesh.triangles) {
+    for (int e = 0; e < 3; ++e) adjacency[t[e]].push_back(t[(e + 1) % 3]);
+  }
+  std::vector<char> seen(n, 0);
+  int patches = 0;
+  for (size_t s = 0; s < n; ++s) {
+    if (!far[s] || seen[s]) continue;
+    ++patches;
+    std::vector<int32_t> stack = {static_cast<int32_t>(s)};
+    seen[s] = 1;
+    while (!stack.empty()) {
+      const int32_t v = stack.back();
+      stack.pop_back();
+      for (int32_t w : adjacency[v]) {
+        if (far[w] && !seen[w]) {
+          seen[w] = 1;
+          stack.push_back(w);
+        }
+      }
+    }
+  }
+  return patches;
+}
+
+TEST(SynthTest, StarHasOneTipPerArm) {
+  for (int arms = 2; arms <= 8; ++arms) {
+    ShapeOptions options;
+    options.target_vertices = 3000;
+    options.seed = 11;
+    options.random_rigid = true;
+    absl::StatusOr<Mesh> mesh = GenerateStar(arms, options);
+    absl::StatusOr<Skeleton> skeleton = StarSkeleton(arms, 0, options);
+    ASSERT_TRUE(mesh.ok() && skeleton.ok()) << arms;
+    ExpectClosedGenusZero(*mesh, "star " + std::to_string(arms));
+    EXPECT_EQ(TipCount(*skeleton), arms);
+    const Eigen::Vector3d centre = skeleton->bones[0].start;
+    // Arms reach 1.3 ball radii... in units of the (scaled) ball radius 0.35:
+    // the ball ends at 1.0, arm tips at about 3.7.
+    const double ball = skeleton->bones[0].start_radius;
+    EXPECT_EQ(CountFarPatches(*mesh, centre, 2.0 * ball), arms) << arms;
+    // The farthest vertex lies on an arm tip, not on the ball.
+    double farthest = 0.0;
+    for (const auto& p : mesh->positions) farthest = std::max(farthest, (p - centre).norm());
+    EXPECT_GT(farthest, 3.0 * ball) << arms;
+  }
+}
+
+TEST(SynthTest, ReloadsThroughIntakeWithIdenticalCounts) {
+  ShapeOptions options;
+  options.target_vertices = 2500;
+  for (const std::string name : {"bird", "quadruped_stocky"}) {
+    absl::StatusOr<Mesh> mesh = GenerateShape(name, 1, options);
+    ASSERT_TRUE(mesh.ok());
+    for (auto [format, in_format] :
+         std::vector<std::pair<extract::MeshWriteFormat, extract::MeshFormat>>{
+             {extract::MeshWriteFormat::kOff, extract::MeshFormat::kOff},
+             {extract::MeshWriteFormat::kPlyAscii, extract::MeshFormat::kPly},
+             {extract::MeshWriteFormat::kPlyBinary, extract::MeshFormat::kPly}}) {
+      extract::MeshWriteOptions write;
+      write.format = format;
+      absl::StatusOr<std::string> bytes = extract::WriteMeshToString(*mesh, write);
+      ASSERT_TRUE(bytes.ok());
+      absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
+          *bytes, in_format, "shape", extract::IntakeOptions{});
+      ASSERT_TRUE(loaded.ok()) << name << ": " << loaded.status();
+      EXPECT_EQ(loaded->stats.vertices,
+                static_cast<int64_t>(mesh->positions.size()));
+      EXPECT_EQ(loaded->stats.faces,
+                static_cast<int64_t>(mesh->triangles.size()));
+      EXPECT_EQ(loaded->stats.boundary_edges, 0);
+      EXPECT_EQ(loaded->stats.components, 1);
+      EXPECT_EQ(loaded->stats.genus, 0);
+      EXPECT_EQ(loaded->stats.dropped_degenerate_faces, 0);
+      EXPECT_EQ(loaded->stats.dropped_duplicate_faces, 0);
+    }
+  }
+}
+
+TEST(SynthTest, BadInputIsInvalidArgument) {
+  ShapeOptions options;
+  absl::StatusOr<Mesh> unknown = GenerateShape("unicorn", 0, options);
+  EXPECT_EQ(unknown.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(unknown.status().message().find("biped_adult"),
+            absl::string_view::npos);
+  EXPECT_EQ(GenerateShape("hand", -1, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  ShapeOptions tiny = options;
+  tiny.target_vertices = 10;
+  EXPECT_EQ(GenerateShape("hand", 0, tiny).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  ShapeOptions wild = options;
+  wild.pose_amount = 1.5;
+  EXPECT_EQ(PoseSkeleton("hand", 0, wild).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(GenerateStar(1, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(GenerateStar(9, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+
+  Skeleton empty;
+  EXPECT_EQ(MeshFromSkeleton(empty, 1000).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Skeleton bad_parent;
+  bad_parent.bones.resize(2);
+  bad_parent.bones[1].parent = 1;
+  bad_parent.bones[1].end = Eigen::Vector3d(1, 0, 0);
+  EXPECT_EQ(MeshFromSkeleton(bad_parent, 1000).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Skeleton zero_radius;
+  zero_radius.bones.resize(1);
+  zero_radius.bones[0].end_radius = 0.0;
+  EXPECT_EQ(MeshFromSkeleton(zero_radius, 1000).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Skeleton nan;
+  nan.bones.resize(1);
+  nan.bones[0].end = Eigen::Vector3d(std::nan(""), 0, 0);
+  EXPECT_EQ(MeshFromSkeleton(nan, 1000).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(SynthTest, SingleBallIsASphere) {
+  // Analytic oracle: one ball of radius 0.5 polygonizes onto the sphere.
+  Skeleton ball;
+  ball.bones.resize(1);
+  ball.bones[0].start_radius = ball.bones[0].end_radius = 0.5;
+  absl::StatusOr<Mesh> mesh = MeshFromSkeleton(ball, 2000);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  ExpectClosedGenusZero(*mesh, "ball");
+  for (const auto& p : mesh->positions) EXPECT_NEAR(p.norm(), 0.5, 5e-3);
+  // Enclosed volume close to 4/3 pi r^3 (the inscribed polyhedron is a bit
+  // smaller).
+  const double volume = Analyse(*mesh).volume;
+  EXPECT_NEAR(volume, 4.0 / 3.0 * M_PI * 0.125, 0.01 * 4.0 / 3.0 * M_PI * 0.125);
+}
+
+}  // namespace
+}  // namespace tpr::synth
