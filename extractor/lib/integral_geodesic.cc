@@ -18,7 +18,9 @@ int32_t LowestVertexOf(const MeshGraph& graph, int32_t c) {
 }
 
 // HierarchicalSearch holds the state of one surface-centre search (4.5).
-// Per-vertex scratch is flat and sized once; the patch is a vertex list.
+// Every sweep's field is kept (as float: half the memory, and 7 digits are
+// plenty for choosing where to look; G itself is summed in double from the
+// solver's field) because Hilaga's approximation of G needs all of them.
 class HierarchicalSearch {
  public:
   HierarchicalSearch(const MeshGraph& graph, DijkstraSolver& solver,
@@ -34,17 +36,15 @@ class HierarchicalSearch {
     const double component_area = graph_.component_areas()[c];
     result_.sweeps = seed_sweeps;
 
-    best_field_ = seed_distances;
-    best_vertex_ = seed;
-    best_g_ = IntegralGeodesicOfField(graph_, best_field_);
-    Record(seed, best_g_);
-
     patch_.clear();
     for (int32_t v = 0; v < n; ++v) {
       if (comp[v] == c) patch_.push_back(v);
     }
-    min_dist_.assign(n, kUnreachable);
-    const int k = std::max(2, options_.patches_per_level);
+    nearest_.assign(n, -1);
+    near_dist_.assign(n, kUnreachable);
+    evaluated_.assign(n, 0);
+    fields_.reserve(static_cast<size_t>(options_.max_sweeps + 1) * n);
+    AddCentre(seed, seed_distances);
 
     while (true) {
       double patch_area = 0.0;
@@ -57,49 +57,44 @@ class HierarchicalSearch {
       }
       if (patch_.size() <= 1 || result_.sweeps >= options_.max_sweeps) break;
 
-      // Farthest-point sampling of the patch's centres; the current best is
-      // the first centre, its field known. min_dist_ over the patch is the
-      // distance to the nearest centre, so the patches are the centres'
-      // Voronoi cells under graph distance.
-      for (int32_t v : patch_) min_dist_[v] = best_field_[v];
       const double level_start_g = best_g_;
-      int32_t level_best = best_vertex_;
-      double level_best_g = best_g_;
-      bool level_best_is_new = false;
-      for (int i = 1; i < k && result_.sweeps < options_.max_sweeps; ++i) {
+      // Farthest-point sampling: each new centre is the patch vertex
+      // farthest from every centre so far, so the patches are the Voronoi
+      // cells of the centres under graph distance.
+      const int new_centres = result_.levels == 0
+                                  ? options_.first_level_patches - 1
+                                  : options_.patches_per_level;
+      for (int i = 0; i < new_centres && result_.sweeps < options_.max_sweeps;
+           ++i) {
         int32_t far = -1;
         for (int32_t v : patch_) {
-          if (far < 0 || min_dist_[v] > min_dist_[far]) far = v;
+          if (far < 0 || near_dist_[v] > near_dist_[far]) far = v;
         }
-        if (far < 0 || !(min_dist_[far] > 0.0)) break;  // patch exhausted
-        const std::vector<double>& d = solver_.Run(far);
+        if (far < 0 || !(near_dist_[far] > 0.0)) break;  // patch exhausted
+        AddCentre(far, solver_.Run(far));
         ++result_.sweeps;
-        const double g = IntegralGeodesicOfField(graph_, d);
-        Record(far, g);
-        for (int32_t v : patch_) min_dist_[v] = std::min(min_dist_[v], d[v]);
-        if (g < level_best_g) {
-          level_best = far;
-          level_best_g = g;
-          level_best_is_new = true;
-          scratch_field_ = d;  // keeps capacity after the first copy
-        }
       }
-      // The sampling radius: every patch vertex lies within it of some
-      // centre. The next patch is everything within it of the best centre:
-      // the best Voronoi cell plus a margin into its neighbours, so that a
-      // minimum just across a cell border stays inside (robustness).
-      double radius = 0.0;
-      for (int32_t v : patch_) radius = std::max(radius, min_dist_[v]);
-      if (level_best_is_new) {
-        std::swap(best_field_, scratch_field_);
-        best_vertex_ = level_best;
-        best_g_ = level_best_g;
+      if (options_.approximation_guided &&
+          result_.sweeps < options_.max_sweeps) {
+        const int32_t guess = ApproximateMinimum();
+        if (guess >= 0) {
+          AddCentre(guess, solver_.Run(guess));
+          ++result_.sweeps;
+        }
       }
       ++result_.levels;
+
+      // The sampling radius: every patch vertex lies within it of some
+      // centre. The next patch is everything within it of the best vertex:
+      // its Voronoi cell plus a margin into the neighbouring cells, so that
+      // a minimum just across a cell border stays inside (robustness).
+      double radius = 0.0;
+      for (int32_t v : patch_) radius = std::max(radius, near_dist_[v]);
+      const float* best_field = Field(best_index_);
       const size_t old_size = patch_.size();
       size_t kept = 0;
       for (int32_t v : patch_) {
-        if (best_field_[v] <= radius) patch_[kept++] = v;
+        if (best_field[v] <= radius) patch_[kept++] = v;
       }
       patch_.resize(kept);
 
@@ -112,30 +107,89 @@ class HierarchicalSearch {
       // itself exactly.
       if (kept == old_size && change <= 0.0) break;
     }
-    result_.vertex = best_vertex_;
+    result_.vertex = centres_[best_index_];
     result_.g_min = best_g_;
     return std::move(result_);
   }
 
  private:
-  void Record(int32_t v, double g) {
+  const float* Field(int i) const {
+    return fields_.data() + static_cast<size_t>(i) * graph_.num_vertices();
+  }
+
+  // AddCentre records a swept vertex: its exact G, its field, and the
+  // Voronoi labels of every vertex of the component.
+  void AddCentre(int32_t v, const std::vector<double>& d) {
+    const int32_t n = graph_.num_vertices();
+    const int index = static_cast<int>(centres_.size());
+    centres_.push_back(v);
+    evaluated_[v] = 1;
+    const double g = IntegralGeodesicOfField(graph_, d);
+    fields_.resize(fields_.size() + n);
+    float* f = fields_.data() + static_cast<size_t>(index) * n;
+    for (int32_t u = 0; u < n; ++u) {
+      f[u] = static_cast<float>(d[u]);
+      if (d[u] < near_dist_[u]) {
+        near_dist_[u] = d[u];
+        nearest_[u] = index;
+      }
+    }
     result_.evaluated_vertices.push_back(v);
     result_.evaluated_g.push_back(g);
     if (result_.g_max_vertex < 0 || g > result_.g_max) {
       result_.g_max = g;
       result_.g_max_vertex = v;
     }
+    if (best_index_ < 0 || g < best_g_) {
+      best_index_ = index;
+      best_g_ = g;
+    }
+  }
+
+  // ApproximateMinimum returns the unevaluated patch vertex minimising
+  // Hilaga et al.'s [9] approximation G~(p) = sum_i area(cell_i) g_i(p),
+  // the integral with each Voronoi cell collapsed onto its centre; -1 if
+  // every patch vertex was evaluated. |G~(p) - G(p)| is at most
+  // sum_i int_{cell_i} d(x, c_i), uniformly in p, which is what makes its
+  // minimum land in the right basin when farthest-point centres alone
+  // (which favour extremities) miss it. O(centres * patch).
+  int32_t ApproximateMinimum() {
+    const std::vector<double>& area = graph_.vertex_areas();
+    cell_area_.assign(centres_.size(), 0.0);
+    for (int32_t v = 0; v < graph_.num_vertices(); ++v) {
+      if (nearest_[v] >= 0) cell_area_[nearest_[v]] += area[v];
+    }
+    approx_.assign(patch_.size(), 0.0);
+    for (size_t i = 0; i < centres_.size(); ++i) {
+      const double a = cell_area_[i];
+      if (a == 0.0) continue;
+      const float* f = Field(static_cast<int>(i));
+      for (size_t j = 0; j < patch_.size(); ++j) approx_[j] += a * f[patch_[j]];
+    }
+    int32_t best = -1;
+    double best_value = kUnreachable;
+    for (size_t j = 0; j < patch_.size(); ++j) {
+      if (!evaluated_[patch_[j]] && approx_[j] < best_value) {
+        best_value = approx_[j];
+        best = patch_[j];
+      }
+    }
+    return best;
   }
 
   const MeshGraph& graph_;
   DijkstraSolver& solver_;
   const IntegralGeodesicOptions& options_;
   SurfaceCentre result_;
-  std::vector<double> best_field_;
-  std::vector<double> scratch_field_;
-  std::vector<double> min_dist_;
+  std::vector<int32_t> centres_;
+  std::vector<float> fields_;  // centres_.size() x n, row per centre
+  std::vector<int32_t> nearest_;
+  std::vector<double> near_dist_;
+  std::vector<char> evaluated_;
   std::vector<int32_t> patch_;
-  int32_t best_vertex_ = -1;
+  std::vector<double> cell_area_;
+  std::vector<double> approx_;
+  int best_index_ = -1;
   double best_g_ = 0.0;
 };
 

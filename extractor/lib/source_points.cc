@@ -17,9 +17,13 @@ int32_t FarthestReached(const DijkstraSolver& solver) {
 }
 
 absl::Status ValidateOptions(const IntegralGeodesicOptions& o) {
-  if (o.patches_per_level < 2) {
+  if (o.first_level_patches < 2) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "patches_per_level must be at least 2, got ", o.patches_per_level));
+        "first_level_patches must be at least 2, got ", o.first_level_patches));
+  }
+  if (o.patches_per_level < 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "patches_per_level must be at least 1, got ", o.patches_per_level));
   }
   if (!(o.min_relative_change >= 0.0)) {
     return absl::InvalidArgumentError(absl::StrCat(

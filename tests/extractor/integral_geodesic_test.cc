@@ -11,6 +11,7 @@
 
 #include "gtest/gtest.h"
 #include "extractor/lib/source_points.h"
+#include "extractor/synth/synth.h"
 #include "tests/extractor/test_meshes.h"
 
 namespace tpr::extract {
@@ -124,6 +125,39 @@ TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForce) {
   }
 }
 
+TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForceOnArticulatedShapes) {
+  // Generated creatures (tpr_synth) in several poses: many protrusions and a
+  // flat G landscape in the torso. The octopus is the hard case: its first
+  // farthest-point centres are all arm tips.
+  for (const char* name : {"biped_adult", "quadruped_stocky", "octopus"}) {
+    for (int pose : {0, 5}) {
+      synth::ShapeOptions options;
+      options.target_vertices = 1200;
+      absl::StatusOr<Mesh> mesh = synth::GenerateShape(name, pose, options);
+      ASSERT_TRUE(mesh.ok()) << mesh.status();
+      const MeshGraph graph = MeshGraph::Build(*mesh);
+      DijkstraSolver solver(graph);
+      const SurfaceCentre brute = BruteForceSurfaceCentre(graph, solver);
+      absl::StatusOr<SourcePoints> s = SelectSourcePoints(graph, solver, {});
+      ASSERT_TRUE(s.ok()) << s.status();
+      const SurfaceCentre& fast = s->surface_centre;
+      // Errors on the scale of the normalized integral geodesic (Eq. 5).
+      const double range = brute.g_max - brute.g_min;
+      const double min_error = (fast.g_min - brute.g_min) / range;
+      const double max_error = (brute.g_max - fast.g_max) / range;
+      std::printf("%-18s pose %d n=%5d  min G error %.3f%%, max G error "
+                  "%.3f%% of the range, sweeps %d (search %d)\n",
+                  name, pose, graph.num_vertices(), 100.0 * min_error,
+                  100.0 * max_error, s->sweeps, fast.sweeps);
+      EXPECT_GE(min_error, -1e-12);
+      EXPECT_LE(min_error, 0.01) << name << " " << pose;
+      EXPECT_GE(max_error, -1e-12);
+      EXPECT_LE(max_error, 0.03) << name << " " << pose;
+      EXPECT_LE(s->sweeps, 40) << name << " " << pose;
+    }
+  }
+}
+
 TEST(SurfaceCentreTest, StaysOnTheLargestComponent) {
   const Mesh small = testing::Icosphere(2, 0.5);
   const Mesh big = SymmetricDumbbell();
@@ -197,7 +231,7 @@ TEST(SourcePointsTest, RejectsBadInput) {
   const MeshGraph graph = MeshGraph::Build(mesh);
   DijkstraSolver solver(graph);
   IntegralGeodesicOptions bad;
-  bad.patches_per_level = 1;
+  bad.patches_per_level = 0;
   EXPECT_EQ(SelectSourcePoints(graph, solver, bad).status().code(),
             absl::StatusCode::kInvalidArgument);
   bad = {};
