@@ -82,6 +82,7 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
   std::vector<char> disallowed(n, 0);
   // Scratch of the bounded search, valid where stamp == candidate number.
   std::vector<int32_t> stamp(n, -1);
+  std::vector<int32_t> cycle_of(n, -1);
   std::vector<int32_t> depth(n, 0);
   std::vector<int32_t> queue;
   std::vector<int32_t> cycle_sizes;
@@ -140,6 +141,7 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
       const int32_t cycle = static_cast<int32_t>(cycle_sizes.size());
       cycle_sizes.push_back(0);
       stamp[seed] = id;
+      cycle_of[seed] = cycle;
       depth[seed] = 1;
       size_t head = queue.size();
       queue.push_back(seed);
@@ -153,6 +155,7 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
           ++out.search_visits;
           if (settled[w] || dist[w] == kUnreachable || stamp[w] == id) continue;
           stamp[w] = id;
+          cycle_of[w] = cycle;
           depth[w] = depth[u] + 1;
           queue.push_back(w);
         }
@@ -164,8 +167,19 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
       out.saddles.push_back(v);  // Table 1, case A: branching.
       continue;
     }
-    // Table 1, cases B and C: disallow C(l_s)^+ (the searched vertices).
-    for (int32_t u : queue) disallowed[u] = 1;
+    // Table 1, cases B and C: disallow C(l_s)^+. In case C every cycle is
+    // invalid and all of C(l_s)^+ is disallowed, as written. In case B we
+    // disallow the invalid cycles only (the pocket vertices that would
+    // otherwise surface as extraneous maxima, Fig. 3 B), not the one valid
+    // cycle: that cycle is the front that goes on, and near a protrusion tip
+    // it is the small loop about to close there; disallowing it loses the
+    // tip's maximum (seen on a 6-arm star: the arm opposite the source had
+    // no maximum). tests/extractor/critical_points_test.cc covers both.
+    for (int32_t u : queue) {
+      if (valid == 0 || cycle_sizes[cycle_of[u]] <= options.cycle_min_vertices) {
+        disallowed[u] = 1;
+      }
+    }
     if (valid == 1) {
       ++out.candidates_one_valid_cycle;
     } else {

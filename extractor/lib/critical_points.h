@@ -92,8 +92,9 @@ struct CriticalPoints {
 // the heap), is searched from v's unvisited neighbours through heap vertices
 // up to options.search_hops edges from v and split into cycles by
 // connectivity; cycles with > cycle_min_vertices vertices are valid. > 1
-// valid: saddle; 1: no critical point, C(l_s)^+ disallowed; 0: v becomes a
-// maximum, C(l_s)^+ disallowed. A vertex all of whose neighbours are settled
+// valid: saddle; 1: no critical point, the invalid cycles of C(l_s)^+
+// disallowed (the paper disallows all of C(l_s)^+; see the .cc for why the
+// valid cycle is spared); 0: v becomes a maximum, C(l_s)^+ disallowed. A vertex all of whose neighbours are settled
 // before it is a maximum unless disallowed. Disallowed vertices never become
 // critical points.
 // Returns INVALID_ARGUMENT when source is out of range, links and graph

@@ -32,7 +32,9 @@ struct Feature {
   // Geometric surface vectors (5.3), one entry per geodesic band:
   // area-weighted Gaussian curvature x total area,
   std::vector<double> curvature;
-  // band area / total area,
+  // segment-area-weighted mean of the band's segment areas / total area
+  // (5.3: each band's value is the area-weighted average over its
+  // segments; a band of one segment gives band area / total area),
   std::vector<double> area;
   // area-weighted segment thickness / sqrt(total area).
   std::vector<double> distance;
