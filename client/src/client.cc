@@ -10,6 +10,7 @@
 
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
+#include <grpc/grpc.h>
 #include <grpcpp/support/channel_arguments.h>
 
 #include "absl/strings/ascii.h"
@@ -64,6 +65,15 @@ std::chrono::system_clock::time_point DeadlineFor(const CallOptions& call) {
          std::chrono::microseconds(absl::ToInt64Microseconds(call.timeout));
 }
 
+// Waits up to `wait` before the next attempt, returning early once the
+// channel is connected. Plain sleeping is not enough: while round_robin has
+// no ready backend, gRPC fails calls at once and a connection attempt begun
+// for a failed call is abandoned with it, so a restarted server could be
+// missed by every retry. WaitForConnected drives the connection itself.
+void BackoffWait(grpc::Channel* channel, std::chrono::microseconds wait) {
+  channel->WaitForConnected(std::chrono::system_clock::now() + wait);
+}
+
 // Runs `attempt(context)` until it succeeds, fails with a code other than
 // UNAVAILABLE, attempts run out, or the next backoff would pass the
 // deadline. Every attempt gets a fresh context with the call's deadline.
@@ -71,7 +81,8 @@ std::chrono::system_clock::time_point DeadlineFor(const CallOptions& call) {
 // that the rule "retry only idempotent calls" lives next to each call and
 // the jitter does not depend on channel configuration.
 template <typename Attempt>
-grpc::Status WithRetries(const CallOptions& call, bool idempotent, Attempt&& attempt) {
+grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call, bool idempotent,
+                         Attempt&& attempt) {
   const auto deadline = DeadlineFor(call);
   const int attempts = idempotent ? std::max(1, call.max_attempts) : 1;
   absl::Duration backoff = call.initial_backoff;
@@ -86,7 +97,7 @@ grpc::Status WithRetries(const CallOptions& call, bool idempotent, Attempt&& att
     const auto wait = std::chrono::microseconds(
         static_cast<int64_t>(absl::ToDoubleMicroseconds(backoff) * jitter(rng)));
     if (std::chrono::system_clock::now() + wait >= deadline) break;
-    std::this_thread::sleep_for(wait);
+    BackoffWait(channel, wait);
     backoff = std::min(call.max_backoff, backoff * call.backoff_multiplier);
   }
   return status;
@@ -149,6 +160,13 @@ absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view add
   args.SetLoadBalancingPolicyName("round_robin");
   args.SetMaxReceiveMessageSize(64 << 20);
   args.SetMaxSendMessageSize(64 << 20);
+  // gRPC's reconnect backoff starts at 1 s and grows to 120 s; while a
+  // subchannel waits, calls fail fast with UNAVAILABLE, so our retries would
+  // all land inside one wait. Reconnecting on the scale of our own backoff
+  // lets a restarted server be found within a retry or two.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
   return grpc::CreateCustomChannel(*target, grpc::InsecureChannelCredentials(), args);
 }
 
@@ -180,7 +198,7 @@ absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
     v1::MeshFormat format, const CallOptions* call) const {
   v1::ExtractResponse response;
   grpc::Status status = WithRetries(
-      call ? *call : defaults_, /*idempotent=*/true, [&](grpc::ClientContext* context) {
+      channel_.get(), call ? *call : defaults_, /*idempotent=*/true, [&](grpc::ClientContext* context) {
         response.Clear();
         std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer =
             stub_->Extract(context, &response);
@@ -252,8 +270,9 @@ class GrpcBatchUpsertWriter final : public BatchUpsertWriter {
 
 class GrpcSearchStream final : public SearchStream {
  public:
-  GrpcSearchStream(std::shared_ptr<v1::Indexer::Stub> stub, v1::SearchRequest request, const CallOptions& call)
-      : stub_(std::move(stub)), request_(std::move(request)), call_(call), deadline_(DeadlineFor(call)) {
+  GrpcSearchStream(std::shared_ptr<grpc::Channel> channel, std::shared_ptr<v1::Indexer::Stub> stub,
+                   v1::SearchRequest request, const CallOptions& call)
+      : channel_(std::move(channel)), stub_(std::move(stub)), request_(std::move(request)), call_(call), deadline_(DeadlineFor(call)) {
     Start();
   }
   ~GrpcSearchStream() override {
@@ -322,10 +341,11 @@ class GrpcSearchStream final : public SearchStream {
     for (int i = 1; i < attempt_; ++i) wait = std::min(call_.max_backoff, wait * call_.backoff_multiplier);
     const auto w = std::chrono::microseconds(absl::ToInt64Microseconds(wait));
     if (std::chrono::system_clock::now() + w >= deadline_) return false;
-    std::this_thread::sleep_for(w);
+    BackoffWait(channel_.get(), w);
     return true;
   }
 
+  std::shared_ptr<grpc::Channel> channel_;
   std::shared_ptr<v1::Indexer::Stub> stub_;
   const v1::SearchRequest request_;
   const CallOptions call_;
@@ -361,7 +381,7 @@ absl::StatusOr<bool> IndexerClient::Upsert(const v1::Model& model, bool overwrit
   *request.mutable_model() = model;
   request.set_overwrite(overwrite);
   v1::UpsertResponse response;
-  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/overwrite,
+  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/overwrite,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Upsert(context, request, &response);
                                     });
@@ -377,7 +397,7 @@ absl::Status IndexerClient::Delete(const std::string& id, const CallOptions* cal
   v1::DeleteRequest request;
   request.set_id(id);
   v1::DeleteResponse response;
-  return FromGrpcStatus(WithRetries(call ? *call : defaults_, /*idempotent=*/false,
+  return FromGrpcStatus(WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/false,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Delete(context, request, &response);
                                     }));
@@ -388,7 +408,7 @@ absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
   v1::GetRequest request;
   request.set_id(id);
   v1::Model response;
-  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Get(context, request, &response);
                                     });
@@ -399,7 +419,7 @@ absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
 absl::StatusOr<v1::ListResponse> IndexerClient::List(const v1::ListRequest& request,
                                                      const CallOptions* call) const {
   v1::ListResponse response;
-  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->List(context, request, &response);
                                     });
@@ -425,13 +445,13 @@ absl::StatusOr<std::vector<v1::Model>> IndexerClient::ListAll(const std::string&
 
 std::unique_ptr<SearchStream> IndexerClient::Search(const v1::SearchRequest& request,
                                                     const CallOptions* call) const {
-  return std::make_unique<GrpcSearchStream>(stub_, request, call ? *call : defaults_);
+  return std::make_unique<GrpcSearchStream>(channel_, stub_, request, call ? *call : defaults_);
 }
 
 absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(const CallOptions* call) const {
   v1::StatsRequest request;
   v1::StatsResponse response;
-  grpc::Status status = WithRetries(call ? *call : defaults_, /*idempotent=*/true,
+  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Stats(context, request, &response);
                                     });
