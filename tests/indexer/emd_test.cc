@@ -1,0 +1,390 @@
+// EMD (section 6.1): exactness against LEMON and a brute-force oracle,
+// degenerate inputs, the centroid lower bound, allocation and threads.
+#include "indexer/lib/emd.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <new>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "indexer/lib/ground_distance.h"
+#include "tests/indexer/emd_oracle.h"
+#include "tests/indexer/signature_testing.h"
+
+// GCC cannot see that these replacements pair malloc with free.
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+
+// Counts heap allocations, to check that a warmed-up solver allocates
+// nothing. Replacing the global operators is allowed by the standard.
+namespace {
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace tpr::index {
+namespace {
+
+using testing::LemonEmd;
+using testing::SignatureGenerator;
+using testing::SignatureGeneratorOptions;
+
+PreparedSignature Prep(const Signature& s,
+                       const GroundDistanceOptions& o = {}) {
+  absl::StatusOr<PreparedSignature> p = Prepare(s, o);
+  EXPECT_TRUE(p.ok()) << p.status();
+  return *std::move(p);
+}
+
+void ExpectRelNear(double actual, double expected, double rel) {
+  EXPECT_NEAR(actual, expected, rel * std::max(std::abs(expected), 1e-12))
+      << "actual " << actual << " expected " << expected;
+}
+
+// Brute force: the optimum of a transportation LP is attained at a basic
+// solution, i.e. a spanning tree of n + m - 1 cells of the bipartite graph.
+// Enumerate every subset of n + m - 1 cells, keep those forming a tree,
+// solve its unique flow by peeling leaves, keep the non-negative ones, take
+// the cheapest. Exponential: only for n, m <= 3.
+double BruteForceEmd(const std::vector<double>& wa,
+                     const std::vector<double>& wb,
+                     const std::vector<std::vector<double>>& cost) {
+  const int n = static_cast<int>(wa.size());
+  const int m = static_cast<int>(wb.size());
+  const int cells = n * m;
+  const int k = n + m - 1;
+  double best = 1e300;
+  for (int mask = 0; mask < (1 << cells); ++mask) {
+    if (__builtin_popcount(static_cast<unsigned>(mask)) != k) continue;
+    std::vector<int> ci;
+    std::vector<int> cj;
+    for (int c = 0; c < cells; ++c) {
+      if (mask & (1 << c)) {
+        ci.push_back(c / m);
+        cj.push_back(c % m);
+      }
+    }
+    std::vector<double> rest(wa);
+    rest.insert(rest.end(), wb.begin(), wb.end());
+    std::vector<double> f(static_cast<size_t>(k), 0.0);
+    std::vector<bool> used(static_cast<size_t>(k), false);
+    bool ok = true;
+    for (int step = 0; step < k && ok; ++step) {
+      // A node with exactly one unused incident cell is a leaf.
+      int leaf_cell = -1;
+      int leaf_node = -1;
+      for (int v = 0; v < n + m && leaf_cell < 0; ++v) {
+        int count = 0;
+        int last = -1;
+        for (int c = 0; c < k; ++c) {
+          if (!used[c] && (ci[c] == v || n + cj[c] == v)) {
+            ++count;
+            last = c;
+          }
+        }
+        if (count == 1) {
+          leaf_cell = last;
+          leaf_node = v;
+        }
+      }
+      if (leaf_cell < 0) {
+        ok = false;  // a cycle: not a tree
+        break;
+      }
+      const int other = leaf_node < n ? n + cj[leaf_cell] : ci[leaf_cell];
+      f[leaf_cell] = rest[leaf_node];
+      rest[other] -= rest[leaf_node];
+      rest[leaf_node] = 0.0;
+      used[leaf_cell] = true;
+    }
+    if (!ok) continue;
+    double total = 0.0;
+    for (int c = 0; c < k && ok; ++c) {
+      if (f[c] < -1e-12) ok = false;
+      total += f[c] * cost[ci[c]][cj[c]];
+    }
+    if (ok) best = std::min(best, total);
+  }
+  return best;
+}
+
+TEST(EmdTest, TinyCasesMatchBruteForceAndLemon) {
+  SignatureGeneratorOptions o;
+  o.bands = 3;
+  o.classes = 1;
+  SignatureGenerator gen(o);
+  std::uniform_int_distribution<int> size(1, 3);
+  EmdSolver solver;
+  LemonEmd lemon;
+  for (int t = 0; t < 400; ++t) {
+    const PreparedSignature a = Prep(gen.Random(size(gen.rng())));
+    const PreparedSignature b = Prep(gen.Random(size(gen.rng())));
+    std::vector<double> wa(a.weights(), a.weights() + a.size());
+    std::vector<double> wb(b.weights(), b.weights() + b.size());
+    std::vector<std::vector<double>> cost(a.size());
+    for (int i = 0; i < a.size(); ++i) {
+      for (int j = 0; j < b.size(); ++j) {
+        cost[i].push_back(GroundDistance(a, i, b, j));
+      }
+    }
+    const double brute = BruteForceEmd(wa, wb, cost);
+    ExpectRelNear(solver.Distance(a, b), brute, 1e-9);
+    ExpectRelNear(lemon.DistanceScalar(a, b), brute, 1e-9);
+  }
+}
+
+TEST(EmdTest, HandComputedTwoByTwo) {
+  // Masses (0.5, 0.5) vs (0.5, 0.5) on a line (only G' differs, W1 = 1):
+  // features at 0, 1 vs 0.25, 0.75. Optimal: 0->0.25, 1->0.75, cost 0.25.
+  GroundDistanceOptions o;
+  o.w1 = 1.0;
+  o.w2 = o.w3 = o.w4 = 0.0;
+  auto make = [](double g0, double g1) {
+    Signature s;
+    s.features.push_back({0.5, g0, {0.0}, {0.0}, {0.0}});
+    s.features.push_back({0.5, g1, {0.0}, {0.0}, {0.0}});
+    return s;
+  };
+  EXPECT_NEAR(Emd(Prep(make(0.0, 1.0), o), Prep(make(0.25, 0.75), o)), 0.25,
+              1e-15);
+  EXPECT_NEAR(Emd(Prep(make(1.0, 0.0), o), Prep(make(0.25, 0.75), o)), 0.25,
+              1e-15);
+}
+
+TEST(EmdTest, RandomPairsMatchLemon) {
+  SignatureGeneratorOptions o;
+  o.seed = 11;
+  o.classes = 30;
+  SignatureGenerator gen(o);
+  std::mt19937_64 rng(12);
+  std::uniform_int_distribution<int> size(1, 60);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  EmdSolver solver;
+  LemonEmd lemon;
+  double worst = 0.0;
+  for (int t = 0; t < 10000; ++t) {
+    Signature sa;
+    Signature sb;
+    if (t % 2 == 0) {  // clustered, often the same class: small EMDs
+      sa = gen.Next();
+      sb = gen.Next();
+    } else {
+      sa = gen.Random(size(rng));
+      sb = gen.Random(size(rng));
+    }
+    const PreparedSignature a = Prep(sa);
+    const PreparedSignature b = Prep(sb);
+    const double ours = solver.Distance(a, b);
+    const double ref = lemon.Distance(a, b);
+    ASSERT_GE(ref, 0.0);
+    worst = std::max(worst, std::abs(ours - ref) / std::max(ref, 1e-12));
+    ASSERT_NEAR(ours, ref, 1e-6 * std::max(ref, 1e-12))
+        << "pair " << t << " sizes " << a.size() << " x " << b.size();
+  }
+  RecordProperty("worst_relative_error", std::to_string(worst));
+}
+
+TEST(EmdTest, LargestSignaturesMatchLemon) {
+  SignatureGeneratorOptions o;
+  o.seed = 21;
+  SignatureGenerator gen(o);
+  EmdSolver solver;
+  LemonEmd lemon;
+  for (int t = 0; t < 5; ++t) {
+    const PreparedSignature a = Prep(gen.Random(kMaxFeatures));
+    const PreparedSignature b = Prep(gen.Random(kMaxFeatures));
+    ExpectRelNear(solver.Distance(a, b), lemon.Distance(a, b), 1e-6);
+  }
+}
+
+TEST(EmdTest, OneFeatureAgainstSixtyIsTheWeightedMean) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  EmdSolver solver;
+  LemonEmd lemon;
+  for (int t = 0; t < 20; ++t) {
+    const PreparedSignature a = Prep(gen.Random(1));
+    const PreparedSignature b = Prep(gen.Random(60));
+    // Only one plan is feasible: all of a's mass to each b_j by weight.
+    double expected = 0.0;
+    for (int j = 0; j < b.size(); ++j) {
+      expected += b.weight(j) * GroundDistance(a, 0, b, j);
+    }
+    ExpectRelNear(solver.Distance(a, b), expected, 1e-12);
+    ExpectRelNear(solver.Distance(b, a), expected, 1e-12);
+    ExpectRelNear(lemon.Distance(a, b), expected, 1e-9);
+  }
+}
+
+TEST(EmdTest, IdenticalSignaturesAreAtZero) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  EmdSolver solver;
+  std::mt19937_64 rng(3);
+  for (int n : {1, 2, 30, 60, 200}) {
+    Signature s = gen.Random(n);
+    const PreparedSignature a = Prep(s);
+    EXPECT_EQ(solver.Distance(a, a), 0.0) << n;
+    // Same features in another order: still 0.
+    std::shuffle(s.features.begin(), s.features.end(), rng);
+    const PreparedSignature b = Prep(s);
+    EXPECT_NEAR(solver.Distance(a, b), 0.0, 1e-12) << n;
+  }
+}
+
+TEST(EmdTest, ZeroGroundDistancesGiveZero) {
+  // Every feature has the same coordinates; masses differ.
+  Signature a;
+  Signature b;
+  for (int i = 0; i < 7; ++i) {
+    a.features.push_back({1.0 / 7, 0.3, {1, 2}, {0.5, 0.5}, {0.1, 0.2}});
+  }
+  for (int j = 0; j < 4; ++j) {
+    b.features.push_back(
+        {j < 3 ? 0.1 : 0.7, 0.3, {1, 2}, {0.5, 0.5}, {0.1, 0.2}});
+  }
+  EXPECT_EQ(Emd(Prep(a), Prep(b)), 0.0);
+}
+
+TEST(EmdTest, ManyTiesAndZeroMassesMatchLemon) {
+  // Coordinates on a coarse grid and equal or zero masses: many equal
+  // costs, many degenerate pivots.
+  std::mt19937_64 rng(5);
+  std::uniform_int_distribution<int> level(0, 2);
+  std::uniform_int_distribution<int> size(1, 40);
+  EmdSolver solver;
+  LemonEmd lemon;
+  auto make = [&](int n, bool zero_masses) {
+    Signature s;
+    int positive = 0;
+    for (int i = 0; i < n; ++i) {
+      Feature f;
+      f.weight = (zero_masses && i % 3 == 1) ? 0.0 : 1.0;
+      positive += f.weight > 0 ? 1 : 0;
+      f.g = 0.5 * level(rng);
+      f.k = {1.0 * level(rng), 1.0 * level(rng)};
+      f.a = {0.5 * level(rng), 0.5 * level(rng)};
+      f.h = {0.1 * level(rng), 0.1 * level(rng)};
+      s.features.push_back(f);
+    }
+    for (Feature& f : s.features) f.weight /= positive;
+    return s;
+  };
+  int64_t degenerate = 0;
+  for (int t = 0; t < 2000; ++t) {
+    const bool zero = t % 2 == 1;
+    const PreparedSignature a = Prep(make(size(rng), zero));
+    const PreparedSignature b = Prep(make(size(rng), !zero));
+    const double ours = solver.Distance(a, b);
+    degenerate += solver.Stats().degenerate_pivots;
+    ExpectRelNear(ours, lemon.Distance(a, b), 1e-6);
+  }
+  EXPECT_GT(degenerate, 0);  // the case is really degenerate
+}
+
+TEST(EmdTest, FlowIsAFeasiblePlanWhoseCostIsTheEmd) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  EmdSolver solver;
+  for (int t = 0; t < 50; ++t) {
+    const PreparedSignature a = Prep(gen.Next());
+    const PreparedSignature b = Prep(gen.Next());
+    const double d = solver.Distance(a, b);
+    std::vector<double> rows(a.size(), 0.0);
+    std::vector<double> cols(b.size(), 0.0);
+    double cost = 0.0;
+    for (const EmdSolver::FlowEntry& e : solver.LastFlow()) {
+      EXPECT_GT(e.mass, 0.0);
+      rows[e.i] += e.mass;
+      cols[e.j] += e.mass;
+      cost += e.mass * GroundDistance(a, e.i, b, e.j);
+    }
+    for (int i = 0; i < a.size(); ++i) EXPECT_NEAR(rows[i], a.weight(i), 1e-12);
+    for (int j = 0; j < b.size(); ++j) EXPECT_NEAR(cols[j], b.weight(j), 1e-12);
+    EXPECT_NEAR(cost, d, 1e-12);
+    EXPECT_GE(solver.Stats().pivots, solver.Stats().degenerate_pivots);
+  }
+}
+
+TEST(EmdTest, LowerBoundNeverExceedsEmd) {
+  SignatureGeneratorOptions o;
+  o.seed = 9;
+  SignatureGenerator gen(o);
+  std::mt19937_64 rng(10);
+  std::uniform_int_distribution<int> size(1, 60);
+  EmdSolver solver;
+  double tightest = 0.0;
+  for (int t = 0; t < 5000; ++t) {
+    const PreparedSignature a =
+        Prep(t % 2 ? gen.Next() : gen.Random(size(rng)));
+    const PreparedSignature b =
+        Prep(t % 3 ? gen.Next() : gen.Random(size(rng)));
+    const double lb = EmdLowerBound(a, b);
+    const double d = solver.Distance(a, b);
+    ASSERT_GE(lb, 0.0);
+    ASSERT_LE(lb, d * (1 + 1e-12) + 1e-15) << t;
+    if (d > 0) tightest = std::max(tightest, lb / d);
+  }
+  EXPECT_GT(tightest, 0.1);  // the bound is not trivially 0
+}
+
+TEST(EmdTest, LowerBoundIsExactForSingleFeatures) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  for (int t = 0; t < 100; ++t) {
+    const PreparedSignature a = Prep(gen.Random(1));
+    const PreparedSignature b = Prep(gen.Random(1));
+    EXPECT_NEAR(EmdLowerBound(a, b), GroundDistance(a, 0, b, 0), 1e-12);
+    EXPECT_NEAR(Emd(a, b), GroundDistance(a, 0, b, 0), 1e-15);
+  }
+}
+
+TEST(EmdTest, WarmSolverDoesNotAllocate) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  std::vector<PreparedSignature> sigs;
+  for (int n : {kMaxFeatures, 1, 30, 7, 60, 120}) {
+    sigs.push_back(Prep(gen.Random(n)));
+  }
+  EmdSolver solver;
+  solver.Distance(sigs[0], sigs[0]);  // warm-up at the largest size
+  const long before = g_allocations.load();
+  double sum = 0.0;
+  for (const PreparedSignature& a : sigs) {
+    for (const PreparedSignature& b : sigs) sum += solver.Distance(a, b);
+  }
+  EXPECT_EQ(g_allocations.load(), before);
+  EXPECT_GT(sum, 0.0);
+}
+
+TEST(EmdTest, ConcurrentCallsAgreeWithSequential) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  std::vector<PreparedSignature> sigs;
+  for (int t = 0; t < 40; ++t) sigs.push_back(Prep(gen.Next()));
+  std::vector<double> expected;
+  for (size_t i = 0; i + 1 < sigs.size(); ++i) {
+    expected.push_back(Emd(sigs[i], sigs[i + 1]));
+  }
+  std::vector<std::thread> threads;
+  std::atomic<int> mismatches{0};
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&] {
+      for (int rep = 0; rep < 20; ++rep) {
+        for (size_t i = 0; i + 1 < sigs.size(); ++i) {
+          if (Emd(sigs[i], sigs[i + 1]) != expected[i]) ++mismatches;
+        }
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  EXPECT_EQ(mismatches.load(), 0);
+}
+
+}  // namespace
+}  // namespace tpr::index
