@@ -79,8 +79,15 @@ std::vector<Point> TieHeavy(size_t n, size_t dim, uint64_t seed) {
 
 using Metric = double (*)(const Point&, const Point&);
 
+// Small buckets, so that a few thousand points make a deep tree.
+VpTreeOptions DeepTree() {
+  VpTreeOptions options;
+  options.leaf_size = 16;
+  return options;
+}
+
 VpTree BuildTree(const std::vector<Point>& points, Metric metric,
-                 VpTreeOptions options = {}) {
+                 VpTreeOptions options = DeepTree()) {
   absl::StatusOr<VpTree> tree = VpTree::Build(
       points.size(),
       [&points, metric](uint32_t i, uint32_t j) {
@@ -152,15 +159,16 @@ void CheckKnnAgainstBruteForce(const std::vector<Point>& points, Metric metric,
 }
 
 TEST(VpTreeTest, MatchesBruteForceOnUniformData) {
-  CheckKnnAgainstBruteForce(Uniform(2000, 6, 11), L2, 1000, {}, 12);
+  CheckKnnAgainstBruteForce(Uniform(2000, 6, 11), L2, 1000, DeepTree(), 12);
+  CheckKnnAgainstBruteForce(Uniform(2000, 6, 13), L2, 200, VpTreeOptions{}, 14);
 }
 
 TEST(VpTreeTest, MatchesBruteForceOnClusteredData) {
-  CheckKnnAgainstBruteForce(Clustered(3000, 10, 20, 0.02, 21), L1, 1000, {}, 22);
+  CheckKnnAgainstBruteForce(Clustered(3000, 10, 20, 0.02, 21), L1, 1000, DeepTree(), 22);
 }
 
 TEST(VpTreeTest, MatchesBruteForceWithTiesAndDuplicates) {
-  CheckKnnAgainstBruteForce(TieHeavy(1500, 3, 31), L1, 1000, {}, 32);
+  CheckKnnAgainstBruteForce(TieHeavy(1500, 3, 31), L1, 1000, DeepTree(), 32);
 }
 
 TEST(VpTreeTest, MatchesBruteForceForOtherShapes) {
@@ -336,7 +344,7 @@ TEST(VpTreeTest, SerializationRoundTripKeepsResults) {
 
 TEST(VpTreeTest, BuildIsDeterministicAcrossThreads) {
   const std::vector<Point> points = Clustered(3000, 5, 12, 0.03, 131);
-  VpTreeOptions options;
+  VpTreeOptions options = DeepTree();
   const std::string one = BuildTree(points, L2, options).Serialize();
   options.build_threads = 2;
   EXPECT_EQ(BuildTree(points, L2, options).Serialize(), one);
@@ -349,7 +357,7 @@ TEST(VpTreeTest, BadOptionsAndCancellation) {
   PairDistance d = [&points](uint32_t i, uint32_t j) {
     return L2(points[i], points[j]);
   };
-  VpTreeOptions options;
+  VpTreeOptions options = DeepTree();
   options.leaf_size = 0;
   EXPECT_EQ(VpTree::Build(points.size(), d, options).status().code(),
             absl::StatusCode::kInvalidArgument);
