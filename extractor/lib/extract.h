@@ -59,7 +59,14 @@ struct Options {
 // its area. Meshes the paper handles poorly (genus > 0, boundaries, several
 // components) still get a signature, with a sentence in `warnings`. A mesh
 // on which no topological point is found (a sphere-like blob) gets one
-// point feature at the surface centre with weight 1 and a warning.
+// point feature at the surface centre with weight 1 and a warning. A
+// topological point whose ring-extraction wavefront never starts (another
+// front sweeps it before its Eq. 1 start time) is dropped: it bounds no
+// region and would carry no effective area (see extract.cc).
+// Timings: stages "graph", "source_points", "critical_points",
+// "topological_points", "point_features", "topological_rings",
+// "ring_features", "signature", in that order. Explanation region ids: 0 is
+// FR, then one per ring (TopologicalRings' regions).
 // Errors: INVALID_ARGUMENT for options out of range, or a mesh with no
 // vertex, out-of-range indices, non-finite coordinates, or zero area (the
 // message says which). Thread-safe (no shared state). Cost: about

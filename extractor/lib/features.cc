@@ -12,13 +12,19 @@ std::vector<double> AngleDefects(const Mesh& mesh, const VertexLinks& links) {
   const int32_t n = static_cast<int32_t>(mesh.positions.size());
   std::vector<double> angle_sum(n, 0.0);
   for (const auto& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d& p = mesh.positions[t[k]];
-      const Eigen::Vector3d a = mesh.positions[t[(k + 1) % 3]] - p;
-      const Eigen::Vector3d b = mesh.positions[t[(k + 2) % 3]] - p;
-      // atan2 of |a x b| and a.b is accurate for angles near 0 and pi.
-      angle_sum[t[k]] += std::atan2(a.cross(b).norm(), a.dot(b));
-    }
+    const Eigen::Vector3d& p0 = mesh.positions[t[0]];
+    const Eigen::Vector3d& p1 = mesh.positions[t[1]];
+    const Eigen::Vector3d& p2 = mesh.positions[t[2]];
+    const Eigen::Vector3d e01 = p1 - p0, e02 = p2 - p0, e12 = p2 - p1;
+    // atan2(|a x b|, a.b) is accurate near 0 and pi; |a x b| is twice the
+    // triangle's area at every corner, and the third angle is pi minus the
+    // other two (atan2 is the costliest step of this O(f) pass).
+    const double twice_area = e01.cross(e02).norm();
+    const double a0 = std::atan2(twice_area, e01.dot(e02));
+    const double a1 = std::atan2(twice_area, -e01.dot(e12));
+    angle_sum[t[0]] += a0;
+    angle_sum[t[1]] += a1;
+    angle_sum[t[2]] += M_PI - a0 - a1;
   }
   std::vector<double> defect(n, 0.0);
   for (int32_t v = 0; v < n; ++v) {
