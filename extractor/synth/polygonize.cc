@@ -34,6 +34,7 @@
 #include <cstdint>
 #include <numeric>
 #include <queue>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
@@ -483,6 +484,7 @@ class Decimator {
     loose.fold_cos = 0.0;
     loose.quality_floor = 0.05;
     loose.quality_factor = 0.5;
+    loose.try_endpoints = true;
     for (int sweep = 0; sweep < 4; ++sweep) {
       const int64_t before = alive_vertices_;
       Sweep(target * 9 / 10, 0.0625 * mean * mean, loose);
@@ -499,6 +501,7 @@ class Decimator {
     double fold_cos = 0.3;
     double quality_floor = 0.15;
     double quality_factor = 0.9;
+    bool try_endpoints = false;
   };
 
   void Sweep(int64_t target, double max_len2, const Criteria& criteria) {
@@ -566,6 +569,48 @@ class Decimator {
     out->erase(std::unique(out->begin(), out->end()), out->end());
   }
 
+  // Fold-over and quality test on every surviving face around u and v when
+  // both move to p. Quality is judged over the whole ring: the worst
+  // triangle after must be no worse than the worst before (often one of the
+  // two removed ones), or above the floor anyway.
+  bool Acceptable(int32_t u, int32_t v, const int32_t shared[2],
+                  const Vector3d& p, const Vector3d& p_normal,
+                  const Criteria& criteria) const {
+    double worst_before = 1.0, worst_after = 1.0;
+    for (int i = 0; i < 2; ++i) {
+      const auto& t = mesh_.triangles[shared[i]];
+      worst_before = std::min(
+          worst_before, TriangleQuality(mesh_.positions[t[0]],
+                                        mesh_.positions[t[1]],
+                                        mesh_.positions[t[2]]));
+    }
+    for (int32_t moved : {u, v}) {
+      for (int32_t f : vertex_faces_[moved]) {
+        if (f == shared[0] || f == shared[1]) continue;
+        const auto& t = mesh_.triangles[f];
+        std::array<Vector3d, 3> before, after;
+        Vector3d reference = Vector3d::Zero();
+        for (int e = 0; e < 3; ++e) {
+          const bool moving = t[e] == u || t[e] == v;
+          before[e] = mesh_.positions[t[e]];
+          after[e] = moving ? p : before[e];
+          reference += moving ? p_normal : normal_[t[e]];
+        }
+        const Vector3d n1 = (after[1] - after[0]).cross(after[2] - after[0]);
+        if (n1.dot(reference) <=
+            criteria.fold_cos * reference.norm() * n1.norm()) {
+          return false;
+        }
+        worst_before = std::min(
+            worst_before, TriangleQuality(before[0], before[1], before[2]));
+        worst_after = std::min(worst_after,
+                               TriangleQuality(after[0], after[1], after[2]));
+      }
+    }
+    return worst_after >= std::min(criteria.quality_floor,
+                                   criteria.quality_factor * worst_before);
+  }
+
   bool TryCollapse(int32_t u, int32_t v, const Criteria& criteria) {
     int32_t shared[2];
     int shared_count = 0;
@@ -593,50 +638,27 @@ class Decimator {
     }
     if (common != 2) return false;
 
+    // Candidate positions: the midpoint on the surface, then (clean-up
+    // only) either endpoint, which often passes at sharp tips where the
+    // midpoint would fold a triangle over.
     const Vector3d mid = 0.5 * (mesh_.positions[u] + mesh_.positions[v]);
-    const Vector3d p = field_.Project(mid, max_step_);
-    Vector3d p_normal;
-    field_.ValueAndGradient(p, &p_normal);
-    // Fold-over and quality test on every surviving face around u and v.
-    // Quality is judged over the whole ring: the worst triangle after must be
-    // no worse than the worst before (often one of the two removed ones), or
-    // above 0.15 anyway.
-    double worst_before = 1.0, worst_after = 1.0;
-    for (int32_t f : shared) {
-      const auto& t = mesh_.triangles[f];
-      worst_before = std::min(
-          worst_before, TriangleQuality(mesh_.positions[t[0]],
-                                        mesh_.positions[t[1]],
-                                        mesh_.positions[t[2]]));
-    }
-    for (int32_t moved : {u, v}) {
-      for (int32_t f : vertex_faces_[moved]) {
-        if (f == shared[0] || f == shared[1]) continue;
-        const auto& t = mesh_.triangles[f];
-        std::array<Vector3d, 3> before, after;
-        for (int e = 0; e < 3; ++e) {
-          before[e] = mesh_.positions[t[e]];
-          after[e] = (t[e] == u || t[e] == v) ? p : before[e];
-        }
-        Vector3d reference = Vector3d::Zero();
-        for (int e = 0; e < 3; ++e) {
-          reference += (t[e] == u || t[e] == v) ? p_normal : normal_[t[e]];
-        }
-        const Vector3d n1 = (after[1] - after[0]).cross(after[2] - after[0]);
-        if (n1.dot(reference) <=
-            criteria.fold_cos * reference.norm() * n1.norm()) {
-          return false;
-        }
-        worst_before = std::min(
-            worst_before, TriangleQuality(before[0], before[1], before[2]));
-        worst_after = std::min(worst_after,
-                               TriangleQuality(after[0], after[1], after[2]));
+    std::array<Vector3d, 3> candidates = {field_.Project(mid, max_step_),
+                                          mesh_.positions[u],
+                                          mesh_.positions[v]};
+    std::array<Vector3d, 3> candidate_normals = {Vector3d::Zero(), normal_[u],
+                                                 normal_[v]};
+    field_.ValueAndGradient(candidates[0], &candidate_normals[0]);
+    const int tries = criteria.try_endpoints ? 3 : 1;
+    int chosen = -1;
+    for (int c = 0; c < tries && chosen < 0; ++c) {
+      if (Acceptable(u, v, shared, candidates[c], candidate_normals[c],
+                     criteria)) {
+        chosen = c;
       }
     }
-    if (worst_after < std::min(criteria.quality_floor,
-                               criteria.quality_factor * worst_before)) {
-      return false;
-    }
+    if (chosen < 0) return false;
+    const Vector3d p = candidates[chosen];
+    const Vector3d p_normal = candidate_normals[chosen];
     for (int32_t f : shared) {
       face_alive_[f] = 0;
       for (int32_t w : mesh_.triangles[f]) {
@@ -685,6 +707,75 @@ class Decimator {
   std::vector<int32_t> nu_, nv_;
   std::vector<Vector3d> normal_;  // Field gradient at each vertex.
 };
+
+// Splits the longest edges until the mesh has `target` vertices, refilling
+// what the clean-up collapses took below the budget. A split of an interior
+// edge of a closed manifold keeps it closed and manifold with the same
+// genus. Each face is split at most once per pass (deterministic: edges by
+// length, ties by ids).
+void SplitToTarget(Mesh& mesh, const BlendField& field, double max_step,
+                   int64_t target) {
+  for (int pass = 0; pass < 4; ++pass) {
+    const int64_t missing =
+        target - static_cast<int64_t>(mesh.positions.size());
+    if (missing <= 0) return;
+    struct Edge {
+      double len2;
+      int32_t f, e;
+    };
+    std::vector<Edge> edges;
+    for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+      const auto& t = mesh.triangles[f];
+      for (int e = 0; e < 3; ++e) {
+        if (t[e] < t[(e + 1) % 3]) {
+          edges.push_back({(mesh.positions[t[e]] - mesh.positions[t[(e + 1) % 3]])
+                               .squaredNorm(),
+                           static_cast<int32_t>(f), e});
+        }
+      }
+    }
+    std::sort(edges.begin(), edges.end(), [](const Edge& x, const Edge& y) {
+      if (x.len2 != y.len2) return x.len2 > y.len2;
+      return std::tie(x.f, x.e) < std::tie(y.f, y.e);
+    });
+    // Face across each directed edge, to find the second face of an edge.
+    std::unordered_map<int64_t, int32_t> face_of;
+    const int64_t n = static_cast<int64_t>(mesh.positions.size());
+    face_of.reserve(mesh.triangles.size() * 3);
+    for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+      const auto& t = mesh.triangles[f];
+      for (int e = 0; e < 3; ++e) {
+        face_of[static_cast<int64_t>(t[e]) * n + t[(e + 1) % 3]] =
+            static_cast<int32_t>(f);
+      }
+    }
+    std::vector<char> touched(mesh.triangles.size(), 0);
+    int64_t done = 0;
+    for (const Edge& edge : edges) {
+      if (done == missing) break;
+      if (touched[edge.f]) continue;
+      const auto t = mesh.triangles[edge.f];
+      const int32_t a = t[edge.e], b = t[(edge.e + 1) % 3],
+                    c = t[(edge.e + 2) % 3];
+      const int32_t g = face_of.at(static_cast<int64_t>(b) * n + a);
+      if (touched[g]) continue;
+      const auto tg = mesh.triangles[g];
+      int32_t d = -1;
+      for (int32_t w : tg) {
+        if (w != a && w != b) d = w;
+      }
+      const int32_t m = static_cast<int32_t>(mesh.positions.size());
+      mesh.positions.push_back(field.Project(
+          0.5 * (mesh.positions[a] + mesh.positions[b]), max_step));
+      mesh.triangles[edge.f] = {a, m, c};
+      mesh.triangles[g] = {b, m, d};
+      mesh.triangles.push_back({m, b, c});
+      mesh.triangles.push_back({m, a, d});
+      touched[edge.f] = touched[g] = 1;
+      ++done;
+    }
+  }
+}
 
 // Delaunay edge flips (step 5): MT and collapses leave obtuse "cap"
 // triangles that no short edge removes; flipping the shared edge of two
@@ -904,6 +995,7 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
   // A step never needs to exceed a few cells: vertices start near the surface.
   const double max_step = 2.0 * h;
   Mesh mesh = Decimator(std::move(fine), field, max_step).Run(target_vertices);
+  SplitToTarget(mesh, field, max_step, target_vertices);
   for (int round = 0; round < 4; ++round) {
     FlipEdges(mesh);
     Relax(mesh, field, max_step, 2);

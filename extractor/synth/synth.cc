@@ -35,6 +35,9 @@ constexpr double kDeg = M_PI / 180.0;
 struct TemplateBone {
   Bone bone;
   double limit = 0.0;
+  // Hinge joints (fingers) swing about this rest-frame axis only, through
+  // [-limit / 3, limit]; a zero axis means a ball joint.
+  Vector3d hinge = Vector3d::Zero();
 };
 
 class Builder {
@@ -67,6 +70,11 @@ class Builder {
     }
     return parent;
   }
+  // Makes bones [first, last] hinges about `axis`.
+  void Hinge(int first, int last, const Vector3d& axis) {
+    for (int i = first; i <= last; ++i) bones_[i].hinge = axis.normalized();
+  }
+  int size() const { return static_cast<int>(bones_.size()); }
   const std::vector<TemplateBone>& bones() const { return bones_; }
 
  private:
@@ -176,18 +184,19 @@ std::vector<TemplateBone> Quadruped(const QuadrupedProportions& p) {
 
 std::vector<TemplateBone> Octopus() {
   Builder b;
-  const int head = b.Add("mantle", -1, V(0, 0.35, 0), V(0, 0.6, 0), 0.3,
+  // The mantle sits well above the arms so that arms may curl up.
+  const int head = b.Add("mantle", -1, V(0, 0.5, 0), V(0, 0.75, 0), 0.3,
                          0.27, 0);
   for (int i = 0; i < 8; ++i) {
     const double a = 2.0 * M_PI * (i + 0.5) / 8.0;
     const Vector3d out = V(std::cos(a), 0, std::sin(a));
-    const int root = b.Add(absl::StrCat("arm", i, "_root"), head, V(0, 0.3, 0),
-                           V(0, 0.15, 0) + 0.3 * out, 0.09, 0.085, 5);
+    const int root = b.Add(absl::StrCat("arm", i, "_root"), head, V(0, 0.4, 0),
+                           V(0, 0.1, 0) + 0.35 * out, 0.09, 0.085, 5);
     std::vector<Vector3d> pts;
     for (int k = 0; k <= 3; ++k) {
-      pts.push_back(V(0, 0.15 - 0.05 * k, 0) + (0.3 + 0.27 * k) * out);
+      pts.push_back(V(0, 0.1 - 0.05 * k, 0) + (0.35 + 0.27 * k) * out);
     }
-    b.Chain(absl::StrCat("arm", i, "_"), root, pts, 0.08, 0.04, 22);
+    b.Chain(absl::StrCat("arm", i, "_"), root, pts, 0.08, 0.04, 20);
   }
   return b.bones();
 }
@@ -205,19 +214,25 @@ std::vector<TemplateBone> Hand() {
     const int meta = b.Add(absl::StrCat("meta", f), palm,
                            V(knuckle.x() * 0.4, 0.25, 0), knuckle, 0.05, 0.045,
                            3);
-    b.Chain(absl::StrCat("finger", f, "_"), meta,
-            {knuckle, knuckle + 0.42 * lengths[f] * dir,
-             knuckle + 0.74 * lengths[f] * dir, knuckle + lengths[f] * dir},
-            0.042, 0.03, 25);
+    const int first = b.size();
+    const int last = b.Chain(
+        absl::StrCat("finger", f, "_"), meta,
+        {knuckle, knuckle + 0.42 * lengths[f] * dir,
+         knuckle + 0.74 * lengths[f] * dir, knuckle + lengths[f] * dir},
+        0.042, 0.03, 40);
+    // Fingers curl towards the palm's front (+z).
+    b.Hinge(first, last, dir.cross(V(0, 0, 1)));
   }
   const Vector3d thumb_dir = V(-0.8, 0.6, 0.25).normalized();
   const Vector3d thumb_base = V(-0.17, 0.12, 0.03);
   const int tmeta = b.Add("thumb_meta", palm, V(-0.05, 0.08, 0), thumb_base,
                           0.055, 0.05, 5);
-  b.Chain("thumb", tmeta,
-          {thumb_base, thumb_base + 0.15 * thumb_dir,
-           thumb_base + 0.27 * thumb_dir},
-          0.048, 0.035, 25);
+  const int first = b.size();
+  const int last = b.Chain("thumb", tmeta,
+                           {thumb_base, thumb_base + 0.15 * thumb_dir,
+                            thumb_base + 0.27 * thumb_dir},
+                           0.048, 0.035, 35);
+  b.Hinge(first, last, thumb_dir.cross(V(0, 0, 1)));
   return b.bones();
 }
 
@@ -322,7 +337,7 @@ const std::vector<ShapeClass>& Classes() {
       {"quadruped_slender",
        [] { return Quadruped({0.16, 0.8, 0.33, 0.055, 0.07, 0.045}); }},
       {"quadruped_stocky",
-       [] { return Quadruped({0.26, 0.8, 0.2, 0.09, 0.11, 0.06}); }},
+       [] { return Quadruped({0.24, 0.8, 0.25, 0.09, 0.11, 0.06}); }},
       {"octopus", Octopus},
       {"hand", Hand},
       {"ant", Ant},
@@ -443,9 +458,11 @@ bool Pose(const std::vector<TemplateBone>& bones, Rng& rng, double amount,
         Vector3d axis(rng.Uniform(-1, 1), rng.Uniform(-1, 1),
                       rng.Uniform(-1, 1));
         const double shrink = attempt < 4 ? 1.0 : std::pow(0.5, attempt - 3);
-        const double angle =
-            rng.Uniform(-1, 1) * bones[i].limit * amount * shrink;
-        if (rest_dir.squaredNorm() > 0.0) {
+        double angle = rng.Uniform(-1, 1) * bones[i].limit * amount * shrink;
+        if (bones[i].hinge.squaredNorm() > 0.0) {
+          axis = bones[i].hinge;
+          if (angle < 0.0) angle /= 3.0;
+        } else if (rest_dir.squaredNorm() > 0.0) {
           const Vector3d d = rest_dir.normalized();
           axis -= d * d.dot(axis);
         }
@@ -518,9 +535,9 @@ Posed PoseTemplate(const std::vector<TemplateBone>& bones, uint64_t shape_id,
   for (const auto& t : bones) posed.skeleton.bones.push_back(t.bone);
   // A few full-range draws, then draws damped towards the rest pose, which
   // is the last resort and always separated.
-  for (int attempt = 0; attempt < 12; ++attempt) {
+  for (int attempt = 0; attempt < 36; ++attempt) {
     const double amount =
-        options.pose_amount * (attempt < 4 ? 1.0 : std::pow(0.7, attempt - 3));
+        options.pose_amount * (attempt < 30 ? 1.0 : std::pow(0.7, attempt - 29));
     if (amount == 0.0) break;
     Rng rng(StreamSeed(options.seed, shape_id, pose_index, 1 + attempt));
     std::vector<Bone> candidate;
