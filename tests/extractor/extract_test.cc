@@ -381,6 +381,37 @@ TEST(ExtractTest, TorusGivesSignatureWithGenusWarning) {
   EXPECT_TRUE(genus_warning);
 }
 
+// Tiny and flat inputs: a single triangle, a flat grid (all boundary), a
+// mesh with an unreferenced vertex. Each still gives a well-formed
+// signature (never a crash or a hang).
+TEST(ExtractTest, TinyAndFlatMeshesStillAnswer) {
+  Mesh tri;
+  tri.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  tri.triangles = {{0, 1, 2}};
+  ExpectWellFormed(Extract(tri));
+
+  Mesh grid;
+  const int k = 30;
+  for (int y = 0; y < k; ++y) {
+    for (int x = 0; x < k; ++x) grid.positions.push_back({double(x), double(y), 0.0});
+  }
+  for (int y = 0; y + 1 < k; ++y) {
+    for (int x = 0; x + 1 < k; ++x) {
+      const int32_t a = y * k + x;
+      grid.triangles.push_back({a, a + 1, a + k + 1});
+      grid.triangles.push_back({a, a + k + 1, a + k});
+    }
+  }
+  ExtractResult r = Extract(grid);
+  ExpectWellFormed(r);
+  EXPECT_FALSE(r.warnings.empty());
+
+  Mesh loose = UvSphere(12, 16);
+  loose.positions.push_back({9, 9, 9});  // Referenced by no triangle.
+  r = Extract(loose);
+  ExpectWellFormed(r);
+}
+
 TEST(ExtractTest, RejectsBadOptionsAndMeshes) {
   const Mesh m = UvSphere(8, 8);
   const MeshStats st = ComputeMeshStats(m);
