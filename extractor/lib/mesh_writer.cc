@@ -16,10 +16,14 @@ namespace {
 // std::to_chars is locale-independent (snprintf's "%g" is not: a program
 // that calls setlocale could write "1,5") and yields the same bytes for the
 // same double, which byte-identical output relies on.
+// With 17 digits the shortest text that reads back as the same double is
+// written ("0.1", not "0.10000000000000001").
 void AppendNumber(std::string* out, double value, int digits) {
   char buffer[64];
-  const auto result = std::to_chars(buffer, buffer + sizeof(buffer), value,
-                                    std::chars_format::general, digits);
+  const auto result =
+      digits >= 17 ? std::to_chars(buffer, buffer + sizeof(buffer), value)
+                   : std::to_chars(buffer, buffer + sizeof(buffer), value,
+                                   std::chars_format::general, digits);
   out->append(buffer, result.ptr);
 }
 

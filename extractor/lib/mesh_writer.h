@@ -1,6 +1,7 @@
 // Mesh output: write a Mesh as OFF or PLY (ASCII or binary little-endian),
 // optionally with one RGB colour per vertex (COFF / PLY red, green, blue).
-// The output reloads through mesh_io.h with the same vertices and triangles.
+// The output reloads through mesh_io.h with the same triangles and the same
+// vertices (to the float precision intake keeps).
 //
 //   absl::StatusOr<std::string> bytes =
 //       WriteMeshToString(mesh, MeshWriteOptions{MeshWriteFormat::kPlyBinary});
@@ -29,11 +30,13 @@ using Rgb = std::array<uint8_t, 3>;
 struct MeshWriteOptions {
   // Default kOff.
   MeshWriteFormat format = MeshWriteFormat::kOff;
-  // Per-vertex colours: empty (no colour), or exactly one per vertex.
-  // Default empty.
+  // Per-vertex colours: empty (no colour), or exactly one per vertex. OFF
+  // then becomes COFF, which viewers read but intake does not (plain OFF
+  // only): use PLY for coloured meshes that must reload. Default empty.
   std::vector<Rgb> vertex_colors;
-  // Significant digits of ASCII coordinates. 17 reloads every double
-  // bit-exactly; fewer make smaller files. Accepted range [6, 17].
+  // Significant digits of ASCII coordinates. 17 writes the shortest text
+  // that reads back as the same double; fewer make smaller files.
+  // Accepted range [6, 17].
   // Default 17. Binary PLY always stores doubles exactly.
   int digits = 17;
 };
