@@ -49,11 +49,15 @@
 #include <limits>
 #include <utility>
 
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace tpr::index {
 namespace {
 
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
-#define TPR_MULTIVERSION __attribute__((target_clones("avx2", "default")))
+#define TPR_MULTIVERSION __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #else
 #define TPR_MULTIVERSION
 #endif
@@ -63,12 +67,11 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Dantzig pricing: the real arc of most negative reduced cost
 // c_ij + u_i - v_j, first in row-major order on ties. `v` is padded to
 // `cs` entries with -inf so padded columns never qualify. Rows are scanned
-// with 8 independent lane minima (vectorizable: no argmin in the hot loop);
-// only a row that beats the best so far is rescanned for its index, with
-// the same expression, hence the same bits.
-TPR_MULTIVERSION
-bool PriceDantzig(const double* cost, int cs, int n, const double* u,
-                  const double* v, double tol, int* ei, int* ej) {
+// for their minimum only (vectorizable: no argmin in the hot loop); a row
+// that beats the best so far is rescanned for its index, with the same
+// expression (c + u) - v, hence the same bits.
+bool PriceScalar(const double* cost, int cs, int n, const double* u,
+                 const double* v, double tol, int* ei, int* ej) {
   double best = -tol;
   bool found = false;
   for (int i = 0; i < n; ++i) {
@@ -77,7 +80,7 @@ bool PriceDantzig(const double* cost, int cs, int n, const double* u,
     double lm[8] = {kInf, kInf, kInf, kInf, kInf, kInf, kInf, kInf};
     for (int j0 = 0; j0 < cs; j0 += 8) {
       for (int l = 0; l < 8; ++l) {
-        const double r = row[j0 + l] + ui - v[j0 + l];
+        const double r = (row[j0 + l] + ui) - v[j0 + l];
         lm[l] = r < lm[l] ? r : lm[l];
       }
     }
@@ -85,7 +88,7 @@ bool PriceDantzig(const double* cost, int cs, int n, const double* u,
     for (int l = 1; l < 8; ++l) rmin = lm[l] < rmin ? lm[l] : rmin;
     if (rmin < best) {
       for (int j = 0; j < cs; ++j) {
-        if (row[j] + ui - v[j] == rmin) {
+        if ((row[j] + ui) - v[j] == rmin) {
           *ei = i;
           *ej = j;
           break;
@@ -96,6 +99,62 @@ bool PriceDantzig(const double* cost, int cs, int n, const double* u,
     }
   }
   return found;
+}
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#define TPR_HAVE_X86_PRICING 1
+// Why intrinsics: pricing is the hot loop of the simplex (one full scan of
+// the n x m reduced costs per pivot) and the build's baseline is SSE2.
+// GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized on its own
+// _mm512_undefined_pd (a known false positive).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+__attribute__((target("avx512f"))) bool PriceAvx512(
+    const double* cost, int cs, int n, const double* u, const double* v,
+    double tol, int* ei, int* ej) {
+  double best = -tol;
+  bool found = false;
+  for (int i = 0; i < n; ++i) {
+    const double* row = cost + static_cast<size_t>(i) * cs;
+    const __m512d ui = _mm512_set1_pd(u[i]);
+    __m512d mn = _mm512_set1_pd(kInf);
+    for (int j0 = 0; j0 < cs; j0 += 8) {
+      const __m512d r = _mm512_sub_pd(
+          _mm512_add_pd(_mm512_loadu_pd(row + j0), ui), _mm512_loadu_pd(v + j0));
+      mn = _mm512_min_pd(mn, r);
+    }
+    const double rmin = _mm512_reduce_min_pd(mn);
+    if (rmin < best) {
+      for (int j0 = 0; j0 < cs; j0 += 8) {
+        const __m512d r =
+            _mm512_sub_pd(_mm512_add_pd(_mm512_loadu_pd(row + j0), ui),
+                          _mm512_loadu_pd(v + j0));
+        const __mmask8 hit =
+            _mm512_cmp_pd_mask(r, _mm512_set1_pd(rmin), _CMP_EQ_OQ);
+        if (hit != 0) {
+          *ei = i;
+          *ej = j0 + __builtin_ctz(static_cast<unsigned>(hit));
+          break;
+        }
+      }
+      best = rmin;
+      found = true;
+    }
+  }
+  return found;
+}
+#pragma GCC diagnostic pop
+#endif
+
+using PriceFn = bool (*)(const double*, int, int, const double*,
+                         const double*, double, int*, int*);
+
+PriceFn PickPricing() {
+#ifdef TPR_HAVE_X86_PRICING
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f")) return PriceAvx512;
+#endif
+  return PriceScalar;
 }
 
 // Largest entry of the n x m block, for the optimality tolerance.
@@ -127,8 +186,7 @@ struct EmdSolver::Impl {
   std::vector<int> prev_sib;
   std::vector<double> flow;  // flow of the arc joining v and parent[v]
   std::vector<double> pi;    // potentials; u = pi[0..n), v = pi[n..n+m)
-  std::vector<int> mark;
-  int stamp = 0;
+  std::vector<int> depth;  // depth[R] = 0
 
   // Scratch.
   std::vector<double> vpad;
@@ -161,7 +219,7 @@ struct EmdSolver::Impl {
       prev_sib.resize(nodes);
       flow.resize(nodes);
       pi.resize(nodes);
-      mark.resize(nodes, 0);
+      depth.resize(nodes);
       cell_i.resize(nodes);
       cell_j.resize(nodes);
       cell_f.resize(nodes);
@@ -203,20 +261,8 @@ struct EmdSolver::Impl {
     return pi[p] - cost[static_cast<size_t>(v) * cs + (p - n)];
   }
 
-  // Recomputes potentials in the subtree of s (s included), top-down.
-  // `queue` is free during a pivot.
-  void UpdateSubtreePotentials(int s) {
-    int top = 0;
-    queue[top++] = s;
-    while (top > 0) {
-      const int v = queue[--top];
-      pi[v] = PotentialFromParent(v);
-      for (int c = first_child[v]; c >= 0; c = next_sib[c]) queue[top++] = c;
-    }
-  }
-
   void InitialBasis();
-  void Pivot(int ei, int ej);
+  void Pivot(int ei, int ej, double rc);
   double Solve();
 };
 
@@ -276,10 +322,12 @@ void EmdSolver::Impl::InitialBasis() {
     adj[adj_fill[n + cell_j[c]]++] = c;
   }
   pi[root] = 0.0;
+  depth[root] = 0;
   for (int s = 0; s < root; ++s) {
     if (parent[s] != -1) continue;
     Link(s, root);
     pi[s] = 0.0;
+    depth[s] = 1;
     int head = 0;
     int tail = 0;
     queue[tail++] = s;
@@ -292,26 +340,18 @@ void EmdSolver::Impl::InitialBasis() {
         Link(w, v);
         flow[w] = cell_f[c];
         pi[w] = PotentialFromParent(w);
+        depth[w] = depth[v] + 1;
         queue[tail++] = w;
       }
     }
   }
 }
 
-// One pivot on entering arc ei -> n + ej (reduced cost < 0).
-void EmdSolver::Impl::Pivot(int ei, int ej) {
+// One pivot on entering arc ei -> n + ej, whose reduced cost rc < 0.
+void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
   const int root = n + m;
   const int first = ei;
   const int second = n + ej;
-  // Apex: mark the path first..R, walk up from second to a marked node.
-  if (stamp == std::numeric_limits<int>::max()) {
-    std::fill(mark.begin(), mark.end(), 0);
-    stamp = 0;
-  }
-  ++stamp;
-  for (int v = first; v != -1; v = parent[v]) mark[v] = stamp;
-  int join = second;
-  while (mark[join] != stamp) join = parent[join];
 
   // Leaving arc by Cunningham's rule (see the top comment). The cycle runs
   // join -> ... -> first -> second -> ... -> join. On the first path an arc
@@ -320,23 +360,34 @@ void EmdSolver::Impl::Pivot(int ei, int ej) {
   // traversed upwards, so it blocks when it points down: a demand node
   // (below a supply node or R) or an artificial arc. Ties: on the first
   // path the arc nearest `first` wins (strict <), on the second path the
-  // arc nearest the apex (<=): the last blocking arc in cycle order.
-  double delta = kInf;
-  int u_out = -1;
-  bool out_on_first = true;
-  for (int v = first; v != join; v = parent[v]) {
-    if (v < n && parent[v] != root && flow[v] < delta) {
-      delta = flow[v];
-      u_out = v;
+  // arc nearest the apex (<=), and the second path wins over the first:
+  // the last blocking arc in cycle order. Both paths are climbed together
+  // by depth, which also finds the apex.
+  double delta1 = kInf;
+  int out1 = -1;
+  double delta2 = kInf;
+  int out2 = -1;
+  int v1 = first;
+  int v2 = second;
+  while (v1 != v2) {
+    if (depth[v1] >= depth[v2]) {
+      if (v1 < n && parent[v1] != root && flow[v1] < delta1) {
+        delta1 = flow[v1];
+        out1 = v1;
+      }
+      v1 = parent[v1];
+    } else {
+      if ((v2 >= n || parent[v2] == root) && flow[v2] <= delta2) {
+        delta2 = flow[v2];
+        out2 = v2;
+      }
+      v2 = parent[v2];
     }
   }
-  for (int v = second; v != join; v = parent[v]) {
-    if ((v >= n || parent[v] == root) && flow[v] <= delta) {
-      delta = flow[v];
-      u_out = v;
-      out_on_first = false;
-    }
-  }
+  const int join = v1;
+  const bool out_on_first = !(out2 >= 0 && delta2 <= delta1);
+  const double delta = out_on_first ? delta1 : delta2;
+  const int u_out = out_on_first ? out1 : out2;
   assert(u_out >= 0);
   ++stats.pivots;
   if (delta > 0.0) {
@@ -371,7 +422,19 @@ void EmdSolver::Impl::Pivot(int ei, int ej) {
     flow[v] = carried;
     carried = old;
   }
-  UpdateSubtreePotentials(s);
+  // Every potential in the moved subtree shifts by the same amount, the
+  // one that zeroes the entering arc's reduced cost rc = c + pi_i - pi_j:
+  // -rc if the supply end moved, +rc if the demand end did. Depths are
+  // recomputed top-down (they do not shift uniformly: the path reversed).
+  const double shift = out_on_first ? -rc : rc;
+  int top = 0;
+  queue[top++] = s;
+  while (top > 0) {
+    const int v = queue[--top];
+    pi[v] += shift;
+    depth[v] = depth[parent[v]] + 1;
+    for (int c = first_child[v]; c >= 0; c = next_sib[c]) queue[top++] = c;
+  }
 }
 
 double EmdSolver::Impl::Solve() {
@@ -383,15 +446,15 @@ double EmdSolver::Impl::Solve() {
   // strongly feasible tree excludes cycling in exact arithmetic).
   const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
   for (int j = m; j < cs; ++j) vpad[j] = -kInf;
+  static const PriceFn price = PickPricing();
   int ei = 0;
   int ej = 0;
   while (stats.pivots < max_pivots) {
     for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
-    if (!PriceDantzig(cost.data(), cs, n, pi.data(), vpad.data(), tol, &ei,
-                      &ej)) {
+    if (!price(cost.data(), cs, n, pi.data(), vpad.data(), tol, &ei, &ej)) {
       break;
     }
-    Pivot(ei, ej);
+    Pivot(ei, ej, (cost[static_cast<size_t>(ei) * cs + ej] + pi[ei]) - pi[n + ej]);
   }
   assert(stats.pivots < max_pivots);
   double total = 0.0;

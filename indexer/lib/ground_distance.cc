@@ -9,6 +9,10 @@
 
 #include "absl/strings/str_cat.h"
 
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace tpr::index {
 namespace {
 
@@ -141,9 +145,7 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
 namespace {
 
 // Squared L2 distance of one band block between feature i of a and feature
-// j of b, the shorter vector padded with zeros. The summation order (band 0
-// upwards) is the same as in the vectorized kernel below, so both give
-// bit-identical results (no FMA contraction under -std=c++17).
+// j of b, the shorter vector padded with zeros.
 double BlockSquared(const PreparedSignature& a, int i, int a_row0,
                     const PreparedSignature& b, int j, int b_row0) {
   const int common = std::min(a.bands(), b.bands());
@@ -183,87 +185,141 @@ double GroundDistance(const PreparedSignature& a, int i,
 
 namespace {
 
-// One row of the matrix: feature i of a against every feature of b. The
-// inner loops run over b's features (contiguous, padded), so the compiler
-// vectorizes them; each lane accumulates its bands in the same order as
-// BlockSquared.
-template <int kMaxChunk>
-inline void KernelRow(const PreparedSignature& a, int i,
-                      const PreparedSignature& b, double* out) {
-  const int bands_a = a.bands();
-  const int bands_b = b.bands();
-  const int common = std::min(bands_a, bands_b);
-  const size_t as = static_cast<size_t>(a.stride());
-  const size_t bs = static_cast<size_t>(b.stride());
-  const double* ac = a.coords();
-  const double* bc = b.coords();
-  const int m_pad = b.stride();
-  for (int j0 = 0; j0 < m_pad; j0 += kMaxChunk) {
-    double acc_k[kMaxChunk];
-    double acc_a[kMaxChunk];
-    double acc_h[kMaxChunk];
-    for (int l = 0; l < kMaxChunk; ++l) acc_k[l] = acc_a[l] = acc_h[l] = 0.0;
-    for (int d = 0; d < common; ++d) {
-      const double xk = ac[(1 + d) * as + i];
-      const double xa = ac[(1 + bands_a + d) * as + i];
-      const double xh = ac[(1 + 2 * bands_a + d) * as + i];
-      const double* yk = bc + (1 + d) * bs + j0;
-      const double* ya = bc + (1 + bands_b + d) * bs + j0;
-      const double* yh = bc + (1 + 2 * bands_b + d) * bs + j0;
-      for (int l = 0; l < kMaxChunk; ++l) {
-        const double dk = xk - yk[l];
-        const double da = xa - ya[l];
-        const double dh = xh - yh[l];
-        acc_k[l] += dk * dk;
-        acc_a[l] += da * da;
-        acc_h[l] += dh * dh;
-      }
-    }
-    for (int d = common; d < bands_a; ++d) {
-      const double xk = ac[(1 + d) * as + i];
-      const double xa = ac[(1 + bands_a + d) * as + i];
-      const double xh = ac[(1 + 2 * bands_a + d) * as + i];
-      for (int l = 0; l < kMaxChunk; ++l) {
-        acc_k[l] += xk * xk;
-        acc_a[l] += xa * xa;
-        acc_h[l] += xh * xh;
-      }
-    }
-    for (int d = common; d < bands_b; ++d) {
-      const double* yk = bc + (1 + d) * bs + j0;
-      const double* ya = bc + (1 + bands_b + d) * bs + j0;
-      const double* yh = bc + (1 + 2 * bands_b + d) * bs + j0;
-      for (int l = 0; l < kMaxChunk; ++l) {
-        acc_k[l] += yk[l] * yk[l];
-        acc_a[l] += ya[l] * ya[l];
-        acc_h[l] += yh[l] * yh[l];
-      }
-    }
-    const double xg = ac[i];
-    const double* yg = bc + j0;
-    for (int l = 0; l < kMaxChunk; ++l) {
-      const double g = std::abs(xg - yg[l]);
-      out[j0 + l] =
-          ((g + std::sqrt(acc_k[l])) + std::sqrt(acc_a[l])) + std::sqrt(acc_h[l]);
+using KernelFn = void (*)(const PreparedSignature&, const PreparedSignature&,
+                          double*, int);
+
+// Portable kernel, also used when the two signatures have different band
+// counts (never the case within one index).
+void KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
+                  double* out, int out_stride) {
+  for (int i = 0; i < a.size(); ++i) {
+    for (int j = 0; j < b.size(); ++j) {
+      out[static_cast<size_t>(i) * out_stride + j] = GroundDistance(a, i, b, j);
     }
   }
 }
 
-// The kernel is compiled for AVX2 and for the baseline; the loader picks
-// the best the CPU runs (GCC function multiversioning). The build's default
-// target is plain x86-64 (SSE2), which would halve the throughput here.
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
-#define TPR_MULTIVERSION __attribute__((target_clones("avx2", "default")))
-#else
-#define TPR_MULTIVERSION
+#if defined(__GNUC__) && defined(__x86_64__)
+#define TPR_HAVE_X86_KERNELS 1
+
+// Why intrinsics: the build targets baseline x86-64 (SSE2), and GCC does
+// not vectorize sqrt without -fno-math-errno; the matrix is about a third
+// of an EMD, so it gets hand-written AVX2 and AVX-512 versions chosen once
+// at run time. Lanes run over 8 consecutive features of b (the padded,
+// dimension-major layout of PreparedSignature); a's coordinates are
+// broadcast. Each lane accumulates its bands in the same order, so the
+// matrix is symmetric under swapping a and b exactly: (x - y)^2 and
+// (y - x)^2 are the same double and fma(d, d, s) depends on d only
+// through d * d.
+__attribute__((target("avx2,fma"))) void KernelAvx2(
+    const PreparedSignature& a, const PreparedSignature& b, double* out,
+    int out_stride) {
+  const int bands = a.bands();
+  const size_t as = static_cast<size_t>(a.stride());
+  const size_t bs = static_cast<size_t>(b.stride());
+  const double* ac = a.coords();
+  const double* bc = b.coords();
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  for (int i = 0; i < a.size(); ++i) {
+    double* row = out + static_cast<size_t>(i) * out_stride;
+    for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+      __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
+      __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd();
+      __m256d h0 = _mm256_setzero_pd(), h1 = _mm256_setzero_pd();
+      for (int d = 0; d < bands; ++d) {
+        const size_t rk = static_cast<size_t>(1 + d);
+        const size_t ra = rk + static_cast<size_t>(bands);
+        const size_t rh = ra + static_cast<size_t>(bands);
+        const __m256d xk = _mm256_broadcast_sd(ac + rk * as + i);
+        const __m256d xa = _mm256_broadcast_sd(ac + ra * as + i);
+        const __m256d xh = _mm256_broadcast_sd(ac + rh * as + i);
+        const double* yk = bc + rk * bs + j0;
+        const double* ya = bc + ra * bs + j0;
+        const double* yh = bc + rh * bs + j0;
+        __m256d t;
+        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk));
+        k0 = _mm256_fmadd_pd(t, t, k0);
+        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk + 4));
+        k1 = _mm256_fmadd_pd(t, t, k1);
+        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya));
+        a0 = _mm256_fmadd_pd(t, t, a0);
+        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya + 4));
+        a1 = _mm256_fmadd_pd(t, t, a1);
+        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh));
+        h0 = _mm256_fmadd_pd(t, t, h0);
+        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh + 4));
+        h1 = _mm256_fmadd_pd(t, t, h1);
+      }
+      const __m256d xg = _mm256_broadcast_sd(ac + i);
+      __m256d g0 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(bc + j0)));
+      __m256d g1 =
+          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(bc + j0 + 4)));
+      g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
+                                       _mm256_sqrt_pd(a0)),
+                         _mm256_sqrt_pd(h0));
+      g1 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g1, _mm256_sqrt_pd(k1)),
+                                       _mm256_sqrt_pd(a1)),
+                         _mm256_sqrt_pd(h1));
+      _mm256_storeu_pd(row + j0, g0);
+      _mm256_storeu_pd(row + j0 + 4, g1);
+    }
+  }
+}
+
+// GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized on its own
+// _mm512_undefined_pd (a known false positive).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+__attribute__((target("avx512f"))) void KernelAvx512(
+    const PreparedSignature& a, const PreparedSignature& b, double* out,
+    int out_stride) {
+  const int bands = a.bands();
+  const size_t as = static_cast<size_t>(a.stride());
+  const size_t bs = static_cast<size_t>(b.stride());
+  const double* ac = a.coords();
+  const double* bc = b.coords();
+  for (int i = 0; i < a.size(); ++i) {
+    double* row = out + static_cast<size_t>(i) * out_stride;
+    for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+      __m512d k = _mm512_setzero_pd();
+      __m512d ar = _mm512_setzero_pd();
+      __m512d h = _mm512_setzero_pd();
+      for (int d = 0; d < bands; ++d) {
+        const size_t rk = static_cast<size_t>(1 + d);
+        const size_t ra = rk + static_cast<size_t>(bands);
+        const size_t rh = ra + static_cast<size_t>(bands);
+        __m512d t;
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]),
+                          _mm512_loadu_pd(bc + rk * bs + j0));
+        k = _mm512_fmadd_pd(t, t, k);
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]),
+                          _mm512_loadu_pd(bc + ra * bs + j0));
+        ar = _mm512_fmadd_pd(t, t, ar);
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]),
+                          _mm512_loadu_pd(bc + rh * bs + j0));
+        h = _mm512_fmadd_pd(t, t, h);
+      }
+      __m512d g = _mm512_abs_pd(
+          _mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(bc + j0)));
+      g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k)),
+                                      _mm512_sqrt_pd(ar)),
+                        _mm512_sqrt_pd(h));
+      _mm512_storeu_pd(row + j0, g);
+    }
+  }
+}
+#pragma GCC diagnostic pop
 #endif
 
-TPR_MULTIVERSION
-void KernelMatrix(const PreparedSignature& a, const PreparedSignature& b,
-                  double* out, int out_stride) {
-  for (int i = 0; i < a.size(); ++i) {
-    KernelRow<8>(a, i, b, out + static_cast<size_t>(i) * out_stride);
+KernelFn PickKernel() {
+#ifdef TPR_HAVE_X86_KERNELS
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f")) return KernelAvx512;
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
+    return KernelAvx2;
   }
+#endif
+  return KernelScalar;
 }
 
 }  // namespace
@@ -272,7 +328,12 @@ void GroundDistanceMatrix(const PreparedSignature& a,
                           const PreparedSignature& b, double* out,
                           int out_stride) {
   assert(out_stride >= b.stride());
-  KernelMatrix(a, b, out, out_stride);
+  static const KernelFn kernel = PickKernel();
+  if (a.bands() != b.bands()) {
+    KernelScalar(a, b, out, out_stride);
+    return;
+  }
+  kernel(a, b, out, out_stride);
 }
 
 }  // namespace tpr::index

@@ -148,9 +148,11 @@ double GroundDistance(const PreparedSignature& a, int i,
 
 // GroundDistanceMatrix writes the a.size() x b.size() matrix of ground
 // distances into `out`, row i at out[i * out_stride], with
-// out_stride >= b.stride(); entries past b.size() in a row are unspecified.
-// This is the vectorized kernel the EMD uses; results equal GroundDistance
-// to rounding. Cost O(a.size() x b.size() x bands); thread-safe.
+// out_stride >= b.stride(); entries past b.size() in a row (up to
+// b.stride()) are written with unspecified finite values. This is the
+// vectorized kernel (AVX-512 or AVX2, chosen at run time) the EMD uses;
+// entries equal GroundDistance to rounding (about 1e-15 relative) and the
+// matrix of (b, a) is exactly the transpose of that of (a, b). Cost O(a.size() x b.size() x bands); thread-safe.
 void GroundDistanceMatrix(const PreparedSignature& a,
                           const PreparedSignature& b, double* out,
                           int out_stride);

@@ -1,0 +1,355 @@
+// Matching benchmarks (Tam & Lau 2007, section 6): one EMD between two
+// realistic signatures, ours against LEMON's network simplex in the same
+// binary so that the ratio holds on a busy machine.
+//
+//   bench_match --benchmark_filter=BM_Emd --benchmark_repetitions=5
+//               --benchmark_report_aggregates_only=true
+//
+// Signatures come from tests/indexer/signature_testing.h: clustered
+// classes, exactly N features per side (the paper averages 30), 20 bands.
+// Each iteration compares the next pair of a fixed pool of 64 signatures
+// (8 classes), so same-class and cross-class pairs are both timed.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "indexer/lib/emd.h"
+#include "indexer/lib/ground_distance.h"
+#include "indexer/lib/brute_force_index.h"
+#include "indexer/lib/signature_index.h"
+#include "indexer/lib/vp_tree.h"
+#include "tests/indexer/emd_oracle.h"
+#include "tests/indexer/signature_testing.h"
+
+namespace tpr::index {
+namespace {
+
+std::vector<PreparedSignature> Pool(int features) {
+  testing::SignatureGeneratorOptions o;
+  o.seed = 42 + static_cast<uint64_t>(features);
+  o.features = features;
+  o.classes = 8;
+  o.feature_change = 0.0;  // exactly `features` per side
+  testing::SignatureGenerator gen(o);
+  std::vector<PreparedSignature> pool;
+  for (int k = 0; k < 64; ++k) {
+    pool.push_back(*Prepare(gen.Next(), GroundDistanceOptions{}));
+  }
+  return pool;
+}
+
+void BM_Emd(benchmark::State& state) {
+  const std::vector<PreparedSignature> pool =
+      Pool(static_cast<int>(state.range(0)));
+  EmdSolver solver;
+  size_t k = 0;
+  int64_t pivots = 0;
+  for (auto _ : state) {
+    const PreparedSignature& a = pool[k % pool.size()];
+    const PreparedSignature& b = pool[(k * 7 + 3) % pool.size()];
+    benchmark::DoNotOptimize(solver.Distance(a, b));
+    pivots += solver.Stats().pivots;
+    ++k;
+  }
+  state.counters["pivots"] =
+      benchmark::Counter(static_cast<double>(pivots) / static_cast<double>(k));
+}
+BENCHMARK(BM_Emd)->Arg(10)->Arg(30)->Arg(60);
+
+// The peer: LEMON NetworkSimplex (block search) on the same ground
+// distances, graph and solver built once per size (only costs and supplies
+// change per pair), so its time is the solve plus filling its maps.
+void BM_EmdLemon(benchmark::State& state) {
+  const std::vector<PreparedSignature> pool =
+      Pool(static_cast<int>(state.range(0)));
+  testing::LemonEmd lemon;
+  size_t k = 0;
+  for (auto _ : state) {
+    const PreparedSignature& a = pool[k % pool.size()];
+    const PreparedSignature& b = pool[(k * 7 + 3) % pool.size()];
+    benchmark::DoNotOptimize(lemon.Distance(a, b));
+    ++k;
+  }
+}
+BENCHMARK(BM_EmdLemon)->Arg(10)->Arg(30)->Arg(60);
+
+// The ground-distance matrix alone (part of every BM_Emd iteration).
+void BM_GroundDistanceMatrix(benchmark::State& state) {
+  const std::vector<PreparedSignature> pool =
+      Pool(static_cast<int>(state.range(0)));
+  std::vector<double> out(static_cast<size_t>(pool[0].size()) *
+                          pool[0].stride());
+  size_t k = 0;
+  for (auto _ : state) {
+    GroundDistanceMatrix(pool[k % pool.size()], pool[(k * 7 + 3) % pool.size()],
+                         out.data(), pool[0].stride());
+    benchmark::DoNotOptimize(out.data());
+    ++k;
+  }
+}
+BENCHMARK(BM_GroundDistanceMatrix)->Arg(10)->Arg(30)->Arg(60);
+
+// The centroid lower bound that lets the index skip EMDs.
+void BM_EmdLowerBound(benchmark::State& state) {
+  const std::vector<PreparedSignature> pool =
+      Pool(static_cast<int>(state.range(0)));
+  size_t k = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(EmdLowerBound(pool[k % pool.size()],
+                                           pool[(k * 7 + 3) % pool.size()]));
+    ++k;
+  }
+}
+BENCHMARK(BM_EmdLowerBound)->Arg(30);
+
+// ---------------------------------------------------------------------------
+// k-NN (section 6.2): the VP-tree against brute force on the same data, in
+// the same run. Databases are realistic signatures (about 30 features, 20
+// bands) drawn from class prototypes (SignatureGenerator); queries are new
+// members of the same classes. Counters per query: emds (full EMDs),
+// emd_share (emds / database size), lbs (centroid bounds), nodes; build_s
+// and build_cpu_s are the one-off tree build time of that database (wall
+// and CPU; on a shared machine CPU is the figure to compare). Databases are built
+// once per process and kept in memory (nothing is cached on disk).
+namespace knn {
+
+using tpr::index::BruteForceIndex;
+using tpr::index::Emd;
+using tpr::index::EmdLowerBound;
+using tpr::index::GroundDistanceOptions;
+using tpr::index::ItemNeighbor;
+using tpr::index::PreparedSignature;
+using tpr::index::QuerySpec;
+using tpr::index::SearchStats;
+using tpr::index::VpTree;
+using tpr::index::VpTreeOptions;
+using tpr::index::testing::SignatureGenerator;
+using tpr::index::testing::SignatureGeneratorOptions;
+
+// Database shape. classes == 0 means unclustered: every signature is its
+// own random prototype (the highest intrinsic dimension we can make).
+struct DbKey {
+  int64_t n;
+  int classes;
+  int jitter_permille;
+  bool operator<(const DbKey& o) const {
+    return std::tie(n, classes, jitter_permille) <
+           std::tie(o.n, o.classes, o.jitter_permille);
+  }
+};
+
+struct Db {
+  std::vector<PreparedSignature> items;
+  std::vector<PreparedSignature> queries;
+  VpTree tree;
+  double build_seconds = 0.0;      // wall clock
+  double build_cpu_seconds = 0.0;  // one thread
+};
+
+// Default data: 100 classes of models, 5% jitter (SignatureGenerator's
+// default), so that a 100k database holds about 1000 poses per class.
+constexpr int kClasses = 100;
+constexpr int kJitterPermille = 50;
+
+// Generate draws the raw signatures of a database (then 64 queries); the
+// same key always gives the same data.
+void Generate(const DbKey& key,
+              const std::function<void(tpr::index::Signature)>& sink) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 20071;
+  gopt.classes = std::max(key.classes, 1);
+  gopt.jitter = key.jitter_permille / 1000.0;
+  SignatureGenerator gen(gopt);
+  for (int64_t i = 0; i < key.n + 64; ++i) {
+    sink(key.classes == 0 ? gen.Random(30) : gen.Next());
+  }
+}
+
+Db& GetDb(const DbKey& key) {
+  static std::map<DbKey, std::unique_ptr<Db>>* cache =
+      new std::map<DbKey, std::unique_ptr<Db>>();
+  std::unique_ptr<Db>& slot = (*cache)[key];
+  if (slot) return *slot;
+  slot = std::make_unique<Db>();
+  const GroundDistanceOptions ground;
+  slot->items.reserve(static_cast<size_t>(key.n));
+  Generate(key, [&](tpr::index::Signature s) {
+    std::vector<PreparedSignature>& to =
+        static_cast<int64_t>(slot->items.size()) < key.n ? slot->items
+                                                         : slot->queries;
+    to.push_back(*Prepare(s, ground));
+  });
+  const std::vector<PreparedSignature>& items = slot->items;
+  const auto start = std::chrono::steady_clock::now();
+  const std::clock_t cpu_start = std::clock();
+  slot->tree = *VpTree::Build(
+      items.size(),
+      [&items](uint32_t i, uint32_t j) { return Emd(items[i], items[j]); },
+      VpTreeOptions{});
+  slot->build_seconds = std::chrono::duration<double>(
+                            std::chrono::steady_clock::now() - start)
+                            .count();
+  slot->build_cpu_seconds =
+      static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
+  return *slot;
+}
+
+QuerySpec Spec(const Db& db, const PreparedSignature& q) {
+  QuerySpec spec;
+  spec.distance = [&db, &q](uint32_t i) { return Emd(q, db.items[i]); };
+  spec.lower_bound = [&db, &q](uint32_t i) {
+    return EmdLowerBound(q, db.items[i]);
+  };
+  return spec;
+}
+
+void Report(benchmark::State& state, const Db& db, const SearchStats& total,
+            int64_t queries) {
+  const double per = queries > 0 ? 1.0 / static_cast<double>(queries) : 0.0;
+  const double n = static_cast<double>(db.items.size());
+  state.counters["emds"] = static_cast<double>(total.emd_computations) * per;
+  state.counters["emd_share"] =
+      static_cast<double>(total.emd_computations) * per / n;
+  state.counters["lbs"] = static_cast<double>(total.lower_bounds) * per;
+  state.counters["nodes"] = static_cast<double>(total.nodes_visited) * per;
+  state.counters["build_s"] = db.build_seconds;
+  state.counters["build_cpu_s"] = db.build_cpu_seconds;
+}
+
+void RunTree(benchmark::State& state, const DbKey& key, size_t k) {
+  Db& db = GetDb(key);
+  SearchStats total;
+  int64_t queries = 0;
+  for (auto _ : state) {
+    SearchStats stats;
+    std::vector<ItemNeighbor> result =
+        db.tree.Knn(Spec(db, db.queries[queries % db.queries.size()]), k, &stats);
+    benchmark::DoNotOptimize(result);
+    total.emd_computations += stats.emd_computations;
+    total.lower_bounds += stats.lower_bounds;
+    total.nodes_visited += stats.nodes_visited;
+    ++queries;
+  }
+  Report(state, db, total, queries);
+}
+
+// BM_KnnVpTree/<n>/<k>: default clustered data.
+void BM_KnnVpTree(benchmark::State& state) {
+  RunTree(state, {state.range(0), kClasses, kJitterPermille},
+          static_cast<size_t>(state.range(1)));
+}
+BENCHMARK(BM_KnnVpTree)
+    ->Args({600, 1})
+    ->Args({1000, 1})
+    ->Args({1000, 10})
+    ->Args({10000, 1})
+    ->Args({10000, 10})
+    ->Args({100000, 1})
+    ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnBruteForce/<n>/<k>: every EMD, same data and queries.
+void BM_KnnBruteForce(benchmark::State& state) {
+  Db& db = GetDb({state.range(0), kClasses, kJitterPermille});
+  const BruteForceIndex oracle(db.items.size());
+  SearchStats total;
+  int64_t queries = 0;
+  for (auto _ : state) {
+    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()]);
+    spec.lower_bound = nullptr;
+    SearchStats stats;
+    std::vector<ItemNeighbor> result =
+        oracle.Knn(std::move(spec), static_cast<size_t>(state.range(1)), &stats);
+    benchmark::DoNotOptimize(result);
+    total.emd_computations += stats.emd_computations;
+    ++queries;
+  }
+  Report(state, db, total, queries);
+}
+BENCHMARK(BM_KnnBruteForce)
+    ->Args({600, 1})
+    ->Args({1000, 1})
+    ->Args({1000, 10})
+    ->Args({10000, 10})
+    ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnIndex/<n>/<k>: the service-facing SignatureIndex (string ids,
+// snapshots, buffer merge) on the same data as BM_KnnVpTree.
+void BM_KnnIndex(benchmark::State& state) {
+  const DbKey key{state.range(0), kClasses, kJitterPermille};
+  std::vector<std::pair<std::string, tpr::index::Signature>> items;
+  std::vector<tpr::index::Signature> queries;
+  Generate(key, [&](tpr::index::Signature s) {
+    if (static_cast<int64_t>(items.size()) < key.n) {
+      items.emplace_back("model-" + std::to_string(items.size()), std::move(s));
+    } else {
+      queries.push_back(std::move(s));
+    }
+  });
+  tpr::index::IndexOptions options;
+  options.background_rebuild = false;
+  tpr::index::SignatureIndex index(options);
+  if (!index.UpsertBatch(items).ok()) {
+    state.SkipWithError("UpsertBatch failed");
+    return;
+  }
+  items.clear();
+  index.Rebuild();
+  SearchStats total;
+  int64_t n_queries = 0;
+  for (auto _ : state) {
+    SearchStats stats;
+    std::vector<tpr::index::Neighbor> result =
+        index.Knn(queries[n_queries % queries.size()],
+                  static_cast<size_t>(state.range(1)), &stats);
+    benchmark::DoNotOptimize(result);
+    total.emd_computations += stats.emd_computations;
+    total.lower_bounds += stats.lower_bounds;
+    total.nodes_visited += stats.nodes_visited;
+    ++n_queries;
+  }
+  const double per = 1.0 / static_cast<double>(std::max<int64_t>(n_queries, 1));
+  state.counters["emds"] = static_cast<double>(total.emd_computations) * per;
+  state.counters["emd_share"] = static_cast<double>(total.emd_computations) *
+                                per / static_cast<double>(key.n);
+}
+BENCHMARK(BM_KnnIndex)
+    ->Args({1000, 10})
+    ->Args({10000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnSpread/<n>/<jitter per mille>/<classes>, k = 10: what the data's
+// intrinsic dimension does. classes = 0 is unclustered data.
+void BM_KnnSpread(benchmark::State& state) {
+  RunTree(state,
+          {state.range(0), static_cast<int>(state.range(2)),
+           static_cast<int>(state.range(1))},
+          10);
+}
+BENCHMARK(BM_KnnSpread)
+    ->Args({10000, 50, 10})
+    ->Args({10000, 20, 100})
+    ->Args({10000, 50, 100})
+    ->Args({10000, 100, 100})
+    ->Args({10000, 200, 100})
+    ->Args({10000, 50, 1000})
+    ->Args({10000, 50, 0})
+    ->Args({100000, 50, 1000})
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace knn
+
+}  // namespace
+}  // namespace tpr::index
+
+BENCHMARK_MAIN();
