@@ -53,25 +53,31 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
   for (double d : distances) {
     if (d != kUnreachable) max_d = std::max(max_d, d);
   }
-  std::vector<int32_t> band(n, -1);
+  // Scratch reused across calls on the same thread: this runs once per
+  // feature, and fresh per-vertex arrays cost page faults at 100k vertices.
+  thread_local std::vector<int32_t> band;
+  thread_local std::vector<int32_t> segment;
+  band.assign(n, -1);
+  const double scale = max_d > 0.0 ? bands / max_d : 0.0;
   for (int32_t v = 0; v < n; ++v) {
     const double d = distances[v];
     if (d == kUnreachable) continue;
-    band[v] = max_d > 0.0 ? std::min(bands - 1, static_cast<int32_t>(d / max_d * bands)) : 0;
+    band[v] = std::min(bands - 1, static_cast<int32_t>(d * scale));
   }
+  // A visited vertex's band becomes kVisited, so the search below admits
+  // only unvisited vertices of the segment's band.
+  const int32_t kVisited = bands;
   // Per band accumulators over segments.
   std::vector<double> band_area(bands, 0.0), band_defect(bands, 0.0);
   std::vector<double> band_area_sq(bands, 0.0), band_thickness(bands, 0.0);
-  std::vector<char> seen(n, 0);
-  std::vector<int32_t> segment;
   for (int32_t s = 0; s < n; ++s) {
-    if (band[s] < 0 || seen[s]) continue;
     const int32_t b = band[s];
+    if (b < 0 || b == kVisited) continue;
     // Depth-first search of the segment (5.3: "depth first search to locate
     // all segments of each band").
     segment.clear();
     segment.push_back(s);
-    seen[s] = 1;
+    band[s] = kVisited;
     double area = 0.0, defect = 0.0;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t head = 0; head < segment.size(); ++head) {
@@ -80,8 +86,8 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
       defect += defects[u];
       centre += areas[u] * mesh.positions[u];
       for (const int32_t* p = links.neighbors_begin(u); p != links.neighbors_end(u); ++p) {
-        if (!seen[*p] && band[*p] == b) {
-          seen[*p] = 1;
+        if (band[*p] == b) {
+          band[*p] = kVisited;
           segment.push_back(*p);
         }
       }

@@ -47,7 +47,7 @@ struct SurfaceVectors {
 // of the segment's vertices to its area-weighted centre of mass; the
 // weighting keeps the value stable under remeshing). Empty bands are 0.
 // Preconditions: bands >= 1; distances, defects of size n; total_area > 0.
-// Cost O(n + e). Thread-safe.
+// Cost O(n + e). Thread-safe (per-thread scratch, reused across calls).
 SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& links,
                                      const std::vector<double>& distances,
                                      const std::vector<double>& defects, int bands,
