@@ -117,6 +117,9 @@ inline absl::StatusOr<StartedServer> StartServer(
     quota.SetMaxThreads(options.max_threads);
     builder.SetResourceQuota(quota);
   }
+  // Sync-API pollers wake this often; Shutdown() waits for each to notice,
+  // so gRPC's default of 10 s made every graceful stop take seconds.
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   for (grpc::Service* service : services) builder.RegisterService(service);
   started.server = builder.BuildAndStart();
   if (started.server == nullptr || started.port == 0) {
