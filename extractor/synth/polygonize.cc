@@ -159,7 +159,8 @@ class BlendField {
       const double s = step.norm();
       if (s > max_step) step *= max_step / s;
       p -= step;
-      if (s < 1e-9 * max_step) break;
+      // Vertices start near the surface: Newton converges in a step or two.
+      if (s < 1e-6 * max_step) break;
     }
     return p;
   }
@@ -803,10 +804,11 @@ int FlipEdges(Mesh& mesh) {
       if (t[e] < t[(e + 1) % 3]) ++valence[t[e]], ++valence[t[(e + 1) % 3]];
     }
   }
-  auto angle = [&](int32_t apex, int32_t p, int32_t q) {
+  // Opposite angles sum past pi exactly when their cotangents sum below 0.
+  auto cotangent = [&](int32_t apex, int32_t p, int32_t q) {
     const Vector3d u = mesh.positions[p] - mesh.positions[apex];
     const Vector3d w = mesh.positions[q] - mesh.positions[apex];
-    return std::atan2(u.cross(w).norm(), u.dot(w));
+    return u.dot(w) / std::max(u.cross(w).norm(), 1e-300);
   };
   auto normal = [&](int32_t a, int32_t b, int32_t c) {
     return Vector3d((mesh.positions[b] - mesh.positions[a])
@@ -828,7 +830,7 @@ int FlipEdges(Mesh& mesh) {
       }
       if (d < 0 || d == c || valence[a] <= 3 || valence[b] <= 3) continue;
       if (edge_faces.count(key(c, d))) continue;
-      if (angle(c, a, b) + angle(d, b, a) <= M_PI + 1e-9) continue;
+      if (cotangent(c, a, b) + cotangent(d, b, a) >= -1e-9) continue;
       const Vector3d nf = normal(a, b, c), ng = normal(b, a, d);
       if (nf.dot(ng) < 0.9 * nf.norm() * ng.norm()) continue;
       const Vector3d n1 = normal(c, a, d), n2 = normal(d, b, c);
@@ -960,7 +962,7 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
   double h = std::min(
       std::sqrt(kMtVerticesPerArea * area_estimate /
                 (kOversample * target_vertices)),
-      r_min / 1.5);
+      r_min / 1.25);
 
   Mesh fine;
   absl::Status last_failure;

@@ -31,8 +31,8 @@ std::vector<std::string> ClassNames();
 
 // ShapeOptions controls one generated mesh.
 struct ShapeOptions {
-  // Vertices of the output mesh; the result is within 20% of it (usually
-  // exact). Accepted range [200, 1,000,000]. Default 10,000.
+  // Vertices of the output mesh; the result is within 20% of it (exact for
+  // the built-in classes). Accepted range [200, 1,000,000]. Default 10,000.
   int target_vertices = 10000;
   // Seed of every random choice (pose angles, rigid motion). Same seed, same
   // class, same pose index: bit-identical mesh. Default 1.
@@ -89,8 +89,10 @@ absl::StatusOr<Skeleton> PoseSkeleton(absl::string_view class_name,
 // vertices. Deterministic in (class, pose_index, options).
 // Errors: as PoseSkeleton; INTERNAL if the polygonizer cannot produce a
 // genus-0 surface (not seen for the built-in classes).
-// Thread-safe. Cost: about 0.1 s for 10k vertices on one core; grows
-// linearly with target_vertices.
+// Thread-safe. Cost: about 0.1-0.2 s of CPU for 10k vertices (the classes
+// with the thinnest parts, ant and octopus, are the slowest); grows about
+// linearly with target_vertices above ~5k (below that the grid the thinnest
+// bone needs dominates).
 absl::StatusOr<extract::Mesh> GenerateShape(absl::string_view class_name,
                                             int pose_index,
                                             const ShapeOptions& options);
