@@ -507,7 +507,7 @@ std::array<uint8_t, 3> RegionColour(int region) {
 }
 
 int RunInspect(const Globals& g, const std::string& mesh_path, const std::string& out,
-               int bands) {
+               int bands, bool ascii) {
   tpr::extract::IntakeOptions intake;
   absl::StatusOr<tpr::extract::LoadedMesh> loaded = tpr::extract::LoadMeshFromFile(mesh_path, intake);
   if (!loaded.ok()) return Fail(mesh_path, loaded.status());
@@ -548,7 +548,8 @@ int RunInspect(const Globals& g, const std::string& mesh_path, const std::string
     }
   }
   tpr::extract::MeshWriteOptions write_options;
-  write_options.format = tpr::extract::MeshWriteFormat::kPlyBinary;
+  write_options.format =
+      ascii ? tpr::extract::MeshWriteFormat::kPlyAscii : tpr::extract::MeshWriteFormat::kPlyBinary;
   write_options.vertex_colors = std::move(colours);
   absl::Status written = tpr::extract::WriteMeshToFile(loaded->mesh, write_options, out);
   if (!written.ok()) return Fail(out, written);
@@ -633,6 +634,8 @@ int main(int argc, char** argv) {
   inspect->add_option("MESH", inspect_mesh, "mesh file")->required();
   inspect->add_option("-o,--out", inspect_out, "output PLY file")->required();
   inspect->add_option("--bands", inspect_bands, "geodesic bands per feature (0: default)");
+  bool inspect_ascii = false;
+  inspect->add_flag("--ascii", inspect_ascii, "write ASCII PLY (default binary)");
 
   CLI11_PARSE(app, argc, argv);
 
@@ -643,6 +646,6 @@ int main(int argc, char** argv) {
   if (*remove) return RunRemove(g, remove_ids);
   if (*list) return RunList(g, list_label);
   if (*stats) return RunStats(g);
-  if (*inspect) return RunInspect(g, inspect_mesh, inspect_out, inspect_bands);
+  if (*inspect) return RunInspect(g, inspect_mesh, inspect_out, inspect_bands, inspect_ascii);
   return 2;
 }

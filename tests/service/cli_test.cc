@@ -7,6 +7,9 @@
 #include <stdio.h>
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <array>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <regex>
@@ -14,6 +17,8 @@
 
 #include <gtest/gtest.h>
 
+#include "extractor/lib/extract.h"
+#include "extractor/lib/mesh_io.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tpr/client.h"
 
@@ -206,6 +211,68 @@ TEST_F(CliTest, SigtermDuringASearchStreamEndsCleanly) {
     EXPECT_EQ(more, 3);
   }
   EXPECT_EQ(exit_code, 0);
+}
+
+// `tpr inspect` runs locally (no services): the PLY it writes has the input's
+// vertices, every point vertex red and every ring vertex black, as the
+// library's explanation of the same mesh says.
+TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
+  testing::TempDir dir;
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(dir.path() + "/set", 1, 1, 2000);
+  ASSERT_TRUE(files.ok());
+  const std::string mesh = dir.path() + "/set/" + files->front().relative_path;
+  const std::string out = dir.path() + "/out.ply";
+  const std::string command = absl::StrCat(testing::BinaryPath("tpr"), " inspect --ascii ", mesh,
+                                           " -o ", out, " > /dev/null");
+  ASSERT_EQ(std::system(command.c_str()), 0);
+
+  absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromFile(mesh, {});
+  ASSERT_TRUE(loaded.ok());
+  extract::Options options;
+  options.explain = true;
+  absl::StatusOr<extract::ExtractResult> r =
+      extract::ExtractSignature(loaded->mesh, loaded->stats, options);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_TRUE(r->explanation.has_value());
+
+  // Parse the ASCII PLY: header, then "x y z r g b" per vertex.
+  std::ifstream in(out);
+  std::string line;
+  int64_t vertices = -1;
+  while (std::getline(in, line) && line != "end_header") {
+    if (line.rfind("element vertex ", 0) == 0) vertices = std::stoll(line.substr(15));
+  }
+  ASSERT_EQ(vertices, loaded->stats.vertices);
+  std::vector<std::array<int, 3>> colours;
+  for (int64_t v = 0; v < vertices && std::getline(in, line); ++v) {
+    std::stringstream fields(line);
+    double x, y, z;
+    std::array<int, 3> c;
+    fields >> x >> y >> z >> c[0] >> c[1] >> c[2];
+    colours.push_back(c);
+  }
+  ASSERT_EQ(static_cast<int64_t>(colours.size()), vertices);
+  const std::array<int, 3> kRed = {220, 20, 20}, kBlack = {20, 20, 20};
+  int points = 0, rings = 0;
+  for (size_t f = 0; f < r->signature.features.size(); ++f) {
+    const bool is_point = r->signature.features[f].kind == extract::FeatureKind::kPoint;
+    (is_point ? points : rings)++;
+    for (int32_t v : r->explanation->feature_vertices[f]) {
+      if (is_point) {
+        // Rings are drawn after points, so a point on a ring shows black.
+        EXPECT_TRUE(colours[v] == kRed || colours[v] == kBlack) << "point vertex " << v;
+      } else {
+        EXPECT_EQ(colours[v], kBlack) << "ring vertex " << v;
+      }
+    }
+  }
+  EXPECT_GT(points, 0);
+  // Unmarked vertices carry a region colour: neither red nor black.
+  const int64_t marked = std::count_if(colours.begin(), colours.end(), [&](const auto& c) {
+    return c == kRed || c == kBlack;
+  });
+  EXPECT_LT(marked, vertices);
 }
 
 }  // namespace
