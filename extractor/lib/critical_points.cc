@@ -5,10 +5,10 @@
 #include "extractor/lib/critical_points.h"
 
 #include <algorithm>
-#include <queue>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "extractor/lib/wavefront_heap.h"
 
 namespace tpr::extract {
 
@@ -41,18 +41,6 @@ VertexLinks VertexLinks::Build(const Mesh& mesh) {
   }
   return links;
 }
-
-namespace {
-
-struct HeapItem {
-  double key;
-  int32_t vertex;
-  bool operator>(const HeapItem& o) const {
-    return key > o.key || (key == o.key && vertex > o.vertex);
-  }
-};
-
-}  // namespace
 
 absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     const MeshGraph& graph, const VertexLinks& links, int32_t source,
@@ -88,13 +76,12 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
   std::vector<int32_t> cycle_sizes;
 
   std::vector<double>& dist = out.distances;
-  std::priority_queue<HeapItem, std::vector<HeapItem>, std::greater<HeapItem>> heap;
+  WavefrontHeap heap;
   dist[source] = 0.0;
-  heap.push({0.0, source});
+  heap.Push(0.0, source);
   int32_t candidate_id = 0;
   while (!heap.empty()) {
-    const HeapItem top = heap.top();
-    heap.pop();
+    const WavefrontHeap::Item top = heap.Pop();
     const int32_t v = top.vertex;
     if (settled[v] || top.key > dist[v]) continue;
     settled[v] = 1;
@@ -105,7 +92,7 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
       const double d = dist[v] + lens[k];
       if (!settled[w] && d < dist[w]) {
         dist[w] = d;
-        heap.push({d, w});
+        heap.Push(d, w);
       }
     }
     if (v == source || disallowed[v]) continue;

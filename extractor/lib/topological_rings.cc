@@ -5,10 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <queue>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "extractor/lib/wavefront_heap.h"
 
 namespace tpr::extract {
 
@@ -26,13 +26,6 @@ std::vector<double> RingStartTimes(const std::vector<double>& point_g, double g_
 
 namespace {
 
-struct HeapItem {
-  double key;
-  int32_t vertex;
-  bool operator>(const HeapItem& o) const {
-    return key > o.key || (key == o.key && vertex > o.vertex);
-  }
-};
 
 // Find with path halving over the "merged into" links: the root of a
 // front's set is the live front that now carries its wavefront.
@@ -100,14 +93,14 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     }
   }
   std::vector<double>& level = out.level;
-  std::priority_queue<HeapItem, std::vector<HeapItem>, std::greater<HeapItem>> heap;
+  WavefrontHeap heap;
   for (int32_t i = 0; i < num_points; ++i) {
     const int32_t p = point_vertices[i];
     if (start_times[i] < level[p]) {
       level[p] = start_times[i];
       reached_by[p] = i;
     }
-    heap.push({start_times[i], p});
+    heap.Push(start_times[i], p);
   }
   std::vector<std::pair<int32_t, int32_t>> points_at;  // (vertex, point)
   for (int32_t i = 0; i < num_points; ++i) points_at.push_back({point_vertices[i], i});
@@ -118,8 +111,7 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
   std::vector<int32_t> roots;
   bool stop = live <= 1;
   while (!stop && !heap.empty()) {
-    const HeapItem top = heap.top();
-    heap.pop();
+    const WavefrontHeap::Item top = heap.Pop();
     const int32_t v = top.vertex;
     if (settled[v] || top.key > level[v]) continue;
     settled[v] = 1;
@@ -133,9 +125,12 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
         --live;
       }
     }
+    // Fronts touch across mesh edges (one_ring): a contact through an
+    // unfolded shortcut is found one edge later, and the 1-ring scan costs
+    // half as much.
     roots.clear();
     roots.push_back(Find(up, reached_by[v]));
-    for (int32_t w : graph.neighbors(v)) {
+    for (int32_t w : graph.one_ring(v)) {
       if (!settled[w] || out.owner[w] < 0) continue;
       const int32_t r = Find(up, out.owner[w]);
       if (std::find(roots.begin(), roots.end(), r) == roots.end()) roots.push_back(r);
@@ -166,7 +161,7 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
       if (!settled[w] && d < level[w]) {
         level[w] = d;
         reached_by[w] = owner;
-        heap.push({d, w});
+        heap.Push(d, w);
       }
     }
     if (is_stop[v] && --remaining_saddles == 0 && options.stop_at_centre_saddles) {
@@ -229,7 +224,7 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
   for (int32_t v = 0; v < n; ++v) {
     const int32_t f = out.owner[v];
     if (f < 0 || !fronts[f].is_ring) continue;
-    for (int32_t w : graph.neighbors(v)) {
+    for (int32_t w : graph.one_ring(v)) {
       if (out.owner[w] != f && (!settled[w] || level[w] >= fronts[f].death)) {
         fronts[f].ring_vertices.push_back(v);
         break;
