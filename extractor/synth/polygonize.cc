@@ -22,12 +22,16 @@
 //  3. Topology check: the largest component is kept; stray bits must be
 //     negligible and the Euler characteristic V - E + F must be 2, else the
 //     grid is refined (thin parts too coarse) and step 2 repeats.
-//  4. Decimation to the exact vertex budget by shortest-edge collapse with the
-//     link condition (which preserves the topology of a closed manifold), a
-//     fold-over test, and projection of the new vertex onto the surface. MT
-//     produces many slivers; collapsing the shortest edges first removes them.
-//  5. A few rounds of tangential Laplacian relaxation with projection onto the
-//     surface even out the triangles without moving off the shape.
+//  4. Decimation by shortest-edge collapse with the link condition (which
+//     preserves the topology of a closed manifold), a fold-over test against
+//     the field's normals, a ring-quality test, and projection of the new
+//     vertex onto the surface. MT produces many slivers and specks;
+//     collapsing the shortest edges first removes them. A clean-up round
+//     with looser tests removes the last tiny edges (creases, sharp tips),
+//     and splitting the longest edges refills the budget exactly.
+//  5. Delaunay edge flips and tangential Laplacian relaxation with
+//     projection onto the surface even out the triangles without moving off
+//     the shape; a move that would flip or crush a triangle is skipped.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -60,7 +64,8 @@ constexpr double kMtVerticesPerArea = 4.49;
 // The fine mesh has this many times the target vertices before decimation;
 // collapsing a third of the vertices removes MT's slivers.
 constexpr double kOversample = 1.6;
-constexpr int64_t kMaxGridPoints = 120'000'000;
+// 4 bytes per point: at most 240 MB of grid.
+constexpr int64_t kMaxGridPoints = 60'000'000;
 
 struct Capsule {
   Vector3d a;
@@ -206,7 +211,11 @@ absl::StatusOr<Grid> SampleField(const BlendField& field, double h) {
         "polygonizer grid would need ", points,
         " points; lower target_vertices or thicken the thinnest bone"));
   }
-  std::vector<double> sums(static_cast<size_t>(points), 0.0);
+  // Sums of weights first, converted to field values in place below (floats:
+  // half the memory of doubles, and the projection steps later restore
+  // full precision on the surface).
+  std::vector<float>& sums = grid.values;
+  sums.assign(static_cast<size_t>(points), 0.0f);
   for (const Capsule& c : field.capsules()) {
     auto first = [&](double v, double o, int64_t n) {
       return std::clamp<int64_t>(
@@ -229,12 +238,11 @@ absl::StatusOr<Grid> SampleField(const BlendField& field, double h) {
         for (int64_t i = i0; i <= i1; ++i, ++idx) {
           const double d =
               BlendField::CapsuleDistance(c, grid.Point(i, j, k), &q);
-          sums[idx] += field.Weight(d);
+          sums[idx] += static_cast<float>(field.Weight(d));
         }
       }
     }
   }
-  grid.values.resize(sums.size());
   const float nudge = static_cast<float>(1e-6 * h);
   for (size_t i = 0; i < sums.size(); ++i) {
     float v = static_cast<float>(field.FromSum(sums[i]));
@@ -967,7 +975,9 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
   Mesh fine;
   absl::Status last_failure;
   bool done = false;
-  for (int attempt = 0; attempt < 6 && !done; ++attempt) {
+  // Up to three refinements (each 2.4x the grid points) for topology, or
+  // corrections of an area estimate that was too low.
+  for (int attempt = 0; attempt < 4 && !done; ++attempt) {
     absl::StatusOr<Grid> grid = SampleField(field, h);
     if (!grid.ok()) return grid.status();
     fine = MarchingTetrahedra(*grid);

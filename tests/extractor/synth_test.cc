@@ -439,6 +439,27 @@ TEST(SynthTest, BadInputIsInvalidArgument) {
             absl::StatusCode::kInvalidArgument);
 }
 
+TEST(SynthTest, SkeletonClosingALoopIsInternalNotAHandle) {
+  // A square of bones whose last bone touches the first: the blended surface
+  // is a torus, which the generator must refuse rather than return.
+  Skeleton ring;
+  const Eigen::Vector3d corners[5] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0},
+                                      {0, 1, 0}, {0, 0.05, 0}};
+  for (int i = 0; i < 4; ++i) {
+    Bone bone;
+    bone.parent = i - 1;
+    bone.start = corners[i];
+    bone.end = corners[i + 1];
+    bone.start_radius = bone.end_radius = 0.1;
+    ring.bones.push_back(bone);
+  }
+  absl::StatusOr<Mesh> mesh = MeshFromSkeleton(ring, 1000);
+  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInternal);
+  EXPECT_NE(mesh.status().message().find("Euler characteristic 0"),
+            absl::string_view::npos)
+      << mesh.status();
+}
+
 TEST(SynthTest, SingleBallIsASphere) {
   // Analytic oracle: one ball of radius 0.5 polygonizes onto the sphere.
   Skeleton ball;
