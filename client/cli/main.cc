@@ -594,7 +594,8 @@ int main(int argc, char** argv) {
   bool update = false;
   CLI::App* add = app.add_subcommand(
       "add", "index mesh files or folders (recursive); ids are paths relative to the folder "
-             "given, labels the parent folder names (or --manifest)");
+             "given (a file argument: its path as given), labels the parent folder names "
+             "(or --manifest)");
   add->add_option("PATH", add_paths, "mesh files or folders")->required();
   add->add_option("--manifest", manifest, "file of 'RELATIVE/PATH LABEL' lines");
   add->add_option("--jobs,-j", jobs, "parallel uploads")->capture_default_str()->check(CLI::Range(1, 64));
