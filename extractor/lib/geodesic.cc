@@ -57,6 +57,21 @@ double UnfoldedLength(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
   return std::hypot(xd - xc, yc + yd);
 }
 
+// InsertionSort sorts [first, last): the ranges here (one vertex's edges)
+// hold about 6 to 12 entries, where it beats std::sort.
+template <typename T, typename Less>
+void InsertionSort(T* first, T* last, Less less) {
+  for (T* i = first + (first == last ? 0 : 1); i < last; ++i) {
+    T value = *i;
+    T* j = i;
+    while (j > first && less(value, *(j - 1))) {
+      *j = *(j - 1);
+      --j;
+    }
+    *j = value;
+  }
+}
+
 // BuildOneRings fills, per vertex, its mesh neighbours in fan order. Each
 // triangle (a, b, c) says that around a, b is followed by c (and so on
 // cyclically); chaining these links walks the fan. Fans are small (about 6),
@@ -163,10 +178,25 @@ MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
   g.total_area_ = 0.0;
   for (double a : g.vertex_areas_) g.total_area_ += a;
 
-  std::sort(sides.begin(), sides.end(), [](const EdgeSide& x, const EdgeSide& y) {
-    return x.lo != y.lo ? x.lo < y.lo
-                        : (x.hi != y.hi ? x.hi < y.hi : x.opposite < y.opposite);
-  });
+  // Group the sides by edge. Buckets per lower vertex (a counting sort)
+  // then a tiny insertion sort per bucket: linear, where a global sort of
+  // 3f entries cost several sweeps' time.
+  std::vector<int64_t> bucket(static_cast<size_t>(n) + 1, 0);
+  for (const EdgeSide& e : sides) ++bucket[e.lo + 1];
+  for (int32_t v = 0; v < n; ++v) bucket[v + 1] += bucket[v];
+  std::vector<EdgeSide> sorted(sides.size());
+  {
+    std::vector<int64_t> fill(bucket.begin(), bucket.end() - 1);
+    for (const EdgeSide& e : sides) sorted[fill[e.lo]++] = e;
+  }
+  auto side_less = [](const EdgeSide& x, const EdgeSide& y) {
+    return x.hi != y.hi ? x.hi < y.hi : x.opposite < y.opposite;
+  };
+  for (int32_t v = 0; v < n; ++v) {
+    InsertionSort(sorted.data() + bucket[v], sorted.data() + bucket[v + 1],
+                  side_less);
+  }
+  sides.swap(sorted);
 
   std::vector<Arc> arcs;
   arcs.reserve(sides.size() * (options.unfold_opposite_edges ? 2 : 1));
@@ -191,34 +221,43 @@ MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
     }
     i = j;
   }
-  // A shortcut may duplicate a mesh edge or another shortcut: keep the
-  // shortest length per vertex pair.
-  std::sort(arcs.begin(), arcs.end(), [](const Arc& x, const Arc& y) {
-    return x.u != y.u ? x.u < y.u : (x.v != y.v ? x.v < y.v : x.length < y.length);
-  });
-  arcs.erase(std::unique(arcs.begin(), arcs.end(),
-                         [](const Arc& x, const Arc& y) {
-                           return x.u == y.u && x.v == y.v;
-                         }),
-             arcs.end());
 
+  // Rows with possible duplicates (a shortcut may repeat a mesh edge or
+  // another shortcut), then sorted and compacted per row keeping the
+  // shortest length per neighbour.
+  std::vector<int64_t> raw(static_cast<size_t>(n) + 1, 0);
+  for (const Arc& e : arcs) {
+    ++raw[e.u + 1];
+    ++raw[e.v + 1];
+  }
+  for (int32_t v = 0; v < n; ++v) raw[v + 1] += raw[v];
+  std::vector<std::pair<int32_t, double>> row_entries(arcs.size() * 2);
+  {
+    std::vector<int64_t> fill(raw.begin(), raw.end() - 1);
+    for (const Arc& e : arcs) {
+      row_entries[fill[e.u]++] = {e.v, e.length};
+      row_entries[fill[e.v]++] = {e.u, e.length};
+    }
+  }
+  auto entry_less = [](const std::pair<int32_t, double>& x,
+                       const std::pair<int32_t, double>& y) {
+    return x.first != y.first ? x.first < y.first : x.second < y.second;
+  };
   g.offsets_.assign(static_cast<size_t>(n) + 1, 0);
-  for (const Arc& e : arcs) {
-    ++g.offsets_[e.u + 1];
-    ++g.offsets_[e.v + 1];
-  }
-  for (int32_t v = 0; v < n; ++v) g.offsets_[v + 1] += g.offsets_[v];
-  g.targets_.resize(arcs.size() * 2);
-  g.lengths_.resize(arcs.size() * 2);
-  std::vector<int64_t> fill(g.offsets_.begin(), g.offsets_.end() - 1);
-  // Arcs are sorted by (u, v), so each row comes out sorted by target.
-  for (const Arc& e : arcs) {
-    g.targets_[fill[e.v]] = e.u;
-    g.lengths_[fill[e.v]++] = e.length;
-  }
-  for (const Arc& e : arcs) {
-    g.targets_[fill[e.u]] = e.v;
-    g.lengths_[fill[e.u]++] = e.length;
+  g.targets_.clear();
+  g.lengths_.clear();
+  g.targets_.reserve(row_entries.size());
+  g.lengths_.reserve(row_entries.size());
+  for (int32_t v = 0; v < n; ++v) {
+    auto* first = row_entries.data() + raw[v];
+    auto* last = row_entries.data() + raw[v + 1];
+    InsertionSort(first, last, entry_less);
+    for (auto* it = first; it != last; ++it) {
+      if (it != first && it->first == (it - 1)->first) continue;
+      g.targets_.push_back(it->first);
+      g.lengths_.push_back(it->second);
+    }
+    g.offsets_[v + 1] = static_cast<int64_t>(g.targets_.size());
   }
 
   BuildOneRings(mesh, &g.ring_offsets_, &g.ring_targets_);

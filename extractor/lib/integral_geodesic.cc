@@ -40,6 +40,7 @@ class HierarchicalSearch {
     for (int32_t v = 0; v < n; ++v) {
       if (comp[v] == c) patch_.push_back(v);
     }
+    component_vertices_ = patch_;
     nearest_.assign(n, -1);
     near_dist_.assign(n, kUnreachable);
     evaluated_.assign(n, 0);
@@ -76,7 +77,8 @@ class HierarchicalSearch {
       }
       if (options_.approximation_guided &&
           result_.sweeps < options_.max_sweeps) {
-        const int32_t guess = ApproximateMinimum();
+        int32_t highest = -1;  // used once the search ends
+        const int32_t guess = ApproximateExtremes(&highest);
         if (guess >= 0) {
           AddCentre(guess, solver_.Run(guess));
           ++result_.sweeps;
@@ -85,18 +87,28 @@ class HierarchicalSearch {
       ++result_.levels;
 
       // The sampling radius: every patch vertex lies within it of some
-      // centre. The next patch is everything within it of the best vertex:
-      // its Voronoi cell plus a margin into the neighbouring cells, so that
-      // a minimum just across a cell border stays inside (robustness).
+      // centre. The next patch is everything within it of the best vertex
+      // (its Voronoi cell plus a margin into the neighbouring cells, so a
+      // minimum just across a cell border stays inside) and of the
+      // runners-up (patches_kept): G often has near-equal minima on
+      // opposite sides of a tube-like torso, which one best patch would
+      // lose for good.
       double radius = 0.0;
       for (int32_t v : patch_) radius = std::max(radius, near_dist_[v]);
-      const float* best_field = Field(best_index_);
+      RankCentres();
       const size_t old_size = patch_.size();
-      size_t kept = 0;
-      for (int32_t v : patch_) {
-        if (best_field[v] <= radius) patch_[kept++] = v;
+      patch_.clear();
+      const int keep = std::min<int>(std::max(1, options_.patches_kept),
+                                     static_cast<int>(ranked_.size()));
+      for (int32_t v : component_vertices_) {
+        for (int r = 0; r < keep; ++r) {
+          if (Field(ranked_[r])[v] <= radius) {
+            patch_.push_back(v);
+            break;
+          }
+        }
       }
-      patch_.resize(kept);
+      const size_t kept = patch_.size();
 
       const double change = level_start_g - best_g_;
       if (result_.levels >= options_.min_levels &&
@@ -106,6 +118,17 @@ class HierarchicalSearch {
       // A level that neither improved nor shrank the patch would repeat
       // itself exactly.
       if (kept == old_size && change <= 0.0) break;
+    }
+    // Last, G at the approximation's maximum (built from every sweep), for
+    // MAX G (Eqs. 1, 5) where no centre hit the extremity where G peaks.
+    // After the search so that it cannot change the centre found.
+    if (options_.refine_max && result_.sweeps < options_.max_sweeps) {
+      int32_t highest = -1;
+      ApproximateExtremes(&highest);
+      if (highest >= 0) {
+        AddCentre(highest, solver_.Run(highest));
+        ++result_.sweeps;
+      }
     }
     result_.vertex = centres_[best_index_];
     result_.g_min = best_g_;
@@ -146,32 +169,58 @@ class HierarchicalSearch {
     }
   }
 
-  // ApproximateMinimum returns the unevaluated patch vertex minimising
-  // Hilaga et al.'s [9] approximation G~(p) = sum_i area(cell_i) g_i(p),
-  // the integral with each Voronoi cell collapsed onto its centre; -1 if
-  // every patch vertex was evaluated. |G~(p) - G(p)| is at most
+  // RankCentres orders the centres by G, smallest first (ties by order of
+  // evaluation), into ranked_.
+  void RankCentres() {
+    ranked_.resize(centres_.size());
+    for (size_t i = 0; i < ranked_.size(); ++i) ranked_[i] = static_cast<int>(i);
+    const std::vector<double>& g = result_.evaluated_g;
+    std::stable_sort(ranked_.begin(), ranked_.end(),
+                     [&g](int a, int b) { return g[a] < g[b]; });
+  }
+
+  // ApproximateExtremes returns the unevaluated vertex minimising Hilaga
+  // et al.'s [9] approximation G~(p) = sum_i area(cell_i) g_i(p), the
+  // integral with each Voronoi cell collapsed onto its centre, and sets
+  // *highest to the unevaluated vertex maximising it over the component;
+  // -1 when there is none. The minimum is sought over the component or the
+  // patch (approximation_global). |G~(p) - G(p)| is at most
   // sum_i int_{cell_i} d(x, c_i), uniformly in p, which is what makes its
   // minimum land in the right basin when farthest-point centres alone
-  // (which favour extremities) miss it. O(centres * patch).
-  int32_t ApproximateMinimum() {
+  // (which favour extremities) miss it. O(centres * n).
+  int32_t ApproximateExtremes(int32_t* highest) {
     const std::vector<double>& area = graph_.vertex_areas();
     cell_area_.assign(centres_.size(), 0.0);
     for (int32_t v = 0; v < graph_.num_vertices(); ++v) {
       if (nearest_[v] >= 0) cell_area_[nearest_[v]] += area[v];
     }
-    approx_.assign(patch_.size(), 0.0);
+    const std::vector<int32_t>& where = component_vertices_;
+    approx_.assign(where.size(), 0.0);
     for (size_t i = 0; i < centres_.size(); ++i) {
       const double a = cell_area_[i];
       if (a == 0.0) continue;
       const float* f = Field(static_cast<int>(i));
-      for (size_t j = 0; j < patch_.size(); ++j) approx_[j] += a * f[patch_[j]];
+      for (size_t j = 0; j < where.size(); ++j) approx_[j] += a * f[where[j]];
+    }
+    if (!options_.approximation_global) {
+      in_patch_.assign(graph_.num_vertices(), 0);
+      for (int32_t v : patch_) in_patch_[v] = 1;
     }
     int32_t best = -1;
     double best_value = kUnreachable;
-    for (size_t j = 0; j < patch_.size(); ++j) {
-      if (!evaluated_[patch_[j]] && approx_[j] < best_value) {
+    *highest = -1;
+    double high_value = -kUnreachable;
+    for (size_t j = 0; j < where.size(); ++j) {
+      const int32_t v = where[j];
+      if (evaluated_[v]) continue;
+      if (approx_[j] > high_value) {
+        high_value = approx_[j];
+        *highest = v;
+      }
+      if (!options_.approximation_global && !in_patch_[v]) continue;
+      if (approx_[j] < best_value) {
         best_value = approx_[j];
-        best = patch_[j];
+        best = v;
       }
     }
     return best;
@@ -187,6 +236,9 @@ class HierarchicalSearch {
   std::vector<double> near_dist_;
   std::vector<char> evaluated_;
   std::vector<int32_t> patch_;
+  std::vector<int32_t> component_vertices_;
+  std::vector<int> ranked_;
+  std::vector<char> in_patch_;
   std::vector<double> cell_area_;
   std::vector<double> approx_;
   int best_index_ = -1;

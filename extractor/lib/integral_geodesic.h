@@ -20,14 +20,16 @@ namespace tpr::extract {
 // (4.5). The paper gives no numbers except "psi ~ 20" integral geodesics on
 // average (Table 4); the defaults were tuned on the generated shapes of
 // tpr_synth against the brute-force minimum (integral_geodesic_test.cc) and
-// land near that. Measured on 10 classes x 3 poses at 1200 vertices, error
-// of min G as a fraction of (MAX G - MIN G): with these defaults mean 0.17%,
-// worst 0.86%, 22.8 sweeps on average including the double sweep; with 12
-// first-level and 5 deeper patches mean 0.13%, worst 0.75%, 27.9 sweeps;
-// without the approximation guidance (12/5) mean 0.58%, worst 2.0%; the
-// paper's scheme alone (8 patches, no guidance, stop on first unchanged
-// level) mean 2.8%, worst 39% (an octopus whose 8 first centres are all
-// arm tips).
+// land near that. Error of the min G found, as a fraction of (MAX G - MIN G)
+// (the scale of Eq. 5), over the 10 classes at 1200 vertices, poses 0, 2, 5
+// (used for tuning): mean 0.09%, worst 0.49%, 23.3 sweeps on average
+// including the double sweep; poses 1, 3, 7 (held out): mean 0.10%, worst
+// 0.56%, 22.5 sweeps; at 3000 vertices (poses 0, 2, 5) mean 0.13%, worst
+// 0.71%, 22.8 sweeps. For comparison on poses 0, 2, 5: the paper's scheme
+// alone (one kept patch, no approximation, stop at the first level that
+// does not improve) mean 2.8%, worst 39% (an octopus whose first centres
+// are all arm tips); with the approximation but one kept patch, worst 1.7%
+// (a biped whose torso has near-equal minima front and back).
 struct IntegralGeodesicOptions {
   // Patches the whole surface is first split into (farthest-point centres;
   // the double sweep's far_a is the first). Default 8.
@@ -40,6 +42,18 @@ struct IntegralGeodesicOptions {
   // that points at the basin of the minimum, where farthest-point centres
   // crowd the patch's rim. Default true.
   bool approximation_guided = true;
+  // Look for that approximate minimum over the whole surface rather than
+  // the current patch, so a level can still jump to another basin the
+  // patch recursion lost. Default true.
+  bool approximation_global = true;
+  // After the first split, also evaluate G at the maximum of that
+  // approximation (one sweep), so that MAX G (Eqs. 1, 5) does not depend on
+  // the first centres having hit the right extremity. Default true.
+  bool refine_max = true;
+  // The next level's patch surrounds this many of the best centres so far
+  // (the paper keeps 1): near-equal minima of G, as on the two sides of a
+  // torso, then both stay in play until one is clearly better. Default 2.
+  int patches_kept = 2;
   // Stop when a level lowers min G by less than this fraction of min G
   // ("the change in the smallest integral geodesic is less than a
   // threshold", 4.5). Default 1e-3.
@@ -98,9 +112,10 @@ struct SurfaceCentre {
 // farthest-point sampling (patches are the Voronoi cells of the centres
 // under graph distance), compute G at each centre (and, when
 // approximation_guided, at the minimum of the approximate G field), then
-// recurse into the patch around the best vertex (its cell plus the margin up
-// to the sampling radius, so a minimum just across a cell border is not
-// lost), until the change in min G or the patch area is small. Starts from
+// recurse into the patch around the best vertices (patches_kept of them;
+// each one's cell plus the margin up to the sampling radius, so a minimum
+// just across a cell border is not lost), until the change in min G or the
+// patch area is small. Starts from
 // a vertex of the largest component. Returns vertex -1 for a graph with no
 // vertex. Cost: `sweeps` Dijkstra sweeps (about 20-30 with the defaults)
 // plus O(sweeps * n) arithmetic; memory sweeps * n floats. Not thread-safe
