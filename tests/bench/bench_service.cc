@@ -1,0 +1,268 @@
+// tpr-indexer service benchmarks:
+//  * BM_KnnGrpcVsInProcess/N: a 10-NN query over N stored models, timed
+//    side by side for the same query on the same IndexerCore: in-process
+//    (IndexerCore::StartSearch, no wire) and through gRPC on loopback (a
+//    streamed Search read to its end). Counters: p50 of each and p50 of the
+//    per-query difference (the wire's added latency; target <= 1 ms).
+//  * BM_ReopenDataDir/N: reopening a data dir of N models with a persisted
+//    VP-tree (target: seconds for 100k, not a rebuild).
+//  * BM_BatchUpsertIngest/N/durable: streaming BatchUpsert of N models into
+//    a fresh data dir, durable (synced group commits) or not, items/s
+//    (target >= 5,000 signatures/s durable).
+//
+//   bench_service --benchmark_filter='BM_KnnGrpcVsInProcess/10000'
+//                 --benchmark_repetitions=3
+//
+// Signatures: tests/indexer/signature_testing.h, clustered classes, 30
+// features x 20 bands (the paper's average size).
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <stdlib.h>
+
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+
+#include "absl/strings/str_cat.h"
+#include "common/server_lifecycle.h"
+#include "indexer/service/indexer_core.h"
+#include "indexer/service/indexer_service.h"
+#include "tests/indexer/signature_testing.h"
+#include "tpr/v1/indexer.grpc.pb.h"
+
+namespace tpr::indexer {
+namespace {
+
+tpr::v1::Signature ToWire(const tpr::index::Signature& s) {
+  tpr::v1::Signature out;
+  for (size_t i = 0; i < s.features.size(); ++i) {
+    const tpr::index::Feature& f = s.features[i];
+    tpr::v1::Feature* w = out.add_features();
+    w->set_kind(i % 2 == 0 ? tpr::v1::FEATURE_KIND_POINT : tpr::v1::FEATURE_KIND_RING);
+    w->set_weight(f.weight);
+    w->set_integral_geodesic(f.g);
+    for (double x : f.k) w->add_curvature(x);
+    for (double x : f.a) w->add_area(x);
+    for (double x : f.h) w->add_distance(x);
+  }
+  return out;
+}
+
+std::vector<tpr::v1::UpsertRequest> Requests(int n, uint64_t seed, const std::string& prefix) {
+  tpr::index::testing::SignatureGeneratorOptions o;
+  o.seed = seed;
+  o.classes = 20;
+  tpr::index::testing::SignatureGenerator gen(o);
+  std::vector<tpr::v1::UpsertRequest> out(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    tpr::v1::Model* m = out[static_cast<size_t>(i)].mutable_model();
+    m->set_id(absl::StrCat(prefix, i));
+    m->set_label(absl::StrCat("class", i % 20));
+    *m->mutable_signature() = ToWire(gen.Next());
+  }
+  return out;
+}
+
+std::string FreshDir(const std::string& tag) {
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / ("tpr-bench-" + tag + ".XXXXXX")).string();
+  return mkdtemp(pattern.data()) ? pattern : std::string();
+}
+
+// A served IndexerCore holding N models with a settled tree, built once per
+// N and kept for the process (building 10k trees costs seconds).
+struct Served {
+  std::string dir;
+  std::unique_ptr<IndexerCore> core;
+  std::unique_ptr<IndexerService> service;
+  tpr::common::ServerOptions server_options;
+  std::unique_ptr<grpc::Server> server;
+  std::unique_ptr<tpr::v1::Indexer::Stub> stub;
+  std::vector<tpr::v1::SearchRequest> queries;
+};
+
+Served* ServedWith(int n) {
+  static std::map<int, std::unique_ptr<Served>>* cache = new std::map<int, std::unique_ptr<Served>>;
+  auto& slot = (*cache)[n];
+  if (slot) return slot.get();
+  slot = std::make_unique<Served>();
+  Served& s = *slot;
+  s.dir = FreshDir("knn");
+  CoreOptions options;
+  options.data_dir = s.dir;
+  options.persist_interval_ms = 0;
+  s.core = std::move(*IndexerCore::Open(options));
+  IndexerCore::BatchWriter batch(s.core.get());
+  for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
+    if (!batch.Add(std::move(r)).ok()) std::abort();
+  }
+  if (!batch.Finish().ok()) std::abort();
+  s.core->WaitForRebuild();
+  s.service = std::make_unique<IndexerService>(s.core.get(), ServiceOptions{});
+  auto started = tpr::common::StartServer(s.server_options, {s.service.get()});
+  if (!started.ok()) std::abort();
+  s.server = std::move(started->server);
+  s.stub = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
+      absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+  for (tpr::v1::UpsertRequest& r : Requests(64, 99, "q")) {
+    tpr::v1::SearchRequest q;
+    *q.mutable_signature() = r.model().signature();
+    q.set_k(10);
+    s.queries.push_back(std::move(q));
+  }
+  return slot.get();
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1))];
+}
+
+void BM_KnnGrpcVsInProcess(benchmark::State& state) {
+  Served* s = ServedWith(static_cast<int>(state.range(0)));
+  std::vector<double> local_us, grpc_us, added_us;
+  size_t i = 0;
+  int64_t neighbours = 0;
+  int64_t emds = 0;
+  for (auto _ : state) {
+    const tpr::v1::SearchRequest& q = s->queries[i++ % s->queries.size()];
+    auto t0 = std::chrono::steady_clock::now();
+    auto session = s->core->StartSearch(q, nullptr);
+    while (auto n = (*session)->Next()) benchmark::DoNotOptimize(n->distance());
+    auto t1 = std::chrono::steady_clock::now();
+    emds += (*session)->Stats().emd_computations();
+    grpc::ClientContext context;
+    auto reader = s->stub->Search(&context, q);
+    tpr::v1::SearchResponse response;
+    while (reader->Read(&response)) neighbours += response.has_neighbor() ? 1 : 0;
+    if (!reader->Finish().ok()) state.SkipWithError("search failed");
+    auto t2 = std::chrono::steady_clock::now();
+    const double a = std::chrono::duration<double, std::micro>(t1 - t0).count();
+    const double b = std::chrono::duration<double, std::micro>(t2 - t1).count();
+    local_us.push_back(a);
+    grpc_us.push_back(b);
+    added_us.push_back(b - a);
+  }
+  state.counters["inproc_p50_us"] = Percentile(local_us, 0.5);
+  state.counters["grpc_p50_us"] = Percentile(grpc_us, 0.5);
+  state.counters["added_p50_us"] = Percentile(added_us, 0.5);
+  state.counters["added_p90_us"] = Percentile(added_us, 0.9);
+  state.counters["emds_per_query"] =
+      benchmark::Counter(static_cast<double>(emds), benchmark::Counter::kAvgIterations);
+  state.counters["neighbours"] = benchmark::Counter(static_cast<double>(neighbours),
+                                                    benchmark::Counter::kAvgIterations);
+}
+BENCHMARK(BM_KnnGrpcVsInProcess)->Arg(1000)->Arg(10000)->Unit(benchmark::kMicrosecond)
+    ->UseRealTime();
+
+void BM_BatchUpsertIngest(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const bool durable = state.range(1) != 0;
+  const std::vector<tpr::v1::UpsertRequest> requests = Requests(n, 11, "b");
+  int64_t items = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const std::string dir = FreshDir("ingest");
+    CoreOptions options;
+    options.data_dir = dir;
+    options.persist_interval_ms = 0;
+    options.storage.sync_writes = durable;
+    auto core = std::move(*IndexerCore::Open(options));
+    IndexerService service(core.get(), ServiceOptions{});
+    tpr::common::ServerOptions server_options;
+    auto started = tpr::common::StartServer(server_options, {&service});
+    if (!started.ok()) std::abort();
+    auto stub = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
+        absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+    state.ResumeTiming();
+
+    grpc::ClientContext context;
+    tpr::v1::BatchUpsertResponse response;
+    auto writer = stub->BatchUpsert(&context, &response);
+    for (const tpr::v1::UpsertRequest& r : requests) writer->Write(r);
+    writer->WritesDone();
+    if (!writer->Finish().ok() || response.written() != n) state.SkipWithError("ingest failed");
+    items += n;
+
+    state.PauseTiming();
+    stub.reset();
+    tpr::common::ShutdownGracefully(*started->server, server_options);
+    started->server.reset();
+    core.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+    state.ResumeTiming();
+  }
+  state.SetItemsProcessed(items);
+}
+BENCHMARK(BM_BatchUpsertIngest)
+    ->Args({2000, 1})
+    ->Args({2000, 0})
+    ->Args({10000, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// A data dir holding N models and their persisted VP-tree, made once: the
+// models are written straight to Storage, then the first IndexerCore::Open
+// builds the tree once and persists it.
+std::string DataDirWith(int n) {
+  static std::map<int, std::string>* cache = new std::map<int, std::string>;
+  std::string& dir = (*cache)[n];
+  if (!dir.empty()) return dir;
+  dir = FreshDir("reopen");
+  {
+    StorageOptions storage_options;
+    storage_options.sync_writes = false;  // set-up only; not what is timed
+    auto storage = std::move(*Storage::Open(dir, storage_options));
+    constexpr int kChunk = 1000;
+    for (int begin = 0; begin < n; begin += kChunk) {
+      std::vector<tpr::v1::UpsertRequest> chunk =
+          Requests(std::min(kChunk, n - begin), 1000 + static_cast<uint64_t>(begin),
+                   absl::StrCat("r", begin, "-"));
+      std::vector<ModelWrite> writes;
+      for (tpr::v1::UpsertRequest& r : chunk) writes.push_back({r.model().id(), &r.model()});
+      if (!storage->Write(writes).ok()) std::abort();
+    }
+  }
+  CoreOptions options;
+  options.data_dir = dir;
+  options.persist_interval_ms = 0;
+  auto core = IndexerCore::Open(options);  // builds and persists the tree
+  if (!core.ok()) std::abort();
+  return dir;
+}
+
+// BM_ReopenDataDir/N: IndexerCore::Open of a data dir of N models with a
+// persisted VP-tree (scan, parse, SignatureIndex::Load; no EMD), as
+// tpr-indexer does at start. The target: seconds for 100k.
+void BM_ReopenDataDir(benchmark::State& state) {
+  const std::string dir = DataDirWith(static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    CoreOptions options;
+    options.data_dir = dir;
+    options.persist_interval_ms = 0;
+    auto core = IndexerCore::Open(options);
+    if (!core.ok()) state.SkipWithError("open failed");
+    state.PauseTiming();
+    if (core.ok() && (*core)->index().size() != static_cast<size_t>(state.range(0))) {
+      state.SkipWithError("wrong model count");
+    }
+    if (core.ok()) core->reset();  // Close: nothing changed, nothing re-persisted
+    state.ResumeTiming();
+  }
+}
+BENCHMARK(BM_ReopenDataDir)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond)
+    ->UseRealTime()->Iterations(2);
+
+}  // namespace
+}  // namespace tpr::indexer
+
+BENCHMARK_MAIN();
