@@ -183,6 +183,139 @@ ArgMaxFn PickArgMax() {
   return ArgMaxScalar;
 }
 
+// Two cheapest entries of a line (Vogel's penalty), with their indices.
+struct TwoMin {
+  double m1;
+  double m2;
+  int a1;
+  int a2;
+};
+
+inline void Offer(double c, int k, TwoMin* t) {
+  const bool lt1 = c < t->m1;
+  const bool lt2 = c < t->m2;
+  t->m2 = lt1 ? t->m1 : (lt2 ? c : t->m2);
+  t->a2 = lt1 ? t->a1 : (lt2 ? k : t->a2);
+  t->m1 = lt1 ? c : t->m1;
+  t->a1 = lt1 ? k : t->a1;
+}
+
+// RowTwoMin: over j < cs of row[j] + mask[j] (mask is 0 or +inf, padded).
+void RowTwoMinScalar(const double* row, const double* mask, int cs,
+                     TwoMin* t) {
+  *t = TwoMin{kInf, kInf, -1, -1};
+  for (int j = 0; j < cs; ++j) Offer(row[j] + mask[j], j, t);
+}
+
+// ColTwoMin: for every column j < cs, over rows i < n of
+// cost[i cs + j] + row_mask[i].
+void ColTwoMinScalar(const double* cost, int cs, int n,
+                     const double* row_mask, TwoMin* out) {
+  for (int j = 0; j < cs; ++j) out[j] = TwoMin{kInf, kInf, -1, -1};
+  for (int i = 0; i < n; ++i) {
+    const double* row = cost + static_cast<size_t>(i) * cs;
+    for (int j = 0; j < cs; ++j) Offer(row[j] + row_mask[i], i, &out[j]);
+  }
+}
+
+#ifdef TPR_HAVE_X86_PRICING
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+// Lane-wise two-minimum: 8 independent (m1, m2) pairs updated with masked
+// blends, indices carried as doubles (exact for k < 2^53).
+struct Lanes {
+  __m512d m1, m2, i1, i2;
+};
+
+__attribute__((target("avx512f"))) inline void OfferLanes(__m512d c,
+                                                         __m512d idx,
+                                                         Lanes* l) {
+  const __mmask8 lt1 = _mm512_cmp_pd_mask(c, l->m1, _CMP_LT_OQ);
+  const __mmask8 lt2 = _mm512_cmp_pd_mask(c, l->m2, _CMP_LT_OQ);
+  l->m2 = _mm512_mask_blend_pd(lt1, _mm512_mask_blend_pd(lt2, l->m2, c), l->m1);
+  l->i2 =
+      _mm512_mask_blend_pd(lt1, _mm512_mask_blend_pd(lt2, l->i2, idx), l->i1);
+  l->m1 = _mm512_mask_blend_pd(lt1, l->m1, c);
+  l->i1 = _mm512_mask_blend_pd(lt1, l->i1, idx);
+}
+
+__attribute__((target("avx512f"))) void RowTwoMinAvx512(const double* row,
+                                                       const double* mask,
+                                                       int cs, TwoMin* t) {
+  Lanes l{_mm512_set1_pd(kInf), _mm512_set1_pd(kInf), _mm512_set1_pd(-1),
+          _mm512_set1_pd(-1)};
+  __m512d idx = _mm512_set_pd(7, 6, 5, 4, 3, 2, 1, 0);
+  const __m512d step = _mm512_set1_pd(8);
+  for (int j0 = 0; j0 < cs; j0 += 8) {
+    OfferLanes(
+        _mm512_add_pd(_mm512_loadu_pd(row + j0), _mm512_loadu_pd(mask + j0)),
+        idx, &l);
+    idx = _mm512_add_pd(idx, step);
+  }
+  alignas(64) double m1[8], m2[8], i1[8], i2[8];
+  _mm512_store_pd(m1, l.m1);
+  _mm512_store_pd(m2, l.m2);
+  _mm512_store_pd(i1, l.i1);
+  _mm512_store_pd(i2, l.i2);
+  *t = TwoMin{kInf, kInf, -1, -1};
+  for (int k = 0; k < 8; ++k) {
+    Offer(m1[k], static_cast<int>(i1[k]), t);
+    Offer(m2[k], static_cast<int>(i2[k]), t);
+  }
+}
+
+__attribute__((target("avx512f"))) void ColTwoMinAvx512(
+    const double* cost, int cs, int n, const double* row_mask, TwoMin* out) {
+  for (int j0 = 0; j0 < cs; j0 += 8) {
+    Lanes l{_mm512_set1_pd(kInf), _mm512_set1_pd(kInf), _mm512_set1_pd(-1),
+            _mm512_set1_pd(-1)};
+    for (int i = 0; i < n; ++i) {
+      const __m512d c =
+          _mm512_add_pd(_mm512_loadu_pd(cost + static_cast<size_t>(i) * cs + j0),
+                        _mm512_set1_pd(row_mask[i]));
+      OfferLanes(c, _mm512_set1_pd(i), &l);
+    }
+    alignas(64) double m1[8], m2[8], i1[8], i2[8];
+    _mm512_store_pd(m1, l.m1);
+    _mm512_store_pd(m2, l.m2);
+    _mm512_store_pd(i1, l.i1);
+    _mm512_store_pd(i2, l.i2);
+    for (int k = 0; k < 8; ++k) {
+      out[j0 + k] = TwoMin{m1[k], m2[k], static_cast<int>(i1[k]),
+                           static_cast<int>(i2[k])};
+    }
+  }
+}
+#pragma GCC diagnostic pop
+#endif
+
+using RowTwoMinFn = void (*)(const double*, const double*, int, TwoMin*);
+using ColTwoMinFn = void (*)(const double*, int, int, const double*, TwoMin*);
+
+bool HaveAvx512() {
+#ifdef TPR_HAVE_X86_PRICING
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f");
+#else
+  return false;
+#endif
+}
+
+RowTwoMinFn PickRowTwoMin() {
+#ifdef TPR_HAVE_X86_PRICING
+  if (HaveAvx512()) return RowTwoMinAvx512;
+#endif
+  return RowTwoMinScalar;
+}
+
+ColTwoMinFn PickColTwoMin() {
+#ifdef TPR_HAVE_X86_PRICING
+  if (HaveAvx512()) return ColTwoMinAvx512;
+#endif
+  return ColTwoMinScalar;
+}
+
 using PriceFn = bool (*)(const double*, int, int, const double*,
                          const double*, double, int*, int*);
 
@@ -237,7 +370,8 @@ struct EmdSolver::Impl {
   std::vector<int> col_second;
   std::vector<double> pen;  // rows at [0, np), columns at [np, np + cs)
   std::vector<double> row_mask;
-  std::vector<double> col_mask;
+  std::vector<double> col_mask;  // cs entries
+  std::vector<TwoMin> two_min;
   std::vector<int> cell_i;
   std::vector<int> cell_j;
   std::vector<double> cell_f;
@@ -267,9 +401,12 @@ struct EmdSolver::Impl {
       col_open.resize(mm);
       col_best.resize(mm);
       col_second.resize(mm);
-      col_mask.resize(mm);
     }
-    if (vpad.size() < static_cast<size_t>(stride)) vpad.resize(stride);
+    if (vpad.size() < static_cast<size_t>(stride)) {
+      vpad.resize(stride);
+      col_mask.resize(stride);
+      two_min.resize(stride);
+    }
     const size_t pen_size = static_cast<size_t>((nn + 7) / 8 * 8 + stride);
     if (pen.size() < pen_size) pen.resize(pen_size);
     if (parent.size() < nodes) {
@@ -362,23 +499,15 @@ void EmdSolver::Impl::InitialBasis() {
   // moves (the comparisons are unpredictable; branches cost more than the
   // whole scan).
   for (int i = 0; i < n; ++i) row_mask[i] = row_open[i] ? 0.0 : kInf;
-  for (int j = 0; j < m; ++j) col_mask[j] = col_open[j] ? 0.0 : kInf;
+  for (int j = 0; j < cs; ++j) col_mask[j] = j < m && col_open[j] ? 0.0 : kInf;
+  static const RowTwoMinFn row_two_min = PickRowTwoMin();
+  static const ColTwoMinFn col_two_min = PickColTwoMin();
   auto row_scan = [&](int i) {
-    const double* row = &cost[static_cast<size_t>(i) * cs];
-    double m1 = kInf, m2 = kInf;
-    int a1 = -1, a2 = -1;
-    for (int j = 0; j < m; ++j) {
-      const double c = row[j] + col_mask[j];
-      const bool lt1 = c < m1;
-      const bool lt2 = c < m2;
-      m2 = lt1 ? m1 : (lt2 ? c : m2);
-      a2 = lt1 ? a1 : (lt2 ? j : a2);
-      m1 = lt1 ? c : m1;
-      a1 = lt1 ? j : a1;
-    }
-    row_best[i] = a1;
-    row_second[i] = a2;
-    pen[i] = m2 - m1;  // +inf when one open cell is left: forced
+    TwoMin t;
+    row_two_min(&cost[static_cast<size_t>(i) * cs], col_mask.data(), cs, &t);
+    row_best[i] = t.a1;
+    row_second[i] = t.a2;
+    pen[i] = t.m2 - t.m1;  // +inf when one open cell is left: forced
   };
   auto col_scan = [&](int j) {
     double m1 = kInf, m2 = kInf;
@@ -404,8 +533,12 @@ void EmdSolver::Impl::InitialBasis() {
     for (int i = 0; i < n; ++i) {
       if (row_open[i]) row_scan(i);
     }
+    col_two_min(cost.data(), cs, n, row_mask.data(), two_min.data());
     for (int j = 0; j < m; ++j) {
-      if (col_open[j]) col_scan(j);
+      if (!col_open[j]) continue;
+      col_best[j] = two_min[j].a1;
+      col_second[j] = two_min[j].a2;
+      pen[np + j] = two_min[j].m2 - two_min[j].m1;
     }
   }
   while (open_rows > 0 && open_cols > 0) {
