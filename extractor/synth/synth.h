@@ -97,12 +97,14 @@ absl::StatusOr<extract::Mesh> GenerateShape(absl::string_view class_name,
                                             int pose_index,
                                             const ShapeOptions& options);
 
-// StarSkeleton returns a ball with `arms` straight cylindrical arms of equal
-// length, spread evenly over the sphere and bent a little by the pose
-// (pose index 0 is the rest pose when pose_amount == 0). Each arm ends in
-// one tip far from the centre: arm tips are the `arms` points farthest from
-// the ball centre. Errors: INVALID_ARGUMENT unless 2 <= arms <= 8, or for
-// options out of range. Thread-safe.
+// StarSkeleton returns a ball (radius 0.35) with `arms` cylindrical arms
+// (radius 0.1, reaching 1.2 from the centre) spread evenly over the sphere;
+// pose `pose_index` bends each arm's outer half by up to 20 degrees
+// (pose_amount 0 keeps them straight). Each arm ends in one tip far from the
+// centre: the arm tips are the `arms` points farthest from the ball centre.
+// Bones: 0 is the ball; arm i is bones 1 + 2i (inner) and 2 + 2i (outer).
+// Errors: INVALID_ARGUMENT unless 2 <= arms <= 8, or for options out of
+// range. Thread-safe.
 absl::StatusOr<Skeleton> StarSkeleton(int arms, int pose_index,
                                       const ShapeOptions& options);
 
