@@ -2,15 +2,18 @@
 //
 //   tpr-synth --out DIR [--classes N] [--poses N] [--vertices N] [--seed S]
 //             [--format off|ply|ply-ascii] [--rigid] [--pose-amount A]
+//             [--jobs J]
 //
 // Output: DIR/<class>/<class>_<pose>.<ext> and DIR/MANIFEST.txt with one line
 // "<relative path> <class>" per mesh. The same flags give byte-identical
 // files.
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "CLI/CLI.hpp"
@@ -28,6 +31,7 @@ int main(int argc, char** argv) {
   std::string format = "off";
   bool rigid = false;
   double pose_amount = 1.0;
+  int jobs = 1;
   const std::vector<std::string> names = tpr::synth::ClassNames();
   app.add_option("--out", out_dir, "output directory (created)")->required();
   app.add_option("--classes", classes,
@@ -46,6 +50,9 @@ int main(int argc, char** argv) {
   app.add_option("--pose-amount", pose_amount,
                  "fraction of the joint limits poses use (0 = rest pose)")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--jobs", jobs,
+                 "meshes generated in parallel (output does not depend on it)")
+      ->check(CLI::Range(1, 256));
   CLI11_PARSE(app, argc, argv);
 
   tpr::extract::MeshWriteOptions write;
@@ -71,46 +78,87 @@ int main(int argc, char** argv) {
                  ec.message().c_str());
     return 1;
   }
-  std::string manifest;
-  const auto start = std::chrono::steady_clock::now();
-  int64_t total = 0;
   for (int c = 0; c < classes; ++c) {
-    const std::string& name = names[c];
-    fs::create_directories(fs::path(out_dir) / name, ec);
+    fs::create_directories(fs::path(out_dir) / names[c], ec);
     if (ec) {
       std::fprintf(stderr, "tpr-synth: cannot create %s/%s: %s\n",
-                   out_dir.c_str(), name.c_str(), ec.message().c_str());
+                   out_dir.c_str(), names[c].c_str(), ec.message().c_str());
       return 1;
     }
-    const auto class_start = std::chrono::steady_clock::now();
-    int64_t class_vertices = 0;
-    for (int p = 0; p < poses; ++p) {
-      absl::StatusOr<tpr::extract::Mesh> mesh =
-          tpr::synth::GenerateShape(name, p, options);
-      if (!mesh.ok()) {
-        std::fprintf(stderr, "tpr-synth: %s pose %d: %s\n", name.c_str(), p,
-                     std::string(mesh.status().message()).c_str());
-        return 1;
-      }
-      const std::string relative = absl::StrCat(name, "/", name, "_", p, ".", ext);
-      absl::Status written = tpr::extract::WriteMeshToFile(
-          *mesh, write, (fs::path(out_dir) / relative).string());
-      if (!written.ok()) {
-        std::fprintf(stderr, "tpr-synth: %s\n",
-                     std::string(written.message()).c_str());
-        return 1;
-      }
-      absl::StrAppend(&manifest, relative, " ", name, "\n");
-      class_vertices += static_cast<int64_t>(mesh->positions.size());
-      ++total;
-    }
-    const double seconds = std::chrono::duration<double>(
-                               std::chrono::steady_clock::now() - class_start)
-                               .count();
-    std::printf("%-18s %d meshes, %.0f vertices on average, %.2f s\n",
-                name.c_str(), poses,
-                static_cast<double>(class_vertices) / poses, seconds);
   }
+  // One task per (class, pose). Each mesh depends only on its own
+  // arguments, so workers may take tasks in any order: the files (and the
+  // manifest, written in task order) are the same for every --jobs.
+  struct Task {
+    int cls;
+    int pose;
+    std::string relative;
+    std::string error;
+    int64_t vertices = 0;
+    double seconds = 0.0;
+  };
+  std::vector<Task> tasks;
+  for (int c = 0; c < classes; ++c) {
+    for (int p = 0; p < poses; ++p) {
+      Task t;
+      t.cls = c;
+      t.pose = p;
+      t.relative = absl::StrCat(names[c], "/", names[c], "_", p, ".", ext);
+      tasks.push_back(t);
+    }
+  }
+  std::atomic<size_t> next{0};
+  std::atomic<bool> failed{false};
+  auto worker = [&] {
+    for (size_t i = next++; i < tasks.size() && !failed; i = next++) {
+      Task& t = tasks[i];
+      const auto t0 = std::chrono::steady_clock::now();
+      absl::StatusOr<tpr::extract::Mesh> mesh =
+          tpr::synth::GenerateShape(names[t.cls], t.pose, options);
+      absl::Status status = mesh.status();
+      if (status.ok()) {
+        status = tpr::extract::WriteMeshToFile(
+            *mesh, write, (fs::path(out_dir) / t.relative).string());
+      }
+      if (!status.ok()) {
+        t.error = absl::StrCat(names[t.cls], " pose ", t.pose, ": ",
+                               status.message());
+        failed = true;
+        return;
+      }
+      t.vertices = static_cast<int64_t>(mesh->positions.size());
+      t.seconds = std::chrono::duration<double>(
+                      std::chrono::steady_clock::now() - t0)
+                      .count();
+    }
+  };
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::thread> threads;
+  for (int j = 1; j < jobs; ++j) threads.emplace_back(worker);
+  worker();
+  for (std::thread& t : threads) t.join();
+  for (const Task& t : tasks) {
+    if (!t.error.empty()) {
+      std::fprintf(stderr, "tpr-synth: %s\n", t.error.c_str());
+      return 1;
+    }
+  }
+  std::string manifest;
+  for (int c = 0; c < classes; ++c) {
+    int64_t class_vertices = 0;
+    double class_seconds = 0.0;
+    for (const Task& t : tasks) {
+      if (t.cls != c) continue;
+      absl::StrAppend(&manifest, t.relative, " ", names[c], "\n");
+      class_vertices += t.vertices;
+      class_seconds += t.seconds;
+    }
+    std::printf("%-18s %d meshes, %.0f vertices on average, %.3f s per mesh\n",
+                names[c].c_str(), poses,
+                static_cast<double>(class_vertices) / poses,
+                class_seconds / poses);
+  }
+  const int64_t total = static_cast<int64_t>(tasks.size());
   std::ofstream file(fs::path(out_dir) / "MANIFEST.txt",
                      std::ios::binary | std::ios::trunc);
   file << manifest;
@@ -123,8 +171,10 @@ int main(int argc, char** argv) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
           .count();
-  std::printf("tpr-synth: %lld meshes in %.2f s (%.2f meshes/s) -> %s\n",
-              static_cast<long long>(total), seconds,
-              seconds > 0 ? total / seconds : 0.0, out_dir.c_str());
+  std::printf(
+      "tpr-synth: %lld meshes in %.2f s (%.2f meshes/s, %d job%s) -> %s\n",
+      static_cast<long long>(total), seconds,
+      seconds > 0 ? total / seconds : 0.0, jobs, jobs == 1 ? "" : "s",
+      out_dir.c_str());
   return 0;
 }
