@@ -369,7 +369,8 @@ TEST(SynthTest, StarHasOneTipPerArm) {
 TEST(SynthTest, ReloadsThroughIntakeWithIdenticalCounts) {
   ShapeOptions options;
   options.target_vertices = 2500;
-  for (const std::string name : {"bird", "quadruped_stocky"}) {
+  options.random_rigid = true;
+  for (const std::string& name : ClassNames()) {
     absl::StatusOr<Mesh> mesh = GenerateShape(name, 1, options);
     ASSERT_TRUE(mesh.ok());
     for (auto [format, in_format] :
