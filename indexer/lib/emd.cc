@@ -124,6 +124,9 @@ __attribute__((target("avx512f"))) bool PriceAvx512(
           _mm512_add_pd(_mm512_loadu_pd(row + j0), ui), _mm512_loadu_pd(v + j0));
       mn = _mm512_min_pd(mn, r);
     }
+    // Cheap vector test first: the horizontal reduction is only needed when
+    // some lane beats the best so far.
+    if (_mm512_cmp_pd_mask(mn, _mm512_set1_pd(best), _CMP_LT_OQ) == 0) continue;
     const double rmin = _mm512_reduce_min_pd(mn);
     if (rmin < best) {
       for (int j0 = 0; j0 < cs; j0 += 8) {
@@ -327,17 +330,6 @@ PriceFn PickPricing() {
   return PriceScalar;
 }
 
-// Largest entry of the n x m block, for the optimality tolerance.
-TPR_MULTIVERSION
-double MaxCost(const double* cost, int cs, int n, int m) {
-  double mx = 0.0;
-  for (int i = 0; i < n; ++i) {
-    const double* row = cost + static_cast<size_t>(i) * cs;
-    for (int j = 0; j < m; ++j) mx = row[j] > mx ? row[j] : mx;
-  }
-  return mx;
-}
-
 }  // namespace
 
 struct EmdSolver::Impl {
@@ -382,6 +374,7 @@ struct EmdSolver::Impl {
   std::vector<int> path;
 
   EmdStats stats;
+  double max_cost = 0.0;  // upper bound of the cost entries
 
   void Reserve(int nn, int mm, int stride) {
     const size_t nodes = static_cast<size_t>(nn + mm + 1);
@@ -730,7 +723,7 @@ double EmdSolver::Impl::Solve() {
   stats = EmdStats{};
   const int root = n + m;
   InitialBasis();
-  const double tol = 1e-12 * std::max(MaxCost(cost.data(), cs, n, m), 1e-300);
+  const double tol = 1e-12 * std::max(max_cost, 1e-300);
   // Safety net against a floating-point stall; never reached in tests (the
   // strongly feasible tree excludes cycling in exact arithmetic).
   const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
@@ -779,7 +772,7 @@ double EmdSolver::Distance(const PreparedSignature& a,
   s.m = b.size();
   s.cs = b.stride();
   s.Reserve(s.n, s.m, s.cs);
-  GroundDistanceMatrix(a, b, s.cost.data(), s.cs);
+  s.max_cost = GroundDistanceMatrix(a, b, s.cost.data(), s.cs);
   for (int i = 0; i < s.n; ++i) s.supply[i] = a.weight(i);
   for (int j = 0; j < s.m; ++j) s.demand[j] = b.weight(j);
   return s.Solve();

@@ -185,18 +185,27 @@ double GroundDistance(const PreparedSignature& a, int i,
 
 namespace {
 
-using KernelFn = void (*)(const PreparedSignature&, const PreparedSignature&,
-                          double*, int);
+// Kernels return the largest entry they wrote (padding included), which the
+// EMD uses to scale its optimality tolerance at no extra pass.
+using KernelFn = double (*)(const PreparedSignature&, const PreparedSignature&,
+                            double*, int);
 
 // Portable kernel, also used when the two signatures have different band
 // counts (never the case within one index).
-void KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
-                  double* out, int out_stride) {
+double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
+                    double* out, int out_stride) {
+  double mx = 0.0;
   for (int i = 0; i < a.size(); ++i) {
     for (int j = 0; j < b.size(); ++j) {
-      out[static_cast<size_t>(i) * out_stride + j] = GroundDistance(a, i, b, j);
+      const double d = GroundDistance(a, i, b, j);
+      out[static_cast<size_t>(i) * out_stride + j] = d;
+      mx = std::max(mx, d);
+    }
+    for (int j = b.size(); j < b.stride(); ++j) {
+      out[static_cast<size_t>(i) * out_stride + j] = 0.0;
     }
   }
+  return mx;
 }
 
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -211,7 +220,7 @@ void KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // matrix is symmetric under swapping a and b exactly: (x - y)^2 and
 // (y - x)^2 are the same double and fma(d, d, s) depends on d only
 // through d * d.
-__attribute__((target("avx2,fma"))) void KernelAvx2(
+__attribute__((target("avx2,fma"))) double KernelAvx2(
     const PreparedSignature& a, const PreparedSignature& b, double* out,
     int out_stride) {
   const int bands = a.bands();
@@ -220,6 +229,7 @@ __attribute__((target("avx2,fma"))) void KernelAvx2(
   const double* ac = a.coords();
   const double* bc = b.coords();
   const __m256d sign = _mm256_set1_pd(-0.0);
+  __m256d mx = _mm256_setzero_pd();
   for (int i = 0; i < a.size(); ++i) {
     double* row = out + static_cast<size_t>(i) * out_stride;
     for (int j0 = 0; j0 < b.stride(); j0 += 8) {
@@ -262,15 +272,20 @@ __attribute__((target("avx2,fma"))) void KernelAvx2(
                          _mm256_sqrt_pd(h1));
       _mm256_storeu_pd(row + j0, g0);
       _mm256_storeu_pd(row + j0 + 4, g1);
+      mx = _mm256_max_pd(mx, _mm256_max_pd(g0, g1));
     }
   }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, mx);
+  return std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3]));
 }
 
 // GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized on its own
 // _mm512_undefined_pd (a known false positive).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-__attribute__((target("avx512f"))) void KernelAvx512(
+#pragma GCC diagnostic ignored "-Wuninitialized"
+__attribute__((target("avx512f"))) double KernelAvx512(
     const PreparedSignature& a, const PreparedSignature& b, double* out,
     int out_stride) {
   const int bands = a.bands();
@@ -278,6 +293,7 @@ __attribute__((target("avx512f"))) void KernelAvx512(
   const size_t bs = static_cast<size_t>(b.stride());
   const double* ac = a.coords();
   const double* bc = b.coords();
+  __m512d mx = _mm512_setzero_pd();
   for (int i = 0; i < a.size(); ++i) {
     double* row = out + static_cast<size_t>(i) * out_stride;
     for (int j0 = 0; j0 < b.stride(); j0 += 8) {
@@ -305,8 +321,10 @@ __attribute__((target("avx512f"))) void KernelAvx512(
                                       _mm512_sqrt_pd(ar)),
                         _mm512_sqrt_pd(h));
       _mm512_storeu_pd(row + j0, g);
+      mx = _mm512_max_pd(mx, g);
     }
   }
+  return _mm512_reduce_max_pd(mx);
 }
 #pragma GCC diagnostic pop
 #endif
@@ -324,16 +342,13 @@ KernelFn PickKernel() {
 
 }  // namespace
 
-void GroundDistanceMatrix(const PreparedSignature& a,
-                          const PreparedSignature& b, double* out,
-                          int out_stride) {
+double GroundDistanceMatrix(const PreparedSignature& a,
+                            const PreparedSignature& b, double* out,
+                            int out_stride) {
   assert(out_stride >= b.stride());
   static const KernelFn kernel = PickKernel();
-  if (a.bands() != b.bands()) {
-    KernelScalar(a, b, out, out_stride);
-    return;
-  }
-  kernel(a, b, out, out_stride);
+  if (a.bands() != b.bands()) return KernelScalar(a, b, out, out_stride);
+  return kernel(a, b, out, out_stride);
 }
 
 }  // namespace tpr::index

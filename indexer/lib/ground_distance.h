@@ -152,10 +152,13 @@ double GroundDistance(const PreparedSignature& a, int i,
 // b.stride()) are written with unspecified finite values. This is the
 // vectorized kernel (AVX-512 or AVX2, chosen at run time) the EMD uses;
 // entries equal GroundDistance to rounding (about 1e-15 relative) and the
-// matrix of (b, a) is exactly the transpose of that of (a, b). Cost O(a.size() x b.size() x bands); thread-safe.
-void GroundDistanceMatrix(const PreparedSignature& a,
-                          const PreparedSignature& b, double* out,
-                          int out_stride);
+// matrix of (b, a) is exactly the transpose of that of (a, b). Returns an
+// upper bound of the entries (the largest value written, padding
+// included), for scaling tolerances. Cost O(a.size() x b.size() x bands);
+// thread-safe.
+double GroundDistanceMatrix(const PreparedSignature& a,
+                            const PreparedSignature& b, double* out,
+                            int out_stride);
 
 }  // namespace tpr::index
 
