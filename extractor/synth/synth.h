@@ -118,9 +118,11 @@ absl::StatusOr<extract::Mesh> GenerateStar(int arms,
 // Preconditions: the skeleton is a tree whose non-adjacent bones do not
 // touch. Errors: INVALID_ARGUMENT for an empty skeleton, a bad parent index,
 // a non-finite coordinate, a radius <= 0 or target_vertices outside
-// [200, 1,000,000]; INTERNAL if the surface is not one genus-0 component
-// even on a refined grid. Thread-safe. Cost: linear in target_vertices plus
-// the number of grid cells the thinnest bone forces (see synth.cc).
+// [200, 1,000,000]; RESOURCE_EXHAUSTED if the grid the thinnest bone needs
+// would exceed 60M points; INTERNAL if the surface is not one genus-0
+// component even on a refined grid (e.g. touching bones close a loop).
+// Thread-safe. Cost: linear in target_vertices plus the grid the thinnest
+// bone forces (spacing = its radius / 1.25; see polygonize.cc).
 absl::StatusOr<extract::Mesh> MeshFromSkeleton(const Skeleton& skeleton,
                                                int target_vertices);
 
