@@ -35,9 +35,9 @@ struct GeodesicOptions {
   // 10k vertices, mean relative error 6-8% -> 0.6-1.5%, max 21-22% -> 3-5%;
   // open tube, mean 10% -> 2.3%, max 18% -> 4.6%. Cost: twice the arcs,
   // about 1.6x the time per sweep (BM_Dijkstra vs BM_DijkstraPlainEdges).
-  // The paper uses plain Dijkstra (4.2); the tighter metric makes G, ring
-  // lengths and geodesic bands depend less on how the mesh is tessellated,
-  // worth the sweep cost. Only distances change: one_ring() never includes
+  // The paper uses plain Dijkstra (4.2); the zig-zag error depends on edge
+  // directions, hence on tessellation and pose, and removing most of it
+  // from G, ring lengths and geodesic bands is worth the sweep cost. Only distances change: one_ring() never includes
   // these arcs. Default true.
   bool unfold_opposite_edges = true;
 };
@@ -54,7 +54,7 @@ class MeshGraph {
   // in [0, positions.size()) and every coordinate is finite (intake,
   // mesh_io.h, guarantees it; use Create for unchecked meshes). Vertices
   // without triangles become isolated vertices of area 0. Thread-safe.
-  // Cost O(n + f log f) time, O(e) memory.
+  // Cost O(n + f) time (about 5 sweeps' worth), O(e) memory.
   static MeshGraph Build(const Mesh& mesh, const GeodesicOptions& options = {});
 
   // Create checks the precondition of Build and then builds. Errors:

@@ -22,14 +22,16 @@ namespace tpr::extract {
 // tpr_synth against the brute-force minimum (integral_geodesic_test.cc) and
 // land near that. Error of the min G found, as a fraction of (MAX G - MIN G)
 // (the scale of Eq. 5), over the 10 classes at 1200 vertices, poses 0, 2, 5
-// (used for tuning): mean 0.09%, worst 0.49%, 23.3 sweeps on average
-// including the double sweep; poses 1, 3, 7 (held out): mean 0.10%, worst
-// 0.56%, 22.5 sweeps; at 3000 vertices (poses 0, 2, 5) mean 0.13%, worst
-// 0.71%, 22.8 sweeps. For comparison on poses 0, 2, 5: the paper's scheme
-// alone (one kept patch, no approximation, stop at the first level that
-// does not improve) mean 2.8%, worst 39% (an octopus whose first centres
-// are all arm tips); with the approximation but one kept patch, worst 1.7%
-// (a biped whose torso has near-equal minima front and back).
+// (used for tuning): mean 0.10%, worst 0.94%, 23.8 sweeps on average
+// including the double sweep; poses 1, 3, 7 (held out): mean 0.11%, worst
+// 0.89%, 24.7 sweeps; MAX G short of the true maximum by at most 0.5%.
+// at 3000 vertices (poses 0, 2, 5) mean 0.14%, worst 1.2%, 24.7 sweeps,
+// MAX G within 0.4%. For comparison on
+// poses 0, 2, 5: the paper's scheme alone (one kept patch, no
+// approximation, stop at the first level that does not improve) mean 2.8%,
+// worst 39% (an octopus whose first centres are all arm tips); with the
+// approximation but one kept patch, worst 1.7% (a biped whose torso has
+// near-equal minima front and back).
 struct IntegralGeodesicOptions {
   // Patches the whole surface is first split into (farthest-point centres;
   // the double sweep's far_a is the first). Default 8.
@@ -91,11 +93,13 @@ struct SurfaceCentre {
   // G(vertex), exact (one full sweep): MIN_{q in S} G(q) of Eqs. 1 and 5.
   double g_min = 0.0;
   // MAX G estimate for Eqs. 1 and 5: the largest exact G among every vertex
-  // the search swept (the first level's farthest-point centres start at a
+  // the search swept. The first level's farthest-point centres start at a
   // double-sweep extreme and take the shape's extremities first, where G
-  // peaks) and the seeds given. A lower bound of the true maximum; callers
-  // should raise it with G of their own candidates (topological points,
-  // 4.4) so that Eq. 1 is never negative.
+  // peaks, and (refine_max) one last sweep goes to the maximum of Hilaga's
+  // approximate G built from all sweeps. A lower bound of the true maximum
+  // (measured within 0.5% of the range on generated shapes); callers should
+  // raise it with G of their own candidates (topological points, 4.4) so
+  // that Eq. 1 is never negative.
   double g_max = 0.0;
   int32_t g_max_vertex = -1;
   // Dijkstra sweeps spent by the search (psi of Table 4).
