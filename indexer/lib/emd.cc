@@ -64,16 +64,18 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// Dantzig pricing: the real arc of most negative reduced cost
-// c_ij + u_i - v_j, first in row-major order on ties. `v` is padded to
-// `cs` entries with -inf so padded columns never qualify. Rows are scanned
-// for their minimum only (vectorizable: no argmin in the hot loop); a row
-// that beats the best so far is rescanned for its index, with the same
-// expression (c + u) - v, hence the same bits.
-bool PriceScalar(const double* cost, int cs, int n, const double* u,
-                 const double* v, double tol, int* ei, int* ej) {
-  double best = -tol;
-  bool found = false;
+// Candidate-list pricing (a major/minor scheme). A major pass scans all
+// n x m reduced costs c_ij + u_i - v_j and records, for every row with a
+// negative one, its most negative column: the candidates. Minor passes
+// then price only the candidates, with current potentials, and pivot on
+// the most negative, until none is negative; then the next major pass. The
+// first pivot of a major pass is Dantzig's choice; later ones cost O(n)
+// instead of O(n m). Optimality is declared only by a major pass that finds
+// no negative reduced cost, so the rule is exact. `v` is padded to `cs`
+// entries with -inf so padded columns never qualify.
+int CollectScalar(const double* cost, int cs, int n, const double* u,
+                  const double* v, double tol, int* cand_i, int* cand_j) {
+  int count = 0;
   for (int i = 0; i < n; ++i) {
     const double* row = cost + static_cast<size_t>(i) * cs;
     const double ui = u[i];
@@ -86,35 +88,33 @@ bool PriceScalar(const double* cost, int cs, int n, const double* u,
     }
     double rmin = lm[0];
     for (int l = 1; l < 8; ++l) rmin = lm[l] < rmin ? lm[l] : rmin;
-    if (rmin < best) {
+    if (rmin < -tol) {
       for (int j = 0; j < cs; ++j) {
         if ((row[j] + ui) - v[j] == rmin) {
-          *ei = i;
-          *ej = j;
+          cand_i[count] = i;
+          cand_j[count] = j;
+          ++count;
           break;
         }
       }
-      best = rmin;
-      found = true;
     }
   }
-  return found;
+  return count;
 }
 
 #if defined(__GNUC__) && defined(__x86_64__)
 #define TPR_HAVE_X86_PRICING 1
-// Why intrinsics: pricing is the hot loop of the simplex (one full scan of
-// the n x m reduced costs per pivot) and the build's baseline is SSE2.
-// GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized on its own
-// _mm512_undefined_pd (a known false positive).
+// Why intrinsics: pricing is the hot loop of the simplex and the build's
+// baseline is SSE2. GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized
+// on its own _mm512_undefined_pd (a known false positive).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
-__attribute__((target("avx512f"))) bool PriceAvx512(
+__attribute__((target("avx512f"))) int CollectAvx512(
     const double* cost, int cs, int n, const double* u, const double* v,
-    double tol, int* ei, int* ej) {
-  double best = -tol;
-  bool found = false;
+    double tol, int* cand_i, int* cand_j) {
+  int count = 0;
+  const __m512d neg_tol = _mm512_set1_pd(-tol);
   for (int i = 0; i < n; ++i) {
     const double* row = cost + static_cast<size_t>(i) * cs;
     const __m512d ui = _mm512_set1_pd(u[i]);
@@ -124,31 +124,35 @@ __attribute__((target("avx512f"))) bool PriceAvx512(
           _mm512_add_pd(_mm512_loadu_pd(row + j0), ui), _mm512_loadu_pd(v + j0));
       mn = _mm512_min_pd(mn, r);
     }
-    // Cheap vector test first: the horizontal reduction is only needed when
-    // some lane beats the best so far.
-    if (_mm512_cmp_pd_mask(mn, _mm512_set1_pd(best), _CMP_LT_OQ) == 0) continue;
-    const double rmin = _mm512_reduce_min_pd(mn);
-    if (rmin < best) {
-      for (int j0 = 0; j0 < cs; j0 += 8) {
-        const __m512d r =
-            _mm512_sub_pd(_mm512_add_pd(_mm512_loadu_pd(row + j0), ui),
-                          _mm512_loadu_pd(v + j0));
-        const __mmask8 hit =
-            _mm512_cmp_pd_mask(r, _mm512_set1_pd(rmin), _CMP_EQ_OQ);
-        if (hit != 0) {
-          *ei = i;
-          *ej = j0 + __builtin_ctz(static_cast<unsigned>(hit));
-          break;
-        }
+    if (_mm512_cmp_pd_mask(mn, neg_tol, _CMP_LT_OQ) == 0) continue;
+    const __m512d rmin = _mm512_set1_pd(_mm512_reduce_min_pd(mn));
+    for (int j0 = 0; j0 < cs; j0 += 8) {
+      const __m512d r = _mm512_sub_pd(
+          _mm512_add_pd(_mm512_loadu_pd(row + j0), ui), _mm512_loadu_pd(v + j0));
+      const __mmask8 hit = _mm512_cmp_pd_mask(r, rmin, _CMP_EQ_OQ);
+      if (hit != 0) {
+        cand_i[count] = i;
+        cand_j[count] = j0 + __builtin_ctz(static_cast<unsigned>(hit));
+        ++count;
+        break;
       }
-      best = rmin;
-      found = true;
     }
   }
-  return found;
+  return count;
 }
 #pragma GCC diagnostic pop
 #endif
+
+using CollectFn = int (*)(const double*, int, int, const double*,
+                          const double*, double, int*, int*);
+
+CollectFn PickCollect() {
+#ifdef TPR_HAVE_X86_PRICING
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f")) return CollectAvx512;
+#endif
+  return CollectScalar;
+}
 
 // ArgMax returns the first index of the largest of v[0..len), len a
 // positive multiple of 8, no NaN.
@@ -319,16 +323,6 @@ ColTwoMinFn PickColTwoMin() {
   return ColTwoMinScalar;
 }
 
-using PriceFn = bool (*)(const double*, int, int, const double*,
-                         const double*, double, int*, int*);
-
-PriceFn PickPricing() {
-#ifdef TPR_HAVE_X86_PRICING
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) return PriceAvx512;
-#endif
-  return PriceScalar;
-}
 
 }  // namespace
 
@@ -364,6 +358,8 @@ struct EmdSolver::Impl {
   std::vector<double> row_mask;
   std::vector<double> col_mask;  // cs entries
   std::vector<TwoMin> two_min;
+  std::vector<int> cand_i;  // pricing candidates (one per row at most)
+  std::vector<int> cand_j;
   std::vector<int> cell_i;
   std::vector<int> cell_j;
   std::vector<double> cell_f;
@@ -384,6 +380,8 @@ struct EmdSolver::Impl {
     if (demand.size() < static_cast<size_t>(mm)) demand.resize(mm);
     if (rem_a.size() < static_cast<size_t>(nn)) {
       rem_a.resize(nn);
+      cand_i.resize(nn);
+      cand_j.resize(nn);
       row_open.resize(nn);
       row_best.resize(nn);
       row_second.resize(nn);
@@ -536,8 +534,9 @@ void EmdSolver::Impl::InitialBasis() {
   }
   while (open_rows > 0 && open_cols > 0) {
     // Lazy refresh: cached penalties may be stale once a cached cell's line
-    // has closed; only the line about to be used is rescanned, and the
-    // choice is made again. (Eager refreshing of every affected line cost
+    // has closed; only the line about to be used is rescanned, and only if
+    // its cheapest cell has closed (a stale second cell merely skews the
+    // penalty), and the choice is made again. (Eager refreshing of every affected line cost
     // more than the pivots it saved.) Any choice yields a valid basis: the
     // start only needs to be good, not exactly Vogel's.
     int bi = -1;
@@ -548,8 +547,7 @@ void EmdSolver::Impl::InitialBasis() {
       const int line = is_row ? k : k - np;
       if (is_row) {
         const int a1 = row_best[line];
-        const int a2 = row_second[line];
-        if (!col_open[a1] || (a2 >= 0 && !col_open[a2])) {
+        if (!col_open[a1]) {
           row_scan(line);
           continue;
         }
@@ -557,8 +555,7 @@ void EmdSolver::Impl::InitialBasis() {
         bj = a1;
       } else {
         const int a1 = col_best[line];
-        const int a2 = col_second[line];
-        if (!row_open[a1] || (a2 >= 0 && !row_open[a2])) {
+        if (!row_open[a1]) {
           col_scan(line);
           continue;
         }
@@ -728,15 +725,31 @@ double EmdSolver::Impl::Solve() {
   // strongly feasible tree excludes cycling in exact arithmetic).
   const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
   for (int j = m; j < cs; ++j) vpad[j] = -kInf;
-  static const PriceFn price = PickPricing();
-  int ei = 0;
-  int ej = 0;
+  static const CollectFn collect = PickCollect();
+  int candidates = 0;
   while (stats.pivots < max_pivots) {
-    for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
-    if (!price(cost.data(), cs, n, pi.data(), vpad.data(), tol, &ei, &ej)) {
-      break;
+    // Minor pass over the candidates.
+    double best = -tol;
+    int pick = -1;
+    for (int c = 0; c < candidates; ++c) {
+      const int i = cand_i[c];
+      const int j = cand_j[c];
+      const double rc = (cost[static_cast<size_t>(i) * cs + j] + pi[i]) - pi[n + j];
+      if (rc < best) {
+        best = rc;
+        pick = c;
+      }
     }
-    Pivot(ei, ej, (cost[static_cast<size_t>(ei) * cs + ej] + pi[ei]) - pi[n + ej]);
+    if (pick < 0) {
+      // Major pass.
+      for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
+      candidates =
+          collect(cost.data(), cs, n, pi.data(), vpad.data(), tol,
+                  cand_i.data(), cand_j.data());
+      if (candidates == 0) break;  // optimal
+      continue;
+    }
+    Pivot(cand_i[pick], cand_j[pick], best);
   }
   assert(stats.pivots < max_pivots);
   double total = 0.0;
