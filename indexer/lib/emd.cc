@@ -367,7 +367,8 @@ struct EmdSolver::Impl {
   std::vector<int> adj_fill;
   std::vector<int> adj;
   std::vector<int> queue;
-  std::vector<int> path;
+  std::vector<int> path1;
+  std::vector<int> path2;
 
   EmdStats stats;
   double max_cost = 0.0;  // upper bound of the cost entries
@@ -415,7 +416,8 @@ struct EmdSolver::Impl {
       adj_fill.resize(nodes + 1);
       adj.resize(2 * nodes);
       queue.resize(nodes);
-      path.resize(nodes);
+      path1.resize(nodes);
+      path2.resize(nodes);
     }
   }
 
@@ -471,6 +473,7 @@ void EmdSolver::Impl::InitialBasis() {
   for (int i = 0; i < n; ++i) rem_a[i] = supply[i];
   for (int j = 0; j < m; ++j) rem_b[j] = demand[j];
   int cells = 0;
+  constexpr int kVogelMinCells = 600;
   // Vogel's approximation: repeatedly take the row or column whose two
   // cheapest open cells differ most (the line that would lose most by not
   // getting its cheapest cell), ship as much as possible along its
@@ -516,6 +519,32 @@ void EmdSolver::Impl::InitialBasis() {
     col_second[j] = a2;
     pen[np + j] = m2 - m1;
   };
+  if (n * m < kVogelMinCells) {
+  // Small problems: least cost per row (each row in turn ships its mass to
+  // its cheapest open columns). Measured faster overall than Vogel below
+  // about 600 cells (at 10 x 10: 3.6 vs 4.8 us; at 30 x 30 a tie; at
+  // 60 x 60 Vogel wins by 5%), its extra pivots costing less than
+  // Vogel's line choices.
+  for (int i = 0; i < n && open_cols > 0; ++i) {
+    while (rem_a[i] > kDust && open_cols > 0) {
+      TwoMin t;
+      row_two_min(&cost[static_cast<size_t>(i) * cs], col_mask.data(), cs, &t);
+      const int bj = t.a1;
+      const double f = std::min(rem_a[i], rem_b[bj]);
+      rem_a[i] -= f;
+      rem_b[bj] -= f;
+      cell_i[cells] = i;
+      cell_j[cells] = bj;
+      cell_f[cells] = f;
+      ++cells;
+      if (rem_b[bj] <= kDust) {
+        col_open[bj] = 0;
+        col_mask[bj] = kInf;
+        --open_cols;
+      }
+    }
+  }
+  } else {
   // Closed and padding lines carry penalty -inf, so the choice is a plain
   // argmax over one padded array (vectorized: it runs once per allocation
   // and was the hottest loop of the start when written with branches).
@@ -586,6 +615,7 @@ void EmdSolver::Impl::InitialBasis() {
       --open_cols;
     }
   }
+  }
   assert(cells <= n + m - 1);
   // Forest adjacency (CSR), then orientation by BFS from each component's
   // first node, which hangs from R by a zero-flow artificial arc.
@@ -642,40 +672,46 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
   // arc nearest the apex (<=), and the second path wins over the first:
   // the last blocking arc in cycle order. Both paths are climbed together
   // by depth, which also finds the apex.
+  // The two paths are recorded (path1, path2) so that the flow update and
+  // the re-hanging below read arrays instead of chasing parents again.
   double delta1 = kInf;
-  int out1 = -1;
+  int out1 = -1;  // index in path1
   double delta2 = kInf;
-  int out2 = -1;
+  int out2 = -1;  // index in path2
+  int len1 = 0;
+  int len2 = 0;
   int v1 = first;
   int v2 = second;
   while (v1 != v2) {
     if (depth[v1] >= depth[v2]) {
       if (v1 < n && parent[v1] != root && flow[v1] < delta1) {
         delta1 = flow[v1];
-        out1 = v1;
+        out1 = len1;
       }
+      path1[len1++] = v1;
       v1 = parent[v1];
     } else {
       if ((v2 >= n || parent[v2] == root) && flow[v2] <= delta2) {
         delta2 = flow[v2];
-        out2 = v2;
+        out2 = len2;
       }
+      path2[len2++] = v2;
       v2 = parent[v2];
     }
   }
-  const int join = v1;
   const bool out_on_first = !(out2 >= 0 && delta2 <= delta1);
   const double delta = out_on_first ? delta1 : delta2;
-  const int u_out = out_on_first ? out1 : out2;
-  assert(u_out >= 0);
+  assert((out_on_first ? out1 : out2) >= 0);
   ++stats.pivots;
   if (delta > 0.0) {
     // No artificial arc lies on a cycle that moves mass (see the top
     // comment), so every arc below is real.
-    for (int v = first; v != join; v = parent[v]) {
+    for (int k = 0; k < len1; ++k) {
+      const int v = path1[k];
       flow[v] += (v < n) ? -delta : delta;
     }
-    for (int v = second; v != join; v = parent[v]) {
+    for (int k = 0; k < len2; ++k) {
+      const int v = path2[k];
       flow[v] += (v >= n) ? -delta : delta;
     }
   } else {
@@ -684,14 +720,12 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
 
   // Re-hang the subtree cut off by the leaving arc: s is the entering arc's
   // endpoint inside it, t the other endpoint. Parent links along s..u_out
-  // reverse, and each arc's flow moves to its new child endpoint.
+  // (a prefix of the recorded path) reverse, and each arc's flow moves to
+  // its new child endpoint.
   const int s = out_on_first ? first : second;
   const int t = out_on_first ? second : first;
-  int len = 0;
-  for (int v = s;; v = parent[v]) {
-    path[len++] = v;
-    if (v == u_out) break;
-  }
+  const int* path = out_on_first ? path1.data() : path2.data();
+  const int len = (out_on_first ? out1 : out2) + 1;
   double carried = delta;  // flow of the entering arc
   for (int k = 0; k < len; ++k) Unlink(path[k]);
   for (int k = 0; k < len; ++k) {
