@@ -9,7 +9,9 @@
 // - The search is the incremental nearest-neighbour algorithm of Hjaltason
 //   and Samet: one priority queue holds nodes (keyed by lower bound) and
 //   items (keyed by a lower bound that is refined lazily: stored distances,
-//   then the caller's cheap bound, then the metric). An item is returned
+//   then the caller's cheap bound, then the metric; a bucket's items enter
+//   as one "run" entry over a heap of their own, so the main queue stays
+//   small with large buckets). An item is returned
 //   when its exact distance is the smallest key left, hence certain; the
 //   metric is evaluated only for items whose bounds fall below the answer.
 // - Computed bounds are deflated by a relative 1e-9 before use: the metric
@@ -281,17 +283,31 @@ class VpCursor : public NeighborCursor {
       dq_.assign(data_->nodes.size(), std::numeric_limits<double>::quiet_NaN());
       queue_.push({0.0, 0, kNode});
     }
-    for (uint32_t item : spec_.extra_items) PushItem(item, 0.0);
+    run_.clear();
+    for (uint32_t item : spec_.extra_items) AddToRun(item, 0.0);
+    PushRun();
   }
 
   std::optional<ItemNeighbor> Next() override {
     while (!queue_.empty()) {
-      const Entry e = queue_.top();
+      Entry e = queue_.top();
       queue_.pop();
+      if (e.kind == kRun) {
+        // The run's smallest bound is the smallest key left: take that item
+        // out of the run and treat it as a popped item entry.
+        std::vector<std::pair<double, uint32_t>>& run = runs_[e.index];
+        std::pop_heap(run.begin(), run.end(), std::greater<>());
+        const std::pair<double, uint32_t> next = run.back();
+        run.pop_back();
+        if (!run.empty()) queue_.push({run.front().first, e.index, kRun});
+        e = Entry{next.first, next.second, kItemStored};
+      }
       switch (e.kind) {
         case kNode:
           Expand(e);
           break;
+        case kRun:
+          break;  // handled above
         case kItemStored:
           if (spec_.lower_bound) {
             ++stats_.lower_bounds;
@@ -318,7 +334,10 @@ class VpCursor : public NeighborCursor {
   const SearchStats& stats() const override { return stats_; }
 
  private:
-  enum Kind : uint8_t { kNode, kItemStored, kItemBound, kItemExact };
+  // kRun: a bucket's items still keyed by their stored-distance bounds,
+  // kept in a heap of their own (runs_) so that the main queue holds one
+  // entry per bucket instead of one per item (buckets are large).
+  enum Kind : uint8_t { kNode, kRun, kItemStored, kItemBound, kItemExact };
   struct Entry {
     double key;
     uint32_t index;  // node or item
@@ -344,10 +363,20 @@ class VpCursor : public NeighborCursor {
     }
   };
 
-  void PushItem(uint32_t item, double bound) {
+  // Adds an item to run_ (scratch) unless rejected or beyond the radius.
+  void AddToRun(uint32_t item, double bound) {
     if (spec_.accept && !spec_.accept(item)) return;
     if (!(bound <= spec_.radius)) return;
-    queue_.push({bound, item, kItemStored});
+    run_.emplace_back(bound, item);
+  }
+  // Queues run_ as one entry (a min-heap on (bound, item)) and clears it.
+  void PushRun() {
+    if (run_.empty()) return;
+    std::make_heap(run_.begin(), run_.end(), std::greater<>());
+    const uint32_t id = static_cast<uint32_t>(runs_.size());
+    queue_.push({run_.front().first, id, kRun});
+    runs_.push_back(std::move(run_));
+    run_.clear();
   }
 
   // Collects the query's distances to the vantage points of `node`'s
@@ -386,6 +415,7 @@ class VpCursor : public NeighborCursor {
     const VpTree::Node& node = data_->nodes[e.index];
     if (node.vp == kNone) {
       CollectPath(node);
+      run_.clear();
       for (uint32_t p = node.begin; p < node.end; ++p) {
         const uint32_t item = data_->leaf_items[p];
         const double* row = &data_->item_dists[data_->item_row[item]];
@@ -396,8 +426,9 @@ class VpCursor : public NeighborCursor {
           bound = std::max(bound, Deflate(std::fabs(q - row[j]),
                                           std::max(q, row[j])));
         }
-        PushItem(item, bound);
+        AddToRun(item, bound);
       }
+      PushRun();
       return;
     }
     ++stats_.emd_computations;
@@ -418,6 +449,8 @@ class VpCursor : public NeighborCursor {
   SearchStats stats_;
   std::vector<double> dq_;    // per node: d(query, vantage point)
   std::vector<double> path_;  // scratch
+  std::vector<std::pair<double, uint32_t>> run_;  // scratch
+  std::vector<std::vector<std::pair<double, uint32_t>>> runs_;
   std::priority_queue<Entry, std::vector<Entry>, Later> queue_;
 };
 
