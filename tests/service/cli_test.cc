@@ -179,18 +179,31 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   EXPECT_EQ(RunTpr(cluster_, "extract " + set + "/broken/bad.off").exit_code, 1);
 }
 
-// SIGTERM while a search stream is open: the server stops accepting calls
+// Labels from --manifest; then SIGTERM while a search stream is open: the
+// server stops accepting calls
 // but the open stream still delivers every neighbour, then the process
 // exits 0.
-TEST_F(CliTest, SigtermDuringASearchStreamEndsCleanly) {
+TEST_F(CliTest, ManifestLabelsThenSigtermDuringASearchStreamEndsCleanly) {
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
       testing::GenerateSet(cluster_.dir() + "/set", 2, 2, 800);
   ASSERT_TRUE(files.ok());
-  CommandResult add = RunTpr(cluster_, "add " + cluster_.dir() + "/set");
+  // Labels from a manifest override the folder names.
+  std::string manifest;
+  for (const testing::GeneratedFile& f : *files) {
+    absl::StrAppend(&manifest, f.relative_path, " manifest_", f.label, "\n");
+  }
+  testing::WriteFile(cluster_.dir() + "/MANIFEST.txt", manifest);
+  CommandResult add = RunTpr(cluster_, "add " + cluster_.dir() + "/set --manifest " +
+                                           cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(add.exit_code, 0) << add.out << add.err;
   absl::StatusOr<client::IndexerClient> indexer =
       client::IndexerClient::Connect(cluster_.indexer().address());
   ASSERT_TRUE(indexer.ok());
+  for (const testing::GeneratedFile& f : *files) {
+    absl::StatusOr<v1::Model> m = indexer->Get(f.relative_path);
+    ASSERT_TRUE(m.ok()) << m.status();
+    EXPECT_EQ(m->label(), "manifest_" + f.label);
+  }
   v1::SearchRequest request;
   request.set_id(files->front().relative_path);
   request.set_k(4);
