@@ -330,7 +330,6 @@ DijkstraSolver::DijkstraSolver(const MeshGraph& graph) : graph_(&graph) {
   dist_.assign(n, kUnreachable);
   source_.assign(n, -1);
   parent_.assign(n, -1);
-  settled_.assign(n, 0);
   order_.reserve(n);
   touched_.reserve(n);
   // Lazy deletion can hold up to one entry per arc; start at 2n, which
@@ -343,7 +342,6 @@ void DijkstraSolver::Reset() {
     dist_[v] = kUnreachable;
     source_[v] = -1;
     parent_[v] = -1;
-    settled_[v] = 0;
   }
   touched_.clear();
   order_.clear();
@@ -413,17 +411,22 @@ const std::vector<double>& DijkstraSolver::Run(
   }
   const double max_distance = run.max_distance;
   bool stopped_early = false;
+  // No settled flags: a vertex's heap entries carry strictly decreasing
+  // keys (pushed only on improvement) and lengths are non-negative, so the
+  // entry whose key equals dist_ is popped exactly once, and a relaxation
+  // can never improve a settled vertex. The wavefront label is copied from
+  // the parent when a vertex settles rather than on every relaxation: one
+  // scattered write less in the inner loop.
   while (!heap_.empty()) {
     const HeapEntry e = Pop();
     const int32_t v = e.vertex;
-    if (settled_[v] || e.key > dist_[v]) continue;  // stale entry
+    if (e.key > dist_[v]) continue;  // stale entry
     if (e.key > max_distance) {
       stopped_early = true;
       break;
     }
-    settled_[v] = 1;
+    if (parent_[v] >= 0) source_[v] = source_[parent_[v]];
     order_.push_back(v);
-    const int32_t src = source_[v];
     const absl::Span<const int32_t> nbrs = g.neighbors(v);
     const absl::Span<const double> lens = g.lengths(v);
     for (size_t k = 0; k < nbrs.size(); ++k) {
@@ -432,7 +435,6 @@ const std::vector<double>& DijkstraSolver::Run(
       if (nd < dist_[u]) {
         if (dist_[u] == kUnreachable) touched_.push_back(u);
         dist_[u] = nd;
-        source_[u] = src;
         parent_[u] = v;
         Push(nd, u);
       }
@@ -440,9 +442,10 @@ const std::vector<double>& DijkstraSolver::Run(
   }
   if (stopped_early) {
     // Tentative distances beyond the bound are not results: report them as
-    // unreached, keeping touched_ so the next Reset still clears them.
+    // unreached, keeping touched_ so the next Reset still clears them. Every
+    // vertex left unsettled has a tentative distance above the bound.
     for (int32_t v : touched_) {
-      if (!settled_[v]) {
+      if (dist_[v] > max_distance) {
         dist_[v] = kUnreachable;
         source_[v] = -1;
         parent_[v] = -1;

@@ -189,7 +189,6 @@ class DijkstraSolver {
   std::vector<int32_t> source_;
   std::vector<int32_t> parent_;
   std::vector<int32_t> order_;
-  std::vector<char> settled_;
   // Vertices whose dist_ was written by the last Run: reset touches only
   // these, so a bounded sweep costs what it visits.
   std::vector<int32_t> touched_;
