@@ -29,6 +29,7 @@
 #include "eval/lib/d2.h"
 #include "eval/lib/metrics.h"
 #include "eval/lib/plots.h"
+#include "eval/lib/signature_cache.h"
 #include "eval/lib/tpr_descriptor.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
@@ -127,10 +128,57 @@ struct Config {
   D2Options d2;
   int synthetic_vertices = 5000;
   uint64_t seed = 1;
+  std::string cache_dir;  // empty: no cache
 };
+
+// Bump whenever the extraction code changes what it produces, so that
+// --cache never serves signatures of older feature code.
+constexpr char kFeatureCodeVersion[] = "features-2026-11-22a";
+
+// CacheKey names everything a cached description depends on.
+std::string CacheKey(const Model& model, const Config& config, size_t index) {
+  std::ostringstream key;
+  key << kFeatureCodeVersion << " copy=" << model.copy << " seed=" << config.seed
+      << " copy_seed=" << config.seed * 1000003 + index;
+  if (model.path.empty()) {
+    key << " synth=" << model.label << "/" << model.synthetic_pose
+        << " v=" << config.synthetic_vertices;
+  } else {
+    std::error_code ec;
+    key << " path=" << fs::absolute(model.path).string()
+        << " size=" << fs::file_size(model.path, ec);
+  }
+  const extract::Options& e = config.extract;
+  key << " bands=" << e.bands << " cycle=" << e.cycle_min_vertices << "/"
+      << e.cycle_search_hops << " ring=" << e.ring_length_threshold
+      << " stop=" << e.ring_stop_at_centre_saddles << " d2=" << config.d2.pairs << "/"
+      << config.d2.bins << "/" << config.d2.range << "/" << config.d2.seed;
+  return key.str();
+}
 
 Described Describe(const Model& model, const Config& config, size_t index) {
   Described out;
+  std::string key;
+  if (!config.cache_dir.empty()) {
+    key = CacheKey(model, config, index);
+    CachedDescription cached;
+    if (LoadCached(config.cache_dir, key, &cached)) {
+      out.raw = std::move(cached.signature);
+      out.points = cached.points;
+      out.rings = cached.rings;
+      out.d2 = std::move(cached.d2);
+      out.extract_ms = cached.extract_ms;
+      out.stage_ms = std::move(cached.stage_ms);
+      absl::StatusOr<index::PreparedSignature> prepared = index::Prepare(out.raw, config.ground);
+      if (!prepared.ok()) {
+        out.error = std::string(prepared.status().message());
+        return out;
+      }
+      out.tpr = std::move(*prepared);
+      out.ok = true;
+      return out;
+    }
+  }
   absl::StatusOr<extract::LoadedMesh> loaded;
   if (model.path.empty()) {
     synth::ShapeOptions shape;
@@ -182,6 +230,13 @@ Described Describe(const Model& model, const Config& config, size_t index) {
   out.tpr = std::move(*prepared);
   out.d2 = D2Histogram(loaded->mesh, config.d2);
   out.ok = true;
+  if (!key.empty()) {
+    CachedDescription cached{out.raw, out.points, out.rings, out.d2, out.extract_ms,
+                             out.stage_ms};
+    if (!StoreCached(config.cache_dir, key, cached)) {
+      std::fprintf(stderr, "warning: cannot write cache entry for %s\n", model.name.c_str());
+    }
+  }
   return out;
 }
 
@@ -263,6 +318,13 @@ int Run(int argc, char** argv) {
   app.add_option("--w3", config.ground.w3, "Eq. 7 weight of area");
   app.add_option("--w4", config.ground.w4, "Eq. 7 weight of thickness");
   app.add_option("--seed", config.seed, "seed for copies, D2 and synthetic shapes");
+  app.add_option("--cache", config.cache_dir,
+                 "folder caching extracted signatures (keyed by mesh, copy and options)");
+  app.add_option("--k-scale", config.ground.k_scale, "Eq. 7 L2norm scale of curvature");
+  app.add_option("--a-scale", config.ground.a_scale, "Eq. 7 L2norm scale of area");
+  app.add_option("--h-scale", config.ground.h_scale, "Eq. 7 L2norm scale of thickness");
+  std::string dump;
+  app.add_option("--dump", dump, "write every model's features (text) to this file");
   CLI11_PARSE(app, argc, argv);
   if (manifest.empty() == synthetic.empty()) {
     std::cerr << "give exactly one of --manifest or --synthetic\n";
@@ -326,6 +388,55 @@ int Run(int argc, char** argv) {
   for (const auto& [cls, pr] : features_per_class) {
     const double n = models_per_class[cls];
     std::printf("%-18s %8.2f %8.2f\n", cls.c_str(), pr.first / n, pr.second / n);
+  }
+
+  // Balance of the Eq. 7 terms: the mean unweighted, scaled contribution
+  // of each block over feature pairs of different models (weighted by the
+  // features' masses, as the EMD sees them).
+  {
+    auto l2 = [](const std::vector<double>& x, const std::vector<double>& y) {
+      double s = 0.0;
+      for (size_t b = 0; b < x.size() && b < y.size(); ++b) s += (x[b] - y[b]) * (x[b] - y[b]);
+      return std::sqrt(s);
+    };
+    double sum[4] = {0, 0, 0, 0}, mass = 0.0;
+    std::mt19937_64 rng(config.seed);
+    std::uniform_int_distribution<size_t> pick(0, kept.size() - 1);
+    for (int trial = 0; trial < 4000; ++trial) {
+      const index::Signature& a = described[kept[pick(rng)]].raw;
+      const index::Signature& b = described[kept[pick(rng)]].raw;
+      for (const index::Feature& fa : a.features) {
+        for (const index::Feature& fb : b.features) {
+          const double w = fa.weight * fb.weight;
+          sum[0] += w * std::abs(fa.g - fb.g);
+          sum[1] += w * config.ground.k_scale * l2(fa.k, fb.k);
+          sum[2] += w * config.ground.a_scale * l2(fa.a, fb.a);
+          sum[3] += w * config.ground.h_scale * l2(fa.h, fb.h);
+          mass += w;
+        }
+      }
+    }
+    std::printf("mean scaled Eq. 7 terms over feature pairs: G %.4f  K %.4f  A %.4f  H %.4f\n",
+                sum[0] / mass, sum[1] / mass, sum[2] / mass, sum[3] / mass);
+  }
+  if (!dump.empty()) {
+    std::ofstream out(dump);
+    for (int i : kept) {
+      const Described& d = described[i];
+      out << "model " << models[i].name << " " << models[i].label << " points " << d.points
+          << " rings " << d.rings << "\n";
+      for (size_t f = 0; f < d.raw.features.size(); ++f) {
+        const index::Feature& x = d.raw.features[f];
+        out << (static_cast<int>(f) < d.points ? "P" : "R") << " w " << x.weight << " g " << x.g;
+        out << "\n  K";
+        for (double v : x.k) out << " " << v;
+        out << "\n  A";
+        for (double v : x.a) out << " " << v;
+        out << "\n  H";
+        for (double v : x.h) out << " " << v;
+        out << "\n";
+      }
+    }
   }
 
   // Distance matrices over all models (full, so that timing is honest and
