@@ -54,7 +54,10 @@ double UnfoldedLength(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
   // already covered by the two edge paths.
   const double margin = 1e-9 * len;
   if (x_cross <= margin || x_cross >= len - margin) return -1.0;
-  return std::hypot(xd - xc, yc + yd);
+  const double dx = xd - xc;
+  const double dy = yc + yd;
+  // Not std::hypot: its overflow care is not needed here and is slow.
+  return std::sqrt(dx * dx + dy * dy);
 }
 
 // InsertionSort sorts [first, last): the ranges here (one vertex's edges)

@@ -143,7 +143,8 @@ class DijkstraSolver {
   explicit DijkstraSolver(const MeshGraph& graph);
 
   // Run computes graph distances from one source vertex and returns
-  // distances(). Precondition 0 <= source < num_vertices(). Unreached
+  // distances(): a reference to the solver's buffer, valid as long as the
+  // solver, whose contents the next Run overwrites (copy to keep). Precondition 0 <= source < num_vertices(). Unreached
   // vertices get kUnreachable. Cost O(e log n) for the component (less when
   // bounded).
   const std::vector<double>& Run(int32_t source, const RunOptions& run = {});

@@ -321,6 +321,32 @@ TEST_P(SolverFamilyTest, BoundedRunMatchesFullRunInsideTheRadius) {
 
 INSTANTIATE_TEST_SUITE_P(Meshes, SolverFamilyTest, ::testing::Range(0, 6));
 
+TEST(GeodesicTest, DistancesFollowRigidMotionAndScale) {
+  const Mesh mesh = testing::Capsule(0.5, 2.0, 40, 24);
+  const double scale = 2.3;
+  const Eigen::Matrix3d rotation =
+      Eigen::AngleAxisd(1.1, Eigen::Vector3d(3, -1, 2).normalized())
+          .toRotationMatrix();
+  Mesh moved = mesh;
+  for (auto& p : moved.positions) {
+    p = scale * (rotation * p) + Eigen::Vector3d(-4.0, 1.0, 0.5);
+  }
+  for (bool unfold : {false, true}) {
+    const MeshGraph a = MeshGraph::Build(mesh, {unfold});
+    const MeshGraph b = MeshGraph::Build(moved, {unfold});
+    EXPECT_EQ(a.num_arcs(), b.num_arcs());
+    EXPECT_NEAR(b.total_area(), scale * scale * a.total_area(),
+                1e-9 * b.total_area());
+    DijkstraSolver sa(a);
+    DijkstraSolver sb(b);
+    const std::vector<double> da = sa.Run(3);
+    const std::vector<double>& db = sb.Run(3);
+    for (int32_t v = 0; v < a.num_vertices(); ++v) {
+      EXPECT_NEAR(db[v], scale * da[v], 1e-9 * std::max(1.0, db[v]));
+    }
+  }
+}
+
 TEST(GeodesicTest, TwoComponentsLeaveTheOtherUnreached) {
   const Mesh small = testing::Icosphere(1, 0.5);
   const Mesh big = testing::Icosphere(2, 2.0);
