@@ -270,6 +270,30 @@ TEST(SourcePointsTest, CentreOfDumbbellIsOnTheNeck) {
   EXPECT_LT(mesh.positions[s->far_a].z() * mesh.positions[s->far_b].z(), 0.0);
 }
 
+TEST(SourcePointsTest, TinyMeshesGiveValidPoints) {
+  Mesh triangle;
+  triangle.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  triangle.triangles = {{0, 1, 2}};
+  Mesh quad;
+  quad.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  quad.triangles = {{0, 1, 2}, {0, 2, 3}};
+  for (const Mesh& mesh : {triangle, quad, testing::Icosphere(0)}) {
+    const MeshGraph graph = MeshGraph::Build(mesh);
+    DijkstraSolver solver(graph);
+    absl::StatusOr<SourcePoints> s = SelectSourcePoints(graph, solver, {});
+    ASSERT_TRUE(s.ok()) << s.status();
+    const SurfaceCentre brute = BruteForceSurfaceCentre(graph, solver);
+    for (int32_t v : {s->far_a, s->far_b, s->centre}) {
+      EXPECT_GE(v, 0);
+      EXPECT_LT(v, graph.num_vertices());
+    }
+    EXPECT_NE(s->far_a, s->far_b);
+    // So few vertices: the search sees them all.
+    EXPECT_NEAR(s->surface_centre.g_min, brute.g_min, 1e-12);
+    EXPECT_NEAR(s->surface_centre.g_max, brute.g_max, 1e-12);
+  }
+}
+
 TEST(SourcePointsTest, RejectsBadInput) {
   const Mesh mesh = testing::Icosphere(1);
   const MeshGraph graph = MeshGraph::Build(mesh);
