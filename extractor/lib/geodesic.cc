@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <utility>
 
@@ -335,9 +336,7 @@ DijkstraSolver::DijkstraSolver(const MeshGraph& graph) : graph_(&graph) {
   parent_.assign(n, -1);
   order_.reserve(n);
   touched_.reserve(n);
-  // Lazy deletion can hold up to one entry per arc; start at 2n, which
-  // covers a closed mesh's typical peak, and let the first sweep grow it.
-  heap_.reserve(static_cast<size_t>(n) * 2 + 16);
+  // The heap's buckets grow during the first sweep and keep their capacity.
 }
 
 void DijkstraSolver::Reset() {
@@ -348,44 +347,61 @@ void DijkstraSolver::Reset() {
   }
   touched_.clear();
   order_.clear();
-  heap_.clear();
+  for (auto& b : buckets_) b.clear();
+  heap_size_ = 0;
+  last_key_ = 0;
 }
 
-// A 4-ary heap: shallower than a binary heap and its four children share a
-// cache line, which matters more than the extra comparisons here.
+namespace {
+
+// OrderedBits maps a double to an unsigned integer of the same order (the
+// IEEE sign-magnitude pattern with negatives flipped), so the radix heap
+// can bucket by the highest differing bit. Exactly invertible.
+inline uint64_t OrderedBits(double x) {
+  uint64_t u;
+  std::memcpy(&u, &x, sizeof u);
+  return (u >> 63) ? ~u : (u | (uint64_t{1} << 63));
+}
+
+inline double FromOrderedBits(uint64_t u) {
+  u = (u >> 63) ? (u & ~(uint64_t{1} << 63)) : ~u;
+  double x;
+  std::memcpy(&x, &u, sizeof x);
+  return x;
+}
+
+inline int BucketOf(uint64_t key, uint64_t last) {
+  return key == last ? 0 : 64 - __builtin_clzll(key ^ last);
+}
+
+}  // namespace
+
 void DijkstraSolver::Push(double key, int32_t vertex) {
-  size_t i = heap_.size();
-  heap_.push_back({key, vertex});
-  while (i > 0) {
-    const size_t parent = (i - 1) >> 2;
-    if (heap_[parent].key <= key) break;
-    heap_[i] = heap_[parent];
-    i = parent;
-  }
-  heap_[i] = {key, vertex};
+  const uint64_t k = OrderedBits(key);
+  assert(k >= last_key_);  // monotone: Dijkstra never pushes below the front
+  buckets_[BucketOf(k, last_key_)].push_back({k, vertex});
+  ++heap_size_;
 }
 
-DijkstraSolver::HeapEntry DijkstraSolver::Pop() {
-  const HeapEntry top = heap_[0];
-  const HeapEntry last = heap_.back();
-  heap_.pop_back();
-  const size_t size = heap_.size();
-  if (size == 0) return top;
-  size_t i = 0;
-  while (true) {
-    const size_t first = 4 * i + 1;
-    if (first >= size) break;
-    size_t best = first;
-    const size_t end = std::min(first + 4, size);
-    for (size_t c = first + 1; c < end; ++c) {
-      if (heap_[c].key < heap_[best].key) best = c;
+int32_t DijkstraSolver::Pop(double* key) {
+  if (buckets_[0].empty()) {
+    int i = 1;
+    while (buckets_[i].empty()) ++i;
+    // The new front is the smallest key of the first non-empty bucket; every
+    // entry of that bucket then falls into a lower one.
+    uint64_t front = buckets_[i][0].key;
+    for (const HeapEntry& e : buckets_[i]) front = std::min(front, e.key);
+    last_key_ = front;
+    for (const HeapEntry& e : buckets_[i]) {
+      buckets_[BucketOf(e.key, last_key_)].push_back(e);
     }
-    if (heap_[best].key >= last.key) break;
-    heap_[i] = heap_[best];
-    i = best;
+    buckets_[i].clear();
   }
-  heap_[i] = last;
-  return top;
+  const HeapEntry e = buckets_[0].back();
+  buckets_[0].pop_back();
+  --heap_size_;
+  *key = FromOrderedBits(e.key);
+  return e.vertex;
 }
 
 const std::vector<double>& DijkstraSolver::Run(int32_t source,
@@ -420,11 +436,11 @@ const std::vector<double>& DijkstraSolver::Run(
   // can never improve a settled vertex. The wavefront label is copied from
   // the parent when a vertex settles rather than on every relaxation: one
   // scattered write less in the inner loop.
-  while (!heap_.empty()) {
-    const HeapEntry e = Pop();
-    const int32_t v = e.vertex;
-    if (e.key > dist_[v]) continue;  // stale entry
-    if (e.key > max_distance) {
+  while (!HeapEmpty()) {
+    double key;
+    const int32_t v = Pop(&key);
+    if (key > dist_[v]) continue;  // stale entry
+    if (key > max_distance) {
       stopped_early = true;
       break;
     }
@@ -434,7 +450,7 @@ const std::vector<double>& DijkstraSolver::Run(
     const absl::Span<const double> lens = g.lengths(v);
     for (size_t k = 0; k < nbrs.size(); ++k) {
       const int32_t u = nbrs[k];
-      const double nd = e.key + lens[k];
+      const double nd = key + lens[k];
       if (nd < dist_[u]) {
         if (dist_[u] == kUnreachable) touched_.push_back(u);
         dist_[u] = nd;

@@ -178,12 +178,14 @@ class DijkstraSolver {
 
  private:
   struct HeapEntry {
-    double key;
+    uint64_t key;  // the distance's order-preserving bit pattern
     int32_t vertex;
   };
   void Reset();
   void Push(double key, int32_t vertex);
-  HeapEntry Pop();
+  // Pop removes a smallest entry; sets *key to its distance.
+  int32_t Pop(double* key);
+  bool HeapEmpty() const { return heap_size_ == 0; }
 
   const MeshGraph* graph_;
   std::vector<double> dist_;
@@ -193,8 +195,14 @@ class DijkstraSolver {
   // Vertices whose dist_ was written by the last Run: reset touches only
   // these, so a bounded sweep costs what it visits.
   std::vector<int32_t> touched_;
-  // 4-ary min-heap with lazy deletion (stale entries skipped on pop).
-  std::vector<HeapEntry> heap_;
+  // Radix heap with lazy deletion (stale entries skipped on pop): Dijkstra
+  // pops keys in non-decreasing order, so entries sit in bucket i by the
+  // highest bit in which their key differs from the last popped key, and
+  // each entry moves to a lower bucket at most 64 times. Buckets keep their
+  // capacity across runs.
+  std::vector<HeapEntry> buckets_[65];
+  uint64_t last_key_ = 0;
+  size_t heap_size_ = 0;
 };
 
 }  // namespace tpr::extract
