@@ -5,7 +5,7 @@
 //
 //   MeshGraph graph = MeshGraph::Build(mesh);          // once per mesh
 //   DijkstraSolver solver(graph);                       // once per thread
-//   const std::vector<double>& d = solver.Run(source);  // per sweep, no allocation
+//   const std::vector<double>& d = solver.Run(source);  // per sweep, buffers reused
 #ifndef TPR_EXTRACTOR_LIB_GEODESIC_H_
 #define TPR_EXTRACTOR_LIB_GEODESIC_H_
 
@@ -136,7 +136,9 @@ struct RunOptions {
 };
 
 // DijkstraSolver runs Dijkstra sweeps over one MeshGraph, reusing its buffers:
-// after the first call no sweep allocates. The graph must outlive the solver.
+// per-vertex arrays are sized once, and the heap's buckets only grow to the
+// largest size a sweep has needed, so after a few sweeps none allocates
+// (tested). The graph must outlive the solver.
 // Not thread-safe: use one solver per thread (the graph may be shared).
 class DijkstraSolver {
  public:
