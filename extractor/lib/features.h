@@ -29,7 +29,8 @@ std::vector<double> AngleDefects(const Mesh& mesh, const VertexLinks& links);
 // SurfaceVectors are the three geometric surface vectors of one feature
 // (5.3), one entry per geodesic band, all scale-free (see signature.h).
 struct SurfaceVectors {
-  // Area-weighted mean Gaussian curvature of the band x total area.
+  // Segment-area-weighted mean of the segments' integrated Gaussian
+  // curvature (radians; scale-free by Gauss-Bonnet).
   std::vector<double> curvature;
   // Segment-area-weighted mean segment area of the band / total area.
   std::vector<double> area;
@@ -42,8 +43,9 @@ struct SurfaceVectors {
 // 0 to the largest finite distance (the last band closed), splits each band
 // into segments (connected by mesh edges inside the band, found by a
 // search, 5.3), and gives each band the segment-area-weighted mean over its
-// segments of: Gaussian curvature (sum of angle defects / segment area),
-// segment area, and average distance (area-weighted mean Euclidean distance
+// segments of: integrated Gaussian curvature (sum of the segment's angle
+// defects, radians: "area-weighted Gaussian curvature" read as the integral
+// of K dA, see features.cc for why not the mean K), segment area, and average distance (area-weighted mean Euclidean distance
 // of the segment's vertices to its area-weighted centre of mass; the
 // weighting keeps the value stable under remeshing). Empty bands are 0.
 // Preconditions: bands >= 1; distances, defects of size n; total_area > 0.

@@ -30,7 +30,9 @@ struct Feature {
   // Normalized integral geodesic G'_norm in [0, 1] (Eqs. 4, 5).
   double integral_geodesic = 0.0;
   // Geometric surface vectors (5.3), one entry per geodesic band:
-  // area-weighted Gaussian curvature x total area,
+  // segment-area-weighted mean of the band's segments' integrated Gaussian
+  // curvature (sum of angle defects in radians; a genus-0 mesh's bands of
+  // one segment each sum to 4 pi),
   std::vector<double> curvature;
   // segment-area-weighted mean of the band's segment areas / total area
   // (5.3: each band's value is the area-weighted average over its

@@ -55,10 +55,11 @@ struct GroundDistanceOptions {
   double w2 = 0.25;
   double w3 = 0.25;
   double w4 = 0.25;
-  // c_K: L2norm(K1, K2) = c_K ||K1 - K2||_2. K holds per-band
-  // area-weighted Gaussian curvature x total area, whose area-weighted sum
-  // over the bands is the total curvature 4 pi of a genus-0 surface; the
-  // scale brings it to order 1. Must be > 0 and finite. Default 1/(4 pi).
+  // c_K: L2norm(K1, K2) = c_K ||K1 - K2||_2. K holds per band the
+  // (segment-area-weighted) integrated Gaussian curvature in radians, whose
+  // sum over the bands is at most about the total curvature 4 pi of a
+  // genus-0 surface; the scale brings it to order 1. Must be > 0 and
+  // finite. Default 1/(4 pi).
   double k_scale = 0.07957747154594767;
   // c_A: A holds band area / total area (entries >= 0, summing to at most
   // 1), so ||A1 - A2||_2 <= sqrt(2); the scale maps that range onto [0, 1].
