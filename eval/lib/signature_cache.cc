@@ -12,7 +12,8 @@
 namespace tpr::eval {
 namespace {
 
-constexpr char kMagic[] = "tpr-eval-cache-v1";
+constexpr char kMagicV1[] = "tpr-eval-cache-v1";
+constexpr char kMagic[] = "tpr-eval-cache-v2";  // v1 plus vertex and face counts
 
 void WriteVector(std::ostream& out, const std::vector<double>& v) {
   out << v.size();
@@ -52,11 +53,12 @@ bool LoadCached(const std::string& dir, const std::string& key,
   std::ifstream in(std::filesystem::path(dir) / CacheFileName(key));
   if (!in) return false;
   std::string magic, stored_key;
-  if (!std::getline(in, magic) || magic != kMagic) return false;
+  if (!std::getline(in, magic) || (magic != kMagic && magic != kMagicV1)) return false;
   if (!std::getline(in, stored_key) || stored_key != key) return false;
   CachedDescription d;
   size_t stages = 0, features = 0;
   if (!(in >> d.points >> d.rings >> d.extract_ms >> stages)) return false;
+  if (magic == kMagic && !(in >> d.vertices >> d.faces)) return false;
   for (size_t i = 0; i < stages; ++i) {
     std::string name;
     double ms = 0.0;
@@ -89,8 +91,8 @@ bool StoreCached(const std::string& dir, const std::string& key,
     if (!out) return false;
     out << kMagic << "\n" << key << "\n";
     char buf[64];
-    std::snprintf(buf, sizeof(buf), "%d %d %.17g %zu\n", d.points, d.rings,
-                  d.extract_ms, d.stage_ms.size());
+    std::snprintf(buf, sizeof(buf), "%d %d %.17g %zu %" PRId64 " %" PRId64 "\n", d.points,
+                  d.rings, d.extract_ms, d.stage_ms.size(), d.vertices, d.faces);
     out << buf;
     for (const auto& [name, ms] : d.stage_ms) {
       std::snprintf(buf, sizeof(buf), " %.17g\n", ms);

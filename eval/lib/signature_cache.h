@@ -11,6 +11,7 @@
 #ifndef TPR_EVAL_LIB_SIGNATURE_CACHE_H_
 #define TPR_EVAL_LIB_SIGNATURE_CACHE_H_
 
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -26,6 +27,9 @@ struct CachedDescription {
   index::Signature signature;
   int points = 0;
   int rings = 0;
+  // The mesh's vertex and face counts (0 when read from a v1 entry).
+  int64_t vertices = 0;
+  int64_t faces = 0;
   // D2 histogram of the same mesh (the baseline).
   std::vector<double> d2;
   // Extraction wall time and per-stage times in ms (as first measured).
