@@ -17,8 +17,8 @@
 //          and an artificial root R = n + m;
 //   arcs:  i -> n+j for every cell, cost Dist(a_i, b_j), uncapacitated;
 //          R -> v for every node, cost 0, never allowed to enter.
-// The spanning tree is stored as parent pointers plus intrusive child
-// lists; the flow of the tree arc joining v to parent[v] is flow[v]. The
+// The spanning tree is stored as parent pointers, depths and a thread
+// (preorder successor and predecessor); the flow of the tree arc joining v to parent[v] is flow[v]. The
 // direction of a tree arc follows from the node types (supply -> demand,
 // root -> anything), so it is not stored.
 //
@@ -216,9 +216,8 @@ struct EmdSolver::Impl {
 
   // Tree over n + m + 1 nodes; R = n + m.
   std::vector<int> parent;
-  std::vector<int> first_child;
-  std::vector<int> next_sib;
-  std::vector<int> prev_sib;
+  std::vector<int> thread;      // preorder successor (circular through R)
+  std::vector<int> rev_thread;  // preorder predecessor
   std::vector<double> flow;  // flow of the arc joining v and parent[v]
   std::vector<double> pi;    // potentials; u = pi[0..n), v = pi[n..n+m)
   std::vector<int> depth;  // depth[R] = 0
@@ -237,6 +236,9 @@ struct EmdSolver::Impl {
   std::vector<int> adj_fill;
   std::vector<int> adj;
   std::vector<int> queue;
+  std::vector<int> sub;       // pivot: old preorder of the moved subtree
+  std::vector<int> sub_pos;   // pivot: node -> index in sub
+  std::vector<int> stem_end;  // pivot: end of each stem node's old subtree
   std::vector<int> path1;
   std::vector<int> path2;
 
@@ -263,9 +265,11 @@ struct EmdSolver::Impl {
     }
     if (parent.size() < nodes) {
       parent.resize(nodes);
-      first_child.resize(nodes);
-      next_sib.resize(nodes);
-      prev_sib.resize(nodes);
+      thread.resize(nodes);
+      rev_thread.resize(nodes);
+      sub.resize(nodes);
+      sub_pos.resize(nodes);
+      stem_end.resize(nodes);
       flow.resize(nodes);
       pi.resize(nodes);
       depth.resize(nodes);
@@ -279,24 +283,6 @@ struct EmdSolver::Impl {
       path1.resize(nodes);
       path2.resize(nodes);
     }
-  }
-
-  void Unlink(int v) {
-    const int p = parent[v];
-    if (prev_sib[v] >= 0) {
-      next_sib[prev_sib[v]] = next_sib[v];
-    } else {
-      first_child[p] = next_sib[v];
-    }
-    if (next_sib[v] >= 0) prev_sib[next_sib[v]] = prev_sib[v];
-  }
-
-  void Link(int v, int p) {
-    parent[v] = p;
-    prev_sib[v] = -1;
-    next_sib[v] = first_child[p];
-    if (first_child[p] >= 0) prev_sib[first_child[p]] = v;
-    first_child[p] = v;
   }
 
   // Potential of v from its parent: pi[head] = pi[tail] + cost(tail, head)
@@ -324,9 +310,6 @@ void EmdSolver::Impl::InitialBasis() {
   constexpr double kDust = 1e-14;
   const int root = n + m;
   for (int v = 0; v <= root; ++v) {
-    first_child[v] = -1;
-    next_sib[v] = -1;
-    prev_sib[v] = -1;
     parent[v] = -1;
     flow[v] = 0.0;
   }
@@ -386,30 +369,39 @@ void EmdSolver::Impl::InitialBasis() {
     adj[adj_fill[cell_i[c]]++] = c;
     adj[adj_fill[n + cell_j[c]]++] = c;
   }
+  // Depth-first from each component's first node, so that the visiting
+  // order is a preorder: it becomes the thread. A node's parent, flow,
+  // potential and depth are set when it is pushed (the forest is acyclic,
+  // so a node is reached only from its parent).
   pi[root] = 0.0;
   depth[root] = 0;
+  int last = root;  // last node of the thread so far
   for (int s = 0; s < root; ++s) {
     if (parent[s] != -1) continue;
-    Link(s, root);
+    parent[s] = root;
     pi[s] = 0.0;
     depth[s] = 1;
-    int head = 0;
-    int tail = 0;
-    queue[tail++] = s;
-    while (head < tail) {
-      const int v = queue[head++];
+    int top = 0;
+    queue[top++] = s;
+    while (top > 0) {
+      const int v = queue[--top];
+      thread[last] = v;
+      rev_thread[v] = last;
+      last = v;
       for (int k = adj_start[v]; k < adj_start[v + 1]; ++k) {
         const int c = adj[k];
         const int w = (v < n) ? n + cell_j[c] : cell_i[c];
         if (parent[w] != -1) continue;  // v's parent (acyclic: no other)
-        Link(w, v);
+        parent[w] = v;
         flow[w] = cell_f[c];
         pi[w] = PotentialFromParent(w);
         depth[w] = depth[v] + 1;
-        queue[tail++] = w;
+        queue[top++] = w;
       }
     }
   }
+  thread[last] = root;
+  rev_thread[root] = last;
 }
 
 // One pivot on entering arc ei -> n + ej, whose reduced cost rc < 0.
@@ -483,27 +475,72 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
   const int* path = out_on_first ? path1.data() : path2.data();
   const int len = (out_on_first ? out1 : out2) + 1;
   double carried = delta;  // flow of the entering arc
-  for (int k = 0; k < len; ++k) Unlink(path[k]);
   for (int k = 0; k < len; ++k) {
     const int v = path[k];
     const double old = flow[v];
-    Link(v, k == 0 ? t : path[k - 1]);
+    parent[v] = k == 0 ? t : path[k - 1];
     flow[v] = carried;
     carried = old;
   }
-  // Every potential in the moved subtree shifts by the same amount, the
-  // one that zeroes the entering arc's reduced cost rc = c + pi_i - pi_j:
-  // -rc if the supply end moved, +rc if the demand end did. Depths are
-  // recomputed top-down (they do not shift uniformly: the path reversed).
+  // The thread (preorder) is rebuilt for the moved subtree only. Old
+  // preorder: the subtree of u_out = path[len - 1] is one run `sub`, in
+  // which the subtrees of the stem nodes path[0] = s, path[1], ... are
+  // nested runs [sub_pos, stem_end). Re-rooted at s and hung below t, its
+  // preorder is s's old run, then for k = 1, 2, ...: path[k]'s old run
+  // minus path[k - 1]'s (two pieces). Each piece keeps its internal order
+  // and shifts its depths uniformly; every potential of the subtree shifts
+  // by the amount that zeroes the entering arc's reduced cost
+  // rc = c + pi_i - pi_j: -rc if the supply end moved, +rc if the demand
+  // end did. The run is spliced right after t. O(subtree) with no
+  // recursion and no per-child branching (LEMON keeps similar arrays).
   const double shift = out_on_first ? -rc : rc;
-  int top = 0;
-  queue[top++] = s;
-  while (top > 0) {
-    const int v = queue[--top];
-    pi[v] += shift;
-    depth[v] = depth[parent[v]] + 1;
-    for (int c = first_child[v]; c >= 0; c = next_sib[c]) queue[top++] = c;
+  const int u_out = path[len - 1];
+  const int d_out = depth[u_out];
+  int size = 0;
+  int v = u_out;
+  do {
+    sub_pos[v] = size;
+    sub[size++] = v;
+    v = thread[v];
+  } while (depth[v] > d_out);
+  const int after = v;
+  const int before = rev_thread[u_out];
+  thread[before] = after;
+  rev_thread[after] = before;
+  int end = size;
+  {
+    int j = sub_pos[s] + 1;
+    for (int k = 0; k < len - 1; ++k) {
+      const int dk = depth[path[k]];
+      while (j < size && depth[sub[j]] > dk) ++j;
+      stem_end[k] = j;
+    }
+    stem_end[len - 1] = end;
   }
+  int prev = t;
+  const int next = thread[t];
+  auto emit = [&](int from, int to, int ddepth) {
+    for (int q = from; q < to; ++q) {
+      const int x = sub[q];
+      thread[prev] = x;
+      rev_thread[x] = prev;
+      prev = x;
+      pi[x] += shift;
+      depth[x] += ddepth;
+    }
+  };
+  const int d_new = depth[t] + 1;
+  emit(sub_pos[s], stem_end[0], d_new - depth[s]);
+  for (int k = 1; k < len; ++k) {
+    const int pk = path[k];
+    const int dd = d_new + k - depth[pk];
+    const int inner_from = sub_pos[path[k - 1]];
+    const int inner_to = stem_end[k - 1];
+    emit(sub_pos[pk], inner_from, dd);
+    emit(inner_to, stem_end[k], dd);
+  }
+  thread[prev] = next;
+  rev_thread[next] = prev;
 }
 
 double EmdSolver::Impl::Solve() {
