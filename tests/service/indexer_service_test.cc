@@ -434,6 +434,13 @@ TEST_F(IndexerServiceTest, HealthAnswersServing) {
   EXPECT_EQ(*health, 1);  // SERVING
 }
 
+TEST_F(IndexerServiceTest, ReflectionListsTheIndexerService) {
+  absl::StatusOr<std::string> services = ReflectedServices(server_->channel());
+  ASSERT_TRUE(services.ok()) << services.status();
+  EXPECT_NE(services->find("tpr.v1.Indexer"), std::string::npos);
+  EXPECT_NE(services->find("grpc.health.v1.Health"), std::string::npos);
+}
+
 TEST_F(IndexerServiceTest, ClientCancellationEndsTheStreamAndServerKeepsServing) {
   const std::vector<TestModel> models = MakeModels(120, 3, 71);
   AddAll(models);

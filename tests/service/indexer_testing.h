@@ -23,6 +23,7 @@
 #include <grpcpp/impl/codegen/rpc_method.h>
 #include <grpcpp/security/credentials.h>
 #include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/sync_stream.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/grpc_status.h"
@@ -172,6 +173,40 @@ inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& ch
   if (bytes.empty()) return 0;  // UNKNOWN, the default, encodes as nothing
   if (bytes.size() == 2 && bytes[0] == 0x08) return static_cast<int>(bytes[1]);
   return absl::InternalError("unexpected health answer");
+}
+
+// ReflectedServices asks the v1alpha reflection service for the server's
+// service list with raw bytes (no generated reflection client in Debian's
+// gRPC): the request sets list_services (field 7, string) to "", i.e. bytes
+// 0x3a 0x00. Returns the answer's bytes, in which the service names appear
+// verbatim.
+inline absl::StatusOr<std::string> ReflectedServices(
+    const std::shared_ptr<grpc::Channel>& channel) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  const grpc::internal::RpcMethod method(
+      "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
+      grpc::internal::RpcMethod::BIDI_STREAMING);
+  std::unique_ptr<grpc::ClientReaderWriter<grpc::ByteBuffer, grpc::ByteBuffer>> stream(
+      grpc::internal::ClientReaderWriterFactory<grpc::ByteBuffer, grpc::ByteBuffer>::Create(
+          channel.get(), method, &context));
+  const char request_bytes[] = {0x3a, 0x00};
+  grpc::Slice slice(request_bytes, sizeof(request_bytes));
+  grpc::ByteBuffer request(&slice, 1);
+  stream->Write(request);
+  stream->WritesDone();
+  std::string bytes;
+  grpc::ByteBuffer response;
+  while (stream->Read(&response)) {
+    std::vector<grpc::Slice> slices;
+    if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read the answer");
+    for (const grpc::Slice& s : slices) {
+      bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+    }
+  }
+  grpc::Status status = stream->Finish();
+  if (!status.ok()) return tpr::FromGrpcStatus(status);
+  return bytes;
 }
 
 // An IndexerCore and IndexerService served on a free loopback port. Stop()
