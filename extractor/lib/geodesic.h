@@ -146,9 +146,9 @@ class DijkstraSolver {
 
   // Run computes graph distances from one source vertex and returns
   // distances(): a reference to the solver's buffer, valid as long as the
-  // solver, whose contents the next Run overwrites (copy to keep). Precondition 0 <= source < num_vertices(). Unreached
-  // vertices get kUnreachable. Cost O(e log n) for the component (less when
-  // bounded).
+  // solver, whose contents the next Run overwrites (copy to keep).
+  // Precondition 0 <= source < num_vertices(). Unreached vertices get
+  // kUnreachable. Cost O(e + n log n) for the component, less when bounded.
   const std::vector<double>& Run(int32_t source, const RunOptions& run = {});
 
   // Run (multi source) computes, per vertex, min over i of
@@ -157,8 +157,9 @@ class DijkstraSolver {
   // means all zero, which gives the geodesic from the vertex set (g_vs,
   // 5.1). Preconditions: every source in range; initial_values empty or of
   // the same size as sources, all finite. Duplicate sources are allowed (the
-  // earlier start wins). An empty `sources` leaves every vertex unreached.
-  // Ties between wavefronts go to the source settled first.
+  // smaller start wins, the earlier one on equal starts). An empty `sources`
+  // leaves every vertex unreached. A vertex at equal distance from two
+  // wavefronts goes to the one that reached it first.
   const std::vector<double>& Run(absl::Span<const int32_t> sources,
                                  absl::Span<const double> initial_values = {},
                                  const RunOptions& run = {});
@@ -172,8 +173,9 @@ class DijkstraSolver {
   // order: the reached vertices in the order they were settled, that is by
   // non-decreasing distance.
   const std::vector<int32_t>& order() const { return order_; }
-  // parent: per vertex, the neighbour it was reached from (-1 for sources
-  // and unreached vertices); follows shortest paths back to a source.
+  // parent: per vertex, the neighbour it was reached from (-1 for a source
+  // whose own start time is its distance, and for unreached vertices);
+  // follows shortest paths back to a source.
   const std::vector<int32_t>& parent() const { return parent_; }
 
   const MeshGraph& graph() const { return *graph_; }
