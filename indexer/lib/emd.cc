@@ -208,21 +208,27 @@ int RowArgMinScalar(const double* row, const double* mask, int cs) {
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
+// Lane-wise minimum and first index, then one masked reduction: no
+// data-dependent branch.
 __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
                                                        const double* mask,
                                                        int cs) {
   __m512d mn = _mm512_set1_pd(kInf);
+  __m512d arg = _mm512_setzero_pd();
+  __m512d idx = _mm512_set_pd(7, 6, 5, 4, 3, 2, 1, 0);
+  const __m512d step = _mm512_set1_pd(8.0);
   for (int j0 = 0; j0 < cs; j0 += 8) {
-    mn = _mm512_min_pd(mn, _mm512_add_pd(_mm512_loadu_pd(row + j0),
-                                         _mm512_loadu_pd(mask + j0)));
+    const __m512d c =
+        _mm512_add_pd(_mm512_loadu_pd(row + j0), _mm512_loadu_pd(mask + j0));
+    const __mmask8 lt = _mm512_cmp_pd_mask(c, mn, _CMP_LT_OQ);
+    mn = _mm512_mask_blend_pd(lt, mn, c);
+    arg = _mm512_mask_blend_pd(lt, arg, idx);
+    idx = _mm512_add_pd(idx, step);
   }
-  const __m512d top = _mm512_set1_pd(_mm512_reduce_min_pd(mn));
-  for (int j0 = 0;; j0 += 8) {
-    const __mmask8 hit = _mm512_cmp_pd_mask(
-        _mm512_add_pd(_mm512_loadu_pd(row + j0), _mm512_loadu_pd(mask + j0)),
-        top, _CMP_EQ_OQ);
-    if (hit != 0) return j0 + __builtin_ctz(static_cast<unsigned>(hit));
-  }
+  const __mmask8 eq =
+      _mm512_cmp_pd_mask(mn, _mm512_set1_pd(_mm512_reduce_min_pd(mn)),
+                         _CMP_EQ_OQ);
+  return static_cast<int>(_mm512_mask_reduce_min_pd(eq, arg));
 }
 #pragma GCC diagnostic pop
 #endif
