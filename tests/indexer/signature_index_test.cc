@@ -425,8 +425,10 @@ TEST(SignatureIndexTest, SerializeAndLoadRoundTrip) {
 
   // Other ground-distance options: the stored distances mean nothing.
   IndexOptions other = ManualOptions();
-  other.ground.w1 = 0.4;
+  other.ground.w1 = 0.4;  // All four set: valid (sum 1) whatever the defaults.
   other.ground.w2 = 0.1;
+  other.ground.w3 = 0.25;
+  other.ground.w4 = 0.25;
   EXPECT_EQ(SignatureIndex::Load(bytes, items, other).status().code(),
             absl::StatusCode::kFailedPrecondition);
   // A malformed item.
