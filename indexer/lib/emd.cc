@@ -384,10 +384,19 @@ void EmdSolver::Impl::InitialBasis() {
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
   // which measured 8% fewer pivots than index order at n = m = 30.
+  // The order comes from ranks (how many rows sort before each; ties by
+  // index): O(n^2) comparisons, but branch-free and vectorizable, which
+  // beats a comparison sort's unpredictable branches at these sizes.
   int* order = row_order.data();
-  for (int i = 0; i < n; ++i) order[i] = i;
-  std::sort(order, order + n,
-            [this](int x, int y) { return rem_a[x] < rem_a[y]; });
+  for (int i = 0; i < n; ++i) {
+    const double wi = rem_a[i];
+    int rank = 0;
+    for (int k = 0; k < n; ++k) {
+      const double wk = rem_a[k];
+      rank += (wk < wi) | ((wk == wi) & (k < i));
+    }
+    order[rank] = i;
+  }
   for (int oi = 0; oi < n && open_cols > 0; ++oi) {
     const int i = order[oi];
     while (rem_a[i] > kDust && open_cols > 0) {
