@@ -9,37 +9,11 @@
 #include <utility>
 #include <vector>
 
-#include <Eigen/Geometry>
-
 #include <Eigen/Geometry>  // cross(): declared in Core, defined here.
 
+#include "extractor/lib/disjoint_sets.h"
+
 namespace tpr::extract {
-namespace {
-
-// Union-find with path halving; flat arrays, as everywhere in the extractor.
-class DisjointSets {
- public:
-  explicit DisjointSets(size_t n) : parent_(n) {
-    std::iota(parent_.begin(), parent_.end(), 0);
-  }
-  int64_t Find(int64_t x) {
-    while (parent_[x] != x) {
-      parent_[x] = parent_[parent_[x]];
-      x = parent_[x];
-    }
-    return x;
-  }
-  void Union(int64_t a, int64_t b) {
-    a = Find(a);
-    b = Find(b);
-    if (a != b) parent_[std::max(a, b)] = std::min(a, b);
-  }
-
- private:
-  std::vector<int64_t> parent_;
-};
-
-}  // namespace
 
 MeshStats ComputeMeshStats(const Mesh& mesh) {
   MeshStats stats;

@@ -45,6 +45,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "common/status_macros.h"
+#include "extractor/lib/disjoint_sets.h"
 
 namespace tpr::extract {
 namespace {
@@ -1205,28 +1206,6 @@ MeshFormat GuessFormat(string_view bytes, string_view file_name) {
 
 // ---------------------------------------------------------------------------
 // Validation and cleaning, shared by files and BuildMesh.
-
-class DisjointSets {
- public:
-  explicit DisjointSets(size_t n) : parent_(n) {
-    std::iota(parent_.begin(), parent_.end(), 0);
-  }
-  int64_t Find(int64_t x) {
-    while (parent_[x] != x) {
-      parent_[x] = parent_[parent_[x]];
-      x = parent_[x];
-    }
-    return x;
-  }
-  void Union(int64_t a, int64_t b) {
-    a = Find(a);
-    b = Find(b);
-    if (a != b) parent_[std::max(a, b)] = std::min(a, b);
-  }
-
- private:
-  std::vector<int64_t> parent_;
-};
 
 struct HalfEdge {
   uint64_t key;  // (min << 32) | max
