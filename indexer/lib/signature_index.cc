@@ -23,6 +23,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
+#include "indexer/lib/byte_codec.h"
 #include "indexer/lib/emd.h"
 
 namespace tpr::index {
@@ -31,14 +32,6 @@ namespace {
 
 using PreparedPtr = std::shared_ptr<const PreparedSignature>;
 
-uint64_t Fnv1a(const void* data, size_t n, uint64_t h = 0xcbf29ce484222325ull) {
-  const unsigned char* p = static_cast<const unsigned char*>(data);
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
 
 // Fingerprint of a prepared signature: its exact coordinates and masses.
 // Prepared coordinates already include the ground-distance weights, so a
@@ -416,39 +409,9 @@ namespace {
 constexpr char kMagic[6] = {'T', 'P', 'R', 'S', 'I', 'X'};
 constexpr uint16_t kVersion = 1;
 
-void PutU(std::string* out, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) out->push_back(static_cast<char>(v >> (8 * i)));
-}
-
 std::vector<double> OptionValues(const GroundDistanceOptions& g) {
   return {g.w1, g.w2, g.w3, g.w4, g.k_scale, g.a_scale, g.h_scale};
 }
-
-class Reader {
- public:
-  explicit Reader(absl::string_view bytes) : bytes_(bytes) {}
-  bool U(int bytes, uint64_t* v) {
-    if (bytes_.size() - pos_ < static_cast<size_t>(bytes)) return false;
-    *v = 0;
-    for (int i = 0; i < bytes; ++i) {
-      *v |= static_cast<uint64_t>(static_cast<unsigned char>(bytes_[pos_ + i]))
-            << (8 * i);
-    }
-    pos_ += bytes;
-    return true;
-  }
-  bool Bytes(uint64_t n, absl::string_view* out) {
-    if (bytes_.size() - pos_ < n) return false;
-    *out = bytes_.substr(pos_, n);
-    pos_ += n;
-    return true;
-  }
-  size_t remaining() const { return bytes_.size() - pos_; }
-
- private:
-  absl::string_view bytes_;
-  size_t pos_ = 0;
-};
 
 absl::Status Corrupt(absl::string_view what) {
   return absl::DataLossError(absl::StrCat("corrupt index bytes: ", what));
@@ -490,7 +453,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     return absl::InvalidArgumentError("not signature-index bytes (bad magic)");
   }
   {
-    Reader r(bytes.substr(sizeof kMagic));
+    ByteReader r(bytes.substr(sizeof kMagic));
     uint64_t version;
     r.U(2, &version);
     if (version != kVersion) {
@@ -502,12 +465,12 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
   const size_t body = bytes.size() - 8;
   {
-    Reader tail(bytes.substr(body));
+    ByteReader tail(bytes.substr(body));
     uint64_t checksum;
     tail.U(8, &checksum);
     if (checksum != Fnv1a(bytes.data(), body)) return Corrupt("checksum mismatch");
   }
-  Reader r(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+  ByteReader r(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
   const std::vector<double> want = OptionValues(options.ground);
   for (double w : want) {
     uint64_t bits;

@@ -28,6 +28,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "indexer/lib/byte_codec.h"
 
 namespace tpr::index {
 
@@ -492,56 +493,6 @@ namespace {
 constexpr char kMagic[6] = {'T', 'P', 'R', 'V', 'P', 'T'};
 constexpr uint16_t kVersion = 1;
 
-uint64_t Fnv1a(const char* p, size_t n) {
-  uint64_t h = 0xcbf29ce484222325ull;
-  for (size_t i = 0; i < n; ++i) {
-    h ^= static_cast<unsigned char>(p[i]);
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
-void PutU(std::string* out, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) out->push_back(static_cast<char>(v >> (8 * i)));
-}
-void PutF(std::string* out, double v) {
-  uint64_t bits;
-  std::memcpy(&bits, &v, sizeof bits);
-  PutU(out, bits, 8);
-}
-
-class Reader {
- public:
-  explicit Reader(absl::string_view bytes) : bytes_(bytes) {}
-  bool U(int bytes, uint64_t* v) {
-    if (bytes_.size() - pos_ < static_cast<size_t>(bytes)) return false;
-    *v = 0;
-    for (int i = 0; i < bytes; ++i) {
-      *v |= static_cast<uint64_t>(static_cast<unsigned char>(bytes_[pos_ + i]))
-            << (8 * i);
-    }
-    pos_ += bytes;
-    return true;
-  }
-  bool U32(uint32_t* v) {
-    uint64_t w;
-    if (!U(4, &w)) return false;
-    *v = static_cast<uint32_t>(w);
-    return true;
-  }
-  bool F(double* v) {
-    uint64_t bits;
-    if (!U(8, &bits)) return false;
-    std::memcpy(v, &bits, sizeof bits);
-    return true;
-  }
-  size_t remaining() const { return bytes_.size() - pos_; }
-
- private:
-  absl::string_view bytes_;
-  size_t pos_ = 0;
-};
-
 absl::Status Corrupt(absl::string_view what) {
   return absl::DataLossError(absl::StrCat("corrupt VP-tree bytes: ", what));
 }
@@ -584,7 +535,7 @@ class VpTreeReader {
         std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
       return absl::InvalidArgumentError("not VP-tree bytes (bad magic)");
     }
-    Reader r(bytes.substr(sizeof kMagic));
+    ByteReader r(bytes.substr(sizeof kMagic));
     uint64_t version;
     r.U(2, &version);
     if (version != kVersion) {
@@ -593,13 +544,13 @@ class VpTreeReader {
     }
     if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
     const size_t body = bytes.size() - 8;
-    Reader tail(bytes.substr(body));
+    ByteReader tail(bytes.substr(body));
     uint64_t checksum;
     tail.U(8, &checksum);
     if (checksum != Fnv1a(bytes.data(), body)) {
       return Corrupt("checksum mismatch");
     }
-    r = Reader(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+    r = ByteReader(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
 
     VpTree tree;
     VpTree::Data& d = *tree.data_;
