@@ -3,37 +3,26 @@
 //   tpr add shapes/                    # index a folder (labels from folders)
 //   tpr query shapes/biped/pose_0.off -k 5
 //   tpr inspect dog.off -o dog_regions.ply
+//   tpr eval shapes/ --out results/     # retrieval quality (NN, FT, ST, ...)
 //
 // Addresses come from --extractor / --indexer or TPR_EXTRACTOR / TPR_INDEXER.
 // Human output goes to stdout (progress and diagnostics to stderr); --json
 // prints one JSON object per line. Exit code 0 on success, 1 when anything
 // failed, 2 on bad usage.
-#include <unistd.h>
-
 #include <algorithm>
 #include <array>
-#include <atomic>
-#include <chrono>
-#include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <iostream>
 #include <map>
-#include <mutex>
-#include <set>
-#include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
-#include <google/protobuf/util/json_util.h>
 
-#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "absl/strings/str_split.h"
+#include "client/cli/add.h"
+#include "client/cli/cli_util.h"
+#include "client/cli/eval.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/lib/mesh_writer.h"
@@ -41,65 +30,14 @@
 
 namespace {
 
-namespace fs = std::filesystem;
 using tpr::client::ExtractorClient;
 using tpr::client::IndexerClient;
 
-struct Globals {
-  std::string extractor = "127.0.0.1:7001";
-  std::string indexer = "127.0.0.1:7002";
-  bool json = false;
-  double timeout_s = 120;
-};
-
-tpr::client::CallOptions CallOptionsFor(const Globals& g) {
-  tpr::client::CallOptions call;
-  call.timeout = absl::Seconds(g.timeout_s);
-  return call;
-}
-
-int Fail(const std::string& what, const absl::Status& status) {
-  std::fprintf(stderr, "tpr: %s: %s\n", what.c_str(), status.ToString().c_str());
-  return 1;
-}
-
-// JSON string literal of `s` (RFC 8259 escaping). Hand-written: the one
-// place we emit JSON by hand is the hot per-neighbour line, where building a
-// protobuf message just to print four fields would be wasteful.
-std::string JsonString(absl::string_view s) {
-  std::string out = "\"";
-  for (unsigned char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (c < 0x20) {
-          out += absl::StrFormat("\\u%04x", c);
-        } else {
-          out += static_cast<char>(c);
-        }
-    }
-  }
-  return out + "\"";
-}
-
-std::string ToJson(const google::protobuf::Message& message) {
-  google::protobuf::util::JsonPrintOptions options;
-  options.preserve_proto_field_names = true;
-  options.always_print_primitive_fields = true;
-  std::string out;
-  // Only fails for messages with unresolvable Any fields, which ours lack.
-  (void)google::protobuf::util::MessageToJsonString(message, &out, options);
-  return out;
-}
-
-bool IsMeshFile(const fs::path& p) {
-  const std::string ext = absl::AsciiStrToLower(p.extension().string());
-  return ext == ".off" || ext == ".obj" || ext == ".ply" || ext == ".stl";
-}
+using tpr::cli::CallOptionsFor;
+using tpr::cli::Fail;
+using tpr::cli::Globals;
+using tpr::cli::JsonString;
+using tpr::cli::ToJson;
 
 int CountKind(const tpr::v1::Signature& s, tpr::v1::FeatureKind kind) {
   return static_cast<int>(std::count_if(s.features().begin(), s.features().end(),
@@ -150,199 +88,6 @@ int RunExtract(const Globals& g, const std::vector<std::string>& meshes, int ban
     for (const std::string& w : r->warnings()) std::printf("  warning: %s\n", w.c_str());
   }
   return failures == 0 ? 0 : 1;
-}
-
-// --- add -----------------------------------------------------------------------
-
-struct Item {
-  std::string path;   // on disk
-  std::string id;     // relative path
-  std::string label;
-};
-
-// Manifest: one "relative/path label" pair per line ('#' comments, blank
-// lines ignored; tab or spaces separate).
-absl::StatusOr<std::map<std::string, std::string>> ReadManifest(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) return absl::NotFoundError(absl::StrCat("cannot open manifest ", file));
-  std::map<std::string, std::string> labels;
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    absl::string_view l = absl::StripAsciiWhitespace(line);
-    if (l.empty() || l[0] == '#') continue;
-    std::vector<std::string> fields =
-        absl::StrSplit(l, absl::ByAnyChar(" \t"), absl::SkipEmpty());
-    if (fields.size() < 2) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(file, ":", number, ": expected 'PATH LABEL', got '", l, "'"));
-    }
-    labels[fields[0]] = fields[1];
-  }
-  return labels;
-}
-
-absl::StatusOr<std::vector<Item>> CollectItems(const std::vector<std::string>& paths) {
-  std::vector<Item> items;
-  for (const std::string& arg : paths) {
-    std::error_code ec;
-    const fs::path root(arg);
-    if (fs::is_directory(root, ec)) {
-      std::vector<fs::path> files;
-      for (auto it = fs::recursive_directory_iterator(root, ec);
-           !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
-        if (it->is_regular_file() && IsMeshFile(it->path())) files.push_back(it->path());
-      }
-      if (ec) return absl::NotFoundError(absl::StrCat("cannot walk ", arg, ": ", ec.message()));
-      std::sort(files.begin(), files.end());
-      for (const fs::path& f : files) {
-        Item item;
-        item.path = f.string();
-        item.id = f.lexically_relative(root).generic_string();
-        item.label = f.parent_path() == root ? "" : f.parent_path().filename().string();
-        items.push_back(std::move(item));
-      }
-    } else if (fs::is_regular_file(root, ec)) {
-      Item item;
-      item.path = arg;
-      item.id = root.lexically_normal().generic_string();
-      item.label = root.parent_path().filename().string();
-      items.push_back(std::move(item));
-    } else {
-      return absl::NotFoundError(absl::StrCat("no such file or folder: ", arg));
-    }
-  }
-  return items;
-}
-
-// Progress on stderr: a redrawn bar on a terminal, plain lines otherwise.
-class Progress {
- public:
-  explicit Progress(size_t total)
-      : total_(total), tty_(isatty(STDERR_FILENO) == 1), start_(Clock::now()) {}
-  void Step(const std::string& id, const std::string& outcome) {
-    std::lock_guard<std::mutex> lock(mu_);
-    ++done_;
-    const double elapsed = std::chrono::duration<double>(Clock::now() - start_).count();
-    const double rate = elapsed > 0 ? done_ / elapsed : 0;
-    const double eta = rate > 0 ? (total_ - done_) / rate : 0;
-    if (tty_) {
-      constexpr int kWidth = 30;
-      const int filled = total_ ? static_cast<int>(kWidth * done_ / total_) : kWidth;
-      std::fprintf(stderr, "\r[%s%s] %zu/%zu  %.1f/s  ETA %.0fs  ",
-                   std::string(filled, '#').c_str(), std::string(kWidth - filled, '.').c_str(),
-                   done_, total_, rate, eta);
-      if (done_ == total_) std::fprintf(stderr, "\n");
-    } else {
-      std::fprintf(stderr, "%zu/%zu %s %s (%.1f/s, ETA %.0fs)\n", done_, total_,
-                   outcome.c_str(), id.c_str(), rate, eta);
-    }
-    std::fflush(stderr);
-  }
-  double Elapsed() const { return std::chrono::duration<double>(Clock::now() - start_).count(); }
-
- private:
-  using Clock = std::chrono::steady_clock;
-  std::mutex mu_;
-  size_t done_ = 0;
-  const size_t total_;
-  const bool tty_;
-  const Clock::time_point start_;
-};
-
-int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::string& manifest,
-           int jobs, bool update) {
-  absl::StatusOr<std::vector<Item>> items = CollectItems(paths);
-  if (!items.ok()) return Fail("add", items.status());
-  if (!manifest.empty()) {
-    absl::StatusOr<std::map<std::string, std::string>> labels = ReadManifest(manifest);
-    if (!labels.ok()) return Fail("--manifest", labels.status());
-    for (Item& item : *items) {
-      auto it = labels->find(item.id);
-      if (it != labels->end()) item.label = it->second;
-    }
-  }
-  absl::StatusOr<ExtractorClient> extractor = ExtractorClient::Connect(g.extractor);
-  if (!extractor.ok()) return Fail("--extractor", extractor.status());
-  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(g.indexer);
-  if (!indexer.ok()) return Fail("--indexer", indexer.status());
-  const tpr::client::CallOptions call = CallOptionsFor(g);
-
-  // Safe re-runs: one listing tells which ids exist, instead of a Get each.
-  std::set<std::string> present;
-  if (!update) {
-    absl::StatusOr<std::vector<tpr::v1::Model>> existing = indexer->ListAll("", &call);
-    if (!existing.ok()) return Fail("listing the index", existing.status());
-    for (const tpr::v1::Model& m : *existing) present.insert(m.id());
-  }
-
-  Progress progress(items->size());
-  std::atomic<size_t> next{0};
-  std::atomic<int> added{0}, updated{0}, skipped{0};
-  std::mutex failures_mu;
-  std::vector<std::pair<std::string, std::string>> failures;
-  auto worker = [&] {
-    for (size_t i = next++; i < items->size(); i = next++) {
-      const Item& item = (*items)[i];
-      if (present.count(item.id)) {
-        ++skipped;
-        progress.Step(item.id, "skipped");
-        continue;
-      }
-      absl::Status status;
-      absl::StatusOr<tpr::v1::ExtractResponse> r = extractor->ExtractFile(item.path, {}, &call);
-      bool created = false;
-      if (r.ok()) {
-        tpr::v1::Model model;
-        model.set_id(item.id);
-        model.set_label(item.label);
-        (*model.mutable_metadata())["file_name"] = fs::path(item.path).filename().string();
-        *model.mutable_signature() = std::move(*r->mutable_signature());
-        absl::StatusOr<bool> c = indexer->Upsert(model, update, &call);
-        status = c.status();
-        created = c.ok() && *c;
-      } else {
-        status = r.status();
-      }
-      if (absl::IsAlreadyExists(status)) {  // added meanwhile by someone else
-        ++skipped;
-        progress.Step(item.id, "skipped");
-      } else if (!status.ok()) {
-        {
-          std::lock_guard<std::mutex> lock(failures_mu);
-          failures.emplace_back(item.id, status.ToString());
-        }
-        progress.Step(item.id, "FAILED");
-      } else {
-        ++(created ? added : updated);
-        progress.Step(item.id, created ? "added" : "updated");
-      }
-    }
-  };
-  std::vector<std::thread> threads;
-  for (int j = 0; j < std::max(1, jobs); ++j) threads.emplace_back(worker);
-  for (std::thread& t : threads) t.join();
-
-  std::sort(failures.begin(), failures.end());
-  if (g.json) {
-    std::string f;
-    for (const auto& [id, why] : failures) {
-      absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
-                      ",\"error\":", JsonString(why), "}");
-    }
-    std::printf("{\"files\":%zu,\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
-                "\"seconds\":%.3f,\"failures\":[%s]}\n",
-                items->size(), added.load(), updated.load(), skipped.load(), failures.size(),
-                progress.Elapsed(), f.c_str());
-  } else {
-    std::printf("%zu files: %d added, %d updated, %d skipped (already present), %zu failed "
-                "in %.1f s\n",
-                items->size(), added.load(), updated.load(), skipped.load(), failures.size(),
-                progress.Elapsed());
-    for (const auto& [id, why] : failures) std::printf("  failed %s: %s\n", id.c_str(), why.c_str());
-  }
-  return failures.empty() ? 0 : 1;
 }
 
 // --- query ---------------------------------------------------------------------
@@ -590,16 +335,17 @@ int main(int argc, char** argv) {
 
   std::vector<std::string> add_paths;
   std::string manifest;
-  int jobs = 4;
-  bool update = false;
+  tpr::cli::AddOptions add_options;
   CLI::App* add = app.add_subcommand(
       "add", "index mesh files or folders (recursive); ids are paths relative to the folder "
              "given (a file argument: its path as given), labels the parent folder names "
              "(or --manifest)");
   add->add_option("PATH", add_paths, "mesh files or folders")->required();
   add->add_option("--manifest", manifest, "file of 'RELATIVE/PATH LABEL' lines");
-  add->add_option("--jobs,-j", jobs, "parallel uploads")->capture_default_str()->check(CLI::Range(1, 64));
-  add->add_flag("--update", update, "replace ids already present (default: skip them)");
+  add->add_option("--jobs,-j", add_options.jobs, "parallel uploads")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  add->add_flag("--update", add_options.update, "replace ids already present (default: skip them)");
 
   std::string query_mesh, query_id, query_label;
   int k = 10;
@@ -638,15 +384,36 @@ int main(int argc, char** argv) {
   bool inspect_ascii = false;
   inspect->add_flag("--ascii", inspect_ascii, "write ASCII PLY (default binary)");
 
+  std::string eval_dataset;
+  tpr::cli::EvalOptions eval_options;
+  CLI::App* eval = app.add_subcommand(
+      "eval", "retrieval quality of a labelled set through the services: extract and index "
+              "every model (as add), query each by id against all others, print NN, FT, ST, "
+              "E, DCG and mAP per class and overall, and draw the precision-recall curve and "
+              "the mean class-similarity matrix (SVG)");
+  eval->add_option("DATASET", eval_dataset,
+                   "folder of class subfolders, or manifest file of 'PATH CLASS' lines (paths "
+                   "relative to it)")
+      ->required();
+  eval->add_option("--out,-o", eval_options.out_dir,
+                   "folder for precision_recall.svg and similarity.svg")
+      ->capture_default_str();
+  eval->add_option("--jobs,-j", eval_options.add.jobs, "parallel uploads and queries")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  eval->add_flag("--update", eval_options.add.update,
+                 "re-extract ids already in the indexer (default: use them as they are)");
+
   CLI11_PARSE(app, argc, argv);
 
   if (*extract) return RunExtract(g, extract_meshes, bands);
-  if (*add) return RunAdd(g, add_paths, manifest, jobs, update);
+  if (*add) return tpr::cli::RunAdd(g, add_paths, manifest, add_options);
   if (*query) return RunQuery(g, query_mesh, query_id, k, radius, query_label, exclude_self);
   if (*get) return RunGet(g, get_ids);
   if (*remove) return RunRemove(g, remove_ids);
   if (*list) return RunList(g, list_label);
   if (*stats) return RunStats(g);
   if (*inspect) return RunInspect(g, inspect_mesh, inspect_out, inspect_bands, inspect_ascii);
+  if (*eval) return tpr::cli::RunEval(g, eval_dataset, eval_options);
   return 2;
 }

@@ -1,0 +1,125 @@
+#include "client/cli/add.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace tpr::cli {
+
+namespace fs = std::filesystem;
+using tpr::client::ExtractorClient;
+using tpr::client::IndexerClient;
+
+absl::StatusOr<std::vector<AddOutcome>> AddItems(const ExtractorClient& extractor,
+                                                 const IndexerClient& indexer,
+                                                 const std::vector<Item>& items,
+                                                 const AddOptions& options,
+                                                 const tpr::client::CallOptions& call,
+                                                 Progress* progress) {
+  // Safe re-runs: one listing tells which ids exist, instead of a Get each.
+  std::set<std::string> present;
+  if (!options.update) {
+    absl::StatusOr<std::vector<tpr::v1::Model>> existing = indexer.ListAll("", &call);
+    if (!existing.ok()) return existing.status();
+    for (const tpr::v1::Model& m : *existing) present.insert(m.id());
+  }
+  std::vector<AddOutcome> outcomes(items.size());
+  ParallelFor(items.size(), options.jobs, [&](size_t i) {
+    const Item& item = items[i];
+    AddOutcome& out = outcomes[i];
+    if (present.count(item.id)) {
+      out.kind = AddOutcome::kSkipped;
+      if (progress != nullptr) progress->Step(item.id, "skipped");
+      return;
+    }
+    absl::Status status;
+    bool created = false;
+    absl::StatusOr<tpr::v1::ExtractResponse> r = extractor.ExtractFile(item.path, {}, &call);
+    if (r.ok()) {
+      tpr::v1::Model model;
+      model.set_id(item.id);
+      model.set_label(item.label);
+      (*model.mutable_metadata())["file_name"] = fs::path(item.path).filename().string();
+      *model.mutable_signature() = std::move(*r->mutable_signature());
+      absl::StatusOr<bool> c = indexer.Upsert(model, options.update, &call);
+      status = c.status();
+      created = c.ok() && *c;
+    } else {
+      status = r.status();
+    }
+    if (absl::IsAlreadyExists(status)) {  // added meanwhile by someone else
+      out.kind = AddOutcome::kSkipped;
+    } else if (!status.ok()) {
+      out.kind = AddOutcome::kFailed;
+      out.error = status.ToString();
+    } else {
+      out.kind = created ? AddOutcome::kAdded : AddOutcome::kUpdated;
+    }
+    if (progress != nullptr) {
+      static const char* const kNames[] = {"added", "updated", "skipped", "FAILED"};
+      progress->Step(item.id, kNames[out.kind]);
+    }
+  });
+  return outcomes;
+}
+
+int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::string& manifest,
+           const AddOptions& options) {
+  absl::StatusOr<std::vector<Item>> items = CollectItems(paths);
+  if (!items.ok()) return Fail("add", items.status());
+  if (!manifest.empty()) {
+    absl::StatusOr<std::map<std::string, std::string>> labels = ReadManifest(manifest);
+    if (!labels.ok()) return Fail("--manifest", labels.status());
+    for (Item& item : *items) {
+      auto it = labels->find(item.id);
+      if (it != labels->end()) item.label = it->second;
+    }
+  }
+  absl::StatusOr<ExtractorClient> extractor = ExtractorClient::Connect(g.extractor);
+  if (!extractor.ok()) return Fail("--extractor", extractor.status());
+  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(g.indexer);
+  if (!indexer.ok()) return Fail("--indexer", indexer.status());
+  const tpr::client::CallOptions call = CallOptionsFor(g);
+
+  Progress progress(items->size());
+  absl::StatusOr<std::vector<AddOutcome>> outcomes =
+      AddItems(*extractor, *indexer, *items, options, call, &progress);
+  if (!outcomes.ok()) return Fail("listing the index", outcomes.status());
+
+  int added = 0, updated = 0, skipped = 0;
+  std::vector<std::pair<std::string, std::string>> failures;
+  for (size_t i = 0; i < items->size(); ++i) {
+    const AddOutcome& o = (*outcomes)[i];
+    switch (o.kind) {
+      case AddOutcome::kAdded: ++added; break;
+      case AddOutcome::kUpdated: ++updated; break;
+      case AddOutcome::kSkipped: ++skipped; break;
+      case AddOutcome::kFailed: failures.emplace_back((*items)[i].id, o.error); break;
+    }
+  }
+  std::sort(failures.begin(), failures.end());
+  if (g.json) {
+    std::string f;
+    for (const auto& [id, why] : failures) {
+      absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
+                      ",\"error\":", JsonString(why), "}");
+    }
+    std::printf("{\"files\":%zu,\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
+                "\"seconds\":%.3f,\"failures\":[%s]}\n",
+                items->size(), added, updated, skipped, failures.size(), progress.Elapsed(),
+                f.c_str());
+  } else {
+    std::printf("%zu files: %d added, %d updated, %d skipped (already present), %zu failed "
+                "in %.1f s\n",
+                items->size(), added, updated, skipped, failures.size(), progress.Elapsed());
+    for (const auto& [id, why] : failures) std::printf("  failed %s: %s\n", id.c_str(), why.c_str());
+  }
+  return failures.empty() ? 0 : 1;
+}
+
+}  // namespace tpr::cli

@@ -1,0 +1,252 @@
+#include "client/cli/eval.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <set>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/cli/dataset.h"
+#include "eval/lib/metrics.h"
+#include "eval/lib/plots.h"
+
+namespace tpr::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using tpr::client::ExtractorClient;
+using tpr::client::IndexerClient;
+
+// A number for the JSON report: full precision, so that a reader can compare
+// it with its own computation; JSON has no NaN or infinity.
+std::string JsonNumber(double x) {
+  if (!(x == x) || x == std::numeric_limits<double>::infinity() ||
+      x == -std::numeric_limits<double>::infinity()) {
+    return "null";
+  }
+  return absl::StrFormat("%.17g", x);
+}
+
+std::string MetricsFields(const eval::Metrics& m) {
+  std::string out = absl::StrCat("\"queries\":", m.queries, ",\"nn\":", JsonNumber(m.nn),
+                                 ",\"ft\":", JsonNumber(m.ft), ",\"st\":", JsonNumber(m.st),
+                                 ",\"e\":", JsonNumber(m.e), ",\"dcg\":", JsonNumber(m.dcg),
+                                 ",\"map\":", JsonNumber(m.map), ",\"pr\":[");
+  for (int r = 0; r < eval::kRecallLevels; ++r) {
+    absl::StrAppend(&out, r ? "," : "", JsonNumber(m.pr[r]));
+  }
+  return out + "]";
+}
+
+absl::Status WriteText(const fs::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out << text;
+  out.close();
+  if (!out) return absl::PermissionDeniedError(absl::StrCat("cannot write ", path.string()));
+  return absl::OkStatus();
+}
+
+// One leave-one-out search: `query` (index into `ids`) against the index,
+// by id, without itself, k = every model. Neighbours that are not part of
+// the evaluated set (other models the indexer holds) are dropped; Evaluate
+// counts evaluated models absent from a ranking as retrieved last.
+absl::StatusOr<eval::Query> SearchOne(const IndexerClient& indexer, const std::vector<Item>& items,
+                                      const std::vector<int>& evaluated,
+                                      const std::unordered_map<std::string, int>& index_of,
+                                      int query, int k, const tpr::client::CallOptions& call) {
+  const std::string& id = items[evaluated[query]].id;
+  tpr::v1::SearchRequest request;
+  request.set_id(id);
+  request.set_exclude_self(true);
+  request.set_k(k);
+  std::unique_ptr<tpr::client::SearchStream> stream = indexer.Search(request, &call);
+  eval::Query q;
+  q.model = query;
+  std::vector<bool> seen(evaluated.size(), false);
+  for (tpr::v1::Neighbor n; stream->Next(&n);) {
+    auto it = index_of.find(n.id());
+    if (it == index_of.end() || it->second == query || seen[it->second]) continue;
+    seen[it->second] = true;
+    q.ranking.push_back({it->second, n.distance()});
+  }
+  absl::Status status = stream->Finish();
+  if (!status.ok()) return status;
+  return q;
+}
+
+void PrintTable(const std::map<std::string, int>& models_per_class, const eval::Scores& s,
+                int models) {
+  std::printf("%-24s %6s %6s %6s %6s %6s %6s %6s\n", "class", "models", "NN", "FT", "ST", "E",
+              "DCG", "mAP");
+  auto row = [](const std::string& cls, int n, const eval::Metrics* m) {
+    if (m == nullptr) {
+      std::printf("%-24s %6d %6s %6s %6s %6s %6s %6s  (one model: no query)\n", cls.c_str(), n,
+                  "-", "-", "-", "-", "-", "-");
+      return;
+    }
+    std::printf("%-24s %6d %6.3f %6.3f %6.3f %6.3f %6.3f %6.3f\n", cls.c_str(), n, m->nn, m->ft,
+                m->st, m->e, m->dcg, m->map);
+  };
+  for (const auto& [cls, n] : models_per_class) {
+    auto it = s.per_class.find(cls);
+    row(cls, n, it == s.per_class.end() ? nullptr : &it->second);
+  }
+  row("ALL", models, &s.overall);
+}
+
+}  // namespace
+
+int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& options) {
+  absl::StatusOr<std::vector<Item>> items = ItemsFromDataset(dataset);
+  if (!items.ok()) {
+    Fail("eval", items.status());
+    return 2;
+  }
+  absl::StatusOr<ExtractorClient> extractor = ExtractorClient::Connect(g.extractor);
+  if (!extractor.ok()) return Fail("--extractor", extractor.status());
+  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(g.indexer);
+  if (!indexer.ok()) return Fail("--indexer", indexer.status());
+  const tpr::client::CallOptions call = CallOptionsFor(g);
+
+  // 1. Extract and index, exactly as `tpr add` (same skip/--update rules).
+  Progress add_progress(items->size(), "extracting");
+  absl::StatusOr<std::vector<AddOutcome>> outcomes =
+      AddItems(*extractor, *indexer, *items, options.add, call, &add_progress);
+  if (!outcomes.ok()) return Fail("listing the index", outcomes.status());
+  const double add_seconds = add_progress.Elapsed();
+
+  std::vector<std::pair<std::string, std::string>> failures;  // id, reason
+  std::vector<int> evaluated;  // indices into *items
+  int added = 0, updated = 0, skipped = 0;
+  for (size_t i = 0; i < items->size(); ++i) {
+    const AddOutcome& o = (*outcomes)[i];
+    if (o.kind == AddOutcome::kFailed) {
+      failures.emplace_back((*items)[i].id, o.error);
+      continue;
+    }
+    (o.kind == AddOutcome::kAdded ? added : o.kind == AddOutcome::kUpdated ? updated : skipped)++;
+    evaluated.push_back(static_cast<int>(i));
+  }
+
+  // 2. Leave-one-out queries. k covers the whole index, so that every
+  // evaluated model is ranked even when the indexer holds other models too.
+  std::vector<eval::Query> queries;
+  double query_seconds = 0;
+  if (evaluated.size() >= 2) {
+    absl::StatusOr<tpr::v1::StatsResponse> stats = indexer->Stats(&call);
+    if (!stats.ok()) return Fail("indexer stats", stats.status());
+    const int64_t k = std::max<int64_t>(stats->models(), static_cast<int64_t>(evaluated.size()));
+    if (k > std::numeric_limits<int32_t>::max()) {
+      return Fail("eval", absl::ResourceExhaustedError("the index is too large to rank fully"));
+    }
+    std::unordered_map<std::string, int> index_of;
+    for (size_t e = 0; e < evaluated.size(); ++e) {
+      index_of[(*items)[evaluated[e]].id] = static_cast<int>(e);
+    }
+    std::vector<absl::StatusOr<eval::Query>> results(evaluated.size());
+    Progress query_progress(evaluated.size(), "querying  ");
+    ParallelFor(evaluated.size(), options.add.jobs, [&](size_t e) {
+      results[e] = SearchOne(*indexer, *items, evaluated, index_of, static_cast<int>(e),
+                             static_cast<int>(k), call);
+      query_progress.Step((*items)[evaluated[e]].id, results[e].ok() ? "queried" : "FAILED");
+    });
+    query_seconds = query_progress.Elapsed();
+    for (size_t e = 0; e < evaluated.size(); ++e) {
+      if (results[e].ok()) {
+        queries.push_back(std::move(*results[e]));
+      } else {
+        // The model stays in the others' rankings; only its own query is
+        // left out.
+        failures.emplace_back((*items)[evaluated[e]].id,
+                              absl::StrCat("query: ", results[e].status().ToString()));
+      }
+    }
+  }
+  std::sort(failures.begin(), failures.end());
+
+  std::vector<std::string> labels;
+  std::map<std::string, int> models_per_class;
+  for (int i : evaluated) {
+    labels.push_back((*items)[i].label);
+    ++models_per_class[(*items)[i].label];
+  }
+  const eval::Scores scores = eval::Evaluate(labels, queries);
+  const bool evaluable = scores.overall.queries > 0;
+
+  // 3. Pictures.
+  std::string written;
+  absl::Status pictures = absl::OkStatus();
+  if (evaluable) {
+    std::error_code ec;
+    fs::create_directories(options.out_dir, ec);
+    if (ec) {
+      pictures = absl::PermissionDeniedError(
+          absl::StrCat("cannot create ", options.out_dir, ": ", ec.message()));
+    } else {
+      const fs::path out(options.out_dir);
+      const std::string name = fs::path(dataset).lexically_normal().filename().string();
+      pictures = WriteText(
+          out / "precision_recall.svg",
+          eval::PrecisionRecallSvg({{"TPR, all classes", scores.overall.pr}},
+                                   absl::StrCat("Precision-recall, ", name, " (",
+                                                evaluated.size(), " models)")));
+      if (pictures.ok()) {
+        pictures = WriteText(out / "similarity.svg",
+                             eval::SimilaritySvg(eval::MeanSimilarity(labels, queries),
+                                                 absl::StrCat("Mean class similarity, ", name)));
+      }
+      written = (out / "precision_recall.svg").string() + ", " +
+                (out / "similarity.svg").string();
+    }
+  }
+
+  // 4. Report.
+  if (g.json) {
+    std::string per_class;
+    for (const auto& [cls, n] : models_per_class) {
+      auto it = scores.per_class.find(cls);
+      absl::StrAppend(&per_class, per_class.empty() ? "" : ",", JsonString(cls),
+                      ":{\"models\":", n,
+                      it == scores.per_class.end() ? std::string(",\"queries\":0")
+                                                   : "," + MetricsFields(it->second),
+                      "}");
+    }
+    std::string f;
+    for (const auto& [id, why] : failures) {
+      absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
+                      ",\"error\":", JsonString(why), "}");
+    }
+    std::printf("{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":{%s},\"files\":%zu,"
+                "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,\"failures\":[%s],"
+                "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
+                evaluated.size(), models_per_class.size(), MetricsFields(scores.overall).c_str(),
+                per_class.c_str(), items->size(), added, updated, skipped, failures.size(),
+                f.c_str(), add_seconds, query_seconds,
+                evaluable && pictures.ok() ? JsonString(options.out_dir).c_str() : "null");
+  } else {
+    std::printf("%zu models in %zu classes (%d added, %d updated, %d already indexed, %zu "
+                "failed); extraction and indexing %.1f s, queries %.1f s\n\n",
+                evaluated.size(), models_per_class.size(), added, updated, skipped,
+                failures.size(), add_seconds, query_seconds);
+    if (evaluable) PrintTable(models_per_class, scores, static_cast<int>(evaluated.size()));
+    for (const auto& [id, why] : failures) std::printf("  failed %s: %s\n", id.c_str(), why.c_str());
+    if (evaluable && pictures.ok()) std::printf("\nwrote %s\n", written.c_str());
+  }
+  if (!evaluable) {
+    std::fprintf(stderr, "tpr eval: nothing could be evaluated (%zu of %zu models usable; "
+                         "metrics need a class with at least two)\n",
+                 evaluated.size(), items->size());
+    return 1;
+  }
+  if (!pictures.ok()) return Fail("eval pictures", pictures);
+  return 0;
+}
+
+}  // namespace tpr::cli
