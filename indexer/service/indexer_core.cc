@@ -29,6 +29,36 @@ absl::Status CheckId(const std::string& id) {
 
 }  // namespace
 
+// The label of `id` in one published label map; nullptr when absent.
+const std::string* IndexerCore::FindLabel(const LabelMap& labels, const std::string& id) {
+  const LabelShard& shard = *labels[LabelShardOf(id)];
+  auto it = shard.find(id);
+  return it == shard.end() ? nullptr : &it->second;
+}
+
+void IndexerCore::ApplyLabelsLocked(
+    const std::vector<std::pair<std::string, std::optional<std::string>>>& changes) {
+  // Copy-on-write: only the shards touched are copied; the others are
+  // shared with the previous map, which running searches may still hold.
+  auto next = std::make_shared<LabelMap>(*labels_);
+  std::unordered_map<size_t, LabelShard*> copied;
+  for (const auto& [id, label] : changes) {
+    const size_t at = LabelShardOf(id);
+    LabelShard*& shard = copied[at];
+    if (shard == nullptr) {
+      auto copy = std::make_shared<LabelShard>(*(*next)[at]);
+      shard = copy.get();
+      (*next)[at] = std::move(copy);
+    }
+    if (label.has_value()) {
+      (*shard)[id] = *label;
+    } else {
+      shard->erase(id);
+    }
+  }
+  labels_ = std::move(next);
+}
+
 absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s) {
   if (s.features_size() > tpr::index::kMaxFeatures) {
     return absl::ResourceExhaustedError(
@@ -110,6 +140,20 @@ absl::Status IndexerCore::LoadIndex() {
         }));
   }
 
+  {
+    // The label map searches use, built whole (no copy-on-write needed yet).
+    std::vector<LabelShard> shards(kLabelShards);
+    absl::ReaderMutexLock lock(&table_mu_);
+    for (const auto& [id, info] : table_) shards[LabelShardOf(id)].emplace(id, info.label);
+    auto labels = std::make_shared<LabelMap>();
+    labels->reserve(kLabelShards);
+    for (LabelShard& shard : shards) {
+      labels->push_back(std::make_shared<const LabelShard>(std::move(shard)));
+    }
+    std::lock_guard<std::mutex> view(view_mu_);
+    labels_ = std::move(labels);
+  }
+
   if (tree.ok()) {
     absl::StatusOr<std::unique_ptr<tpr::index::SignatureIndex>> loaded =
         tpr::index::SignatureIndex::Load(tree->bytes, items, options_.index);
@@ -138,7 +182,9 @@ absl::Status IndexerCore::LoadIndex() {
   build_options.background_rebuild = false;
   build_options.rebuild_threshold = items.size() + 1;
   tpr::index::SignatureIndex builder(build_options);
-  for (const auto& [id, sig] : items) TPR_RETURN_IF_ERROR(builder.Upsert(id, sig));
+  // One bulk insert: per-item Upsert copies the growing buffer each time,
+  // quadratic in the number of models.
+  TPR_RETURN_IF_ERROR(builder.UpsertBatch(items));
   builder.Rebuild();
   const std::string bytes = builder.SerializeTree();
   TPR_ASSIGN_OR_RETURN(index_, tpr::index::SignatureIndex::Load(bytes, items, options_.index));
@@ -233,7 +279,7 @@ absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
 
 absl::Status IndexerCore::WriteGroupLocked(
     std::vector<tpr::v1::UpsertRequest>& requests,
-    const std::vector<tpr::index::Signature>& signatures, std::vector<int>* outcome) {
+    std::vector<tpr::index::Signature>& signatures, std::vector<int>* outcome) {
   outcome->assign(requests.size(), kSkipped);
   // Ids written earlier in this same group, with their time added.
   std::unordered_map<std::string, int64_t> in_group;
@@ -263,17 +309,33 @@ absl::Status IndexerCore::WriteGroupLocked(
   }
   if (writes.empty()) return absl::OkStatus();
   TPR_RETURN_IF_ERROR(storage_->Write(writes));
-  // Durable from here on: the index and the table follow.
+  // Durable from here on: the index (one bulk insert for the whole group:
+  // per-model Upsert copies the index's buffer each time, which dominated
+  // ingest), the label map and the table follow.
+  std::vector<std::pair<std::string, tpr::index::Signature>> entries;
+  std::vector<std::pair<std::string, std::optional<std::string>>> labels;
+  entries.reserve(writes.size());
+  labels.reserve(writes.size());
+  for (size_t i = 0; i < requests.size(); ++i) {
+    if ((*outcome)[i] == kSkipped) continue;
+    const tpr::v1::Model& model = requests[i].model();
+    entries.emplace_back(model.id(), std::move(signatures[i]));
+    labels.emplace_back(model.id(), model.label());
+  }
+  {
+    std::lock_guard<std::mutex> view(view_mu_);
+    absl::Status st = index_->UpsertBatch(entries);
+    if (!st.ok()) {
+      // CheckModel validated the signatures already; this is a bug, not data.
+      return absl::InternalError(
+          absl::StrCat("index rejected a stored model: ", st.message()));
+    }
+    ApplyLabelsLocked(labels);
+  }
   absl::MutexLock lock(&table_mu_);
   for (size_t i = 0; i < requests.size(); ++i) {
     if ((*outcome)[i] == kSkipped) continue;
     const tpr::v1::Model& model = requests[i].model();
-    absl::Status st = index_->Upsert(model.id(), signatures[i]);
-    if (!st.ok()) {
-      // CheckModel validated the signature already; this is a bug, not data.
-      return absl::InternalError(absl::StrCat("index rejected stored model '", model.id(),
-                                              "': ", st.message()));
-    }
     Info& info = table_[model.id()];
     if ((*outcome)[i] == kReplaced) {
       if (--label_counts_[info.label] == 0) label_counts_.erase(info.label);
@@ -353,7 +415,11 @@ absl::Status IndexerCore::Delete(const std::string& id) {
     }
   }
   TPR_RETURN_IF_ERROR(storage_->Write({{id, nullptr}}));
-  index_->Remove(id);
+  {
+    std::lock_guard<std::mutex> view(view_mu_);
+    index_->Remove(id);
+    ApplyLabelsLocked({{id, std::nullopt}});
+  }
   absl::MutexLock write(&table_mu_);
   auto it = table_.find(id);
   if (--label_counts_[it->second.label] == 0) label_counts_.erase(it->second.label);
@@ -511,21 +577,27 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
       return absl::InvalidArgumentError("search has no query: set signature or id");
   }
   const std::string label = request.label();
-  auto filter = [this, label, exclude, cancelled](const std::string& id) {
-    if (cancelled && cancelled()) return false;
-    if (!exclude.empty() && id == exclude) return false;
-    if (label.empty()) return true;
-    absl::ReaderMutexLock lock(&table_mu_);
-    auto it = table_.find(id);
-    return it != table_.end() && it->second.label == label;
-  };
-  auto label_of = [this](const std::string& id) {
-    absl::ReaderMutexLock lock(&table_mu_);
-    auto it = table_.find(id);
-    return it == table_.end() ? std::string() : it->second.label;
-  };
-  TPR_ASSIGN_OR_RETURN(std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor,
-                       index_->Search(query, request.radius(), filter));
+  std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor;
+  Session::LabelOf label_of;
+  {
+    // The index snapshot and the label map are taken together (writers
+    // update both under view_mu_), so filter and results use the labels that
+    // went with the ranked signatures, whatever is written meanwhile.
+    std::lock_guard<std::mutex> view(view_mu_);
+    std::shared_ptr<const LabelMap> labels = labels_;
+    auto filter = [labels, label, exclude, cancelled](const std::string& id) {
+      if (cancelled && cancelled()) return false;
+      if (!exclude.empty() && id == exclude) return false;
+      if (label.empty()) return true;
+      const std::string* found = FindLabel(*labels, id);
+      return found != nullptr && *found == label;
+    };
+    label_of = [labels](const std::string& id) {
+      const std::string* found = FindLabel(*labels, id);
+      return found == nullptr ? std::string() : *found;
+    };
+    TPR_ASSIGN_OR_RETURN(cursor, index_->Search(query, request.radius(), filter));
+  }
   return std::unique_ptr<SearchSession>(
       new Session(std::move(cursor), request.k(), std::move(cancelled), label_of));
 }

@@ -11,9 +11,12 @@
 // Consistency: writes are serialized by one mutex held across the synced
 // RocksDB write and the index update, so the index never holds a model that
 // is not durable and an acknowledged write is visible to every later search.
-// A search works on the index snapshot taken when it starts (signatures and
-// tree); labels for the label filter and for the results are read from the
-// live id table as candidates are examined.
+// A search sees one consistent state: the index snapshot (signatures and
+// tree) and the id -> label map snapshot taken together when it starts, so
+// a model relabelled or deleted during a search keeps, for that search, the
+// label that went with the signature it is ranked by. The label map is
+// copy-on-write in hash shards: a write copies the shards it touches (plus
+// a vector of shard pointers), a search start copies one shared pointer.
 #ifndef TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 #define TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 
@@ -27,6 +30,8 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -202,10 +207,15 @@ class IndexerCore {
   absl::Status CheckModel(const tpr::v1::Model& model,
                           tpr::index::Signature* signature) const;
   // Writes `requests` (validated, with converted signatures) durably and
-  // indexes them. Requires write_mu_. Counts created/replaced/skipped.
+  // indexes them with one SignatureIndex::UpsertBatch. Requires write_mu_.
+  // Counts created/replaced/skipped. Moves from `signatures`.
   absl::Status WriteGroupLocked(std::vector<tpr::v1::UpsertRequest>& requests,
-                                const std::vector<tpr::index::Signature>& signatures,
+                                std::vector<tpr::index::Signature>& signatures,
                                 std::vector<int>* outcome);
+  // Publishes a new label map with `changes` applied (label set, or nullopt:
+  // removed). Requires view_mu_.
+  void ApplyLabelsLocked(
+      const std::vector<std::pair<std::string, std::optional<std::string>>>& changes);
   void PersisterLoop();
 
   const CoreOptions options_;
@@ -214,6 +224,20 @@ class IndexerCore {
 
   // Serializes writes: storage write + index update + table update.
   std::mutex write_mu_;
+  // The id -> label map searches use: kLabelShards shards by id hash, each
+  // immutable once published (copy-on-write).
+  static constexpr size_t kLabelShards = 4096;
+  using LabelShard = std::unordered_map<std::string, std::string>;
+  using LabelMap = std::vector<std::shared_ptr<const LabelShard>>;
+  static size_t LabelShardOf(const std::string& id) {
+    return std::hash<std::string>()(id) % kLabelShards;
+  }
+  static const std::string* FindLabel(const LabelMap& labels, const std::string& id);
+  // Pairs index updates with label map updates: writers hold it across
+  // both, a search start across taking both snapshots. Order: write_mu_,
+  // then view_mu_, then table_mu_.
+  mutable std::mutex view_mu_;
+  std::shared_ptr<const LabelMap> labels_;  // guarded by view_mu_
   // The live id table: id -> label and time added, plus label counts.
   mutable absl::Mutex table_mu_;
   std::map<std::string, Info> table_ ABSL_GUARDED_BY(table_mu_);

@@ -2,6 +2,8 @@
 // round trips, searches against the brute-force EMD oracle, error codes,
 // concurrency, health, cancellation.
 #include <atomic>
+#include <map>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -426,6 +428,78 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
     ASSERT_TRUE(r.status.ok());
     TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, all, 25));
   }
+}
+
+// A search sees the state of the moment it started: models relabelled (with
+// a new signature), deleted or added while it runs do not show, and every
+// result carries the label that went with the signature it was ranked by.
+// The oracle is the brute-force ranking of the models as they were.
+TEST_F(IndexerServiceTest, SearchSeesTheLabelsOfItsStartDespiteLaterWrites) {
+  const std::vector<TestModel> before = MakeModels(40, 2, 81);
+  AddAll(before);
+  const tpr::index::Signature& query = before[7].signature;
+  const std::string kept_label = before[7].label;
+  auto all = server_->core()->StartSearch(BySignature(query, 40), nullptr);
+  ASSERT_TRUE(all.ok()) << all.status();
+  tpr::v1::SearchRequest filtered = BySignature(query, 40);
+  filtered.set_label(kept_label);
+  auto by_label = server_->core()->StartSearch(filtered, nullptr);
+  ASSERT_TRUE(by_label.ok()) << by_label.status();
+
+  // Writes after both searches started: relabel every model of the query's
+  // class with a far signature, delete some of the other class, add new ones.
+  const std::vector<TestModel> other = MakeModels(40, 2, 82, "n");
+  for (size_t i = 0; i < before.size(); ++i) {
+    grpc::ClientContext c;
+    if (before[i].label == kept_label) {
+      TestModel changed = before[i];
+      changed.label = "relabelled";
+      changed.signature = other[i].signature;
+      tpr::v1::UpsertResponse r;
+      ASSERT_TRUE(server_->stub()->Upsert(&c, ToRequest(changed, true), &r).ok());
+    } else if (i % 4 == 1) {
+      tpr::v1::DeleteRequest d;
+      d.set_id(before[i].id);
+      tpr::v1::DeleteResponse r;
+      ASSERT_TRUE(server_->stub()->Delete(&c, d, &r).ok());
+    } else {
+      tpr::v1::UpsertResponse r;
+      TestModel added = other[i];
+      added.label = kept_label;
+      ASSERT_TRUE(server_->stub()->Upsert(&c, ToRequest(added), &r).ok());
+    }
+  }
+
+  std::map<std::string, std::string> label_before;
+  for (const TestModel& m : before) label_before[m.id] = m.label;
+  auto drain = [&](SearchSession& session) {
+    std::vector<tpr::v1::Neighbor> out;
+    while (std::optional<tpr::v1::Neighbor> n = session.Next()) out.push_back(*n);
+    return out;
+  };
+  const std::vector<tpr::v1::Neighbor> got_all = drain(**all);
+  TPR_EXPECT_SAME_RANKING(got_all, BruteForce(query, before, 40));
+  for (const tpr::v1::Neighbor& n : got_all) EXPECT_EQ(n.label(), label_before[n.id()]) << n.id();
+  const std::vector<tpr::v1::Neighbor> got_label = drain(**by_label);
+  TPR_EXPECT_SAME_RANKING(got_label, BruteForce(query, before, 40, 0, kept_label));
+  for (const tpr::v1::Neighbor& n : got_label) EXPECT_EQ(n.label(), kept_label) << n.id();
+
+  // A search started now sees the new state.
+  std::vector<TestModel> after;
+  for (size_t i = 0; i < before.size(); ++i) {
+    if (before[i].label == kept_label) {
+      after.push_back({before[i].id, "relabelled", other[i].signature});
+    } else if (i % 4 == 1) {
+      continue;
+    } else {
+      after.push_back(before[i]);
+      after.push_back({other[i].id, kept_label, other[i].signature});
+    }
+  }
+  SearchResult now = RunSearch(server_->stub(), filtered);
+  ASSERT_TRUE(now.status.ok());
+  TPR_EXPECT_SAME_RANKING(now.neighbors, BruteForce(query, after, 40, 0, kept_label));
+  for (const tpr::v1::Neighbor& n : now.neighbors) EXPECT_EQ(n.label(), kept_label);
 }
 
 TEST_F(IndexerServiceTest, HealthAnswersServing) {
