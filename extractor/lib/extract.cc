@@ -164,6 +164,13 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   for (double d : centre_set.distances) {
     if (d != kUnreachable) max_g_o = std::max(max_g_o, d);
   }
+  // Geodesic diameter estimate: the far source points' distance (4.5), for
+  // bands of one absolute extent (Options::bands_per_feature_extent false).
+  double band_extent = 0.0;
+  if (!options.bands_per_feature_extent) {
+    const double d = sets[0].distances[sources.far_b];
+    if (d != kUnreachable) band_extent = d;
+  }
   timer.Finish("critical_points");
 
   // Stage: Topological Point Selection (4.4).
@@ -178,7 +185,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   ParallelFor(graph, solver, num_points, options.threads, [&](int i, DijkstraSolver& s) {
     point_g[i] = IntegralGeodesic(s, points[i].vertex);
     point_vectors[i] =
-        ComputeSurfaceVectors(graph, links, s.distances(), defects, options.bands, area);
+        ComputeSurfaceVectors(graph, links, s.distances(), defects, options.bands, area,
+                              band_extent);
   });
   // MAX G is an estimate from the centre search; the points are where G
   // peaks (4.1), so they raise it and Eq. 1 stays non-negative.
@@ -247,7 +255,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     const double g_vs_o = d[centre] == kUnreachable ? 0.0 : d[centre];
     const double g_vs_w = d[point_vertices[w]] == kUnreachable ? 0.0 : d[point_vertices[w]];
     ring_g[k] = RingIntegralGeodesic(g_vs_o, g_vs_w, g_min, point_g[w]);
-    ring_vectors[k] = ComputeSurfaceVectors(graph, links, d, defects, options.bands, area);
+    ring_vectors[k] =
+        ComputeSurfaceVectors(graph, links, d, defects, options.bands, area, band_extent);
   });
   timer.Finish("ring_features");
 
@@ -261,7 +270,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
         "no topological point found; the signature is one point at the surface centre");
     Feature f = MakeFeature(
         FeatureKind::kPoint, NormalizeIntegralGeodesic(g_min, g_min, g_max),
-        ComputeSurfaceVectors(graph, links, centre_set.distances, defects, options.bands, area));
+        ComputeSurfaceVectors(graph, links, centre_set.distances, defects, options.bands, area,
+                              band_extent));
     f.weight = 1.0;
     sig.features.push_back(std::move(f));
   } else {

@@ -20,6 +20,12 @@ struct Options {
   // Geodesic bands per feature for the surface vectors (5.3, Fig. 8).
   // Default 20.
   int bands = 20;
+  // Geodesic bands span [0, the largest geodesic distance from the feature]
+  // when true (each feature's own extent); when false they span [0, the
+  // mesh's geodesic diameter, the distance between the two far source
+  // points of 4.5], the same absolute range for every feature of a mesh
+  // (5.3 and Fig. 8 do not say which). Default true.
+  bool bands_per_feature_extent = true;
   // Critical Point Analysis: a cycle is valid when it has more than this
   // many vertices (4.3, "we choose n = 1"). Default 1.
   int cycle_min_vertices = 1;

@@ -41,7 +41,7 @@ std::vector<double> AngleDefects(const Mesh& mesh, const VertexLinks& links) {
 SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& links,
                                      const std::vector<double>& distances,
                                      const std::vector<double>& defects, int bands,
-                                     double total_area) {
+                                     double total_area, double band_extent) {
   const int32_t n = graph.num_vertices();
   const Mesh& mesh = graph.mesh();
   const std::vector<double>& areas = graph.vertex_areas();
@@ -58,6 +58,7 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
   thread_local std::vector<int32_t> band;
   thread_local std::vector<int32_t> segment;
   band.assign(n, -1);
+  if (band_extent > 0.0) max_d = band_extent;
   const double scale = max_d > 0.0 ? bands / max_d : 0.0;
   for (int32_t v = 0; v < n; ++v) {
     const double d = distances[v];

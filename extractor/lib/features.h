@@ -50,10 +50,13 @@ struct SurfaceVectors {
 // weighting keeps the value stable under remeshing). Empty bands are 0.
 // Preconditions: bands >= 1; distances, defects of size n; total_area > 0.
 // Cost O(n + e). Thread-safe (per-thread scratch, reused across calls).
+// With band_extent > 0 the bands divide [0, band_extent] instead (vertices
+// farther away fall in the last band), so that band b covers the same
+// absolute range for every feature of a mesh.
 SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& links,
                                      const std::vector<double>& distances,
                                      const std::vector<double>& defects, int bands,
-                                     double total_area);
+                                     double total_area, double band_extent = 0.0);
 
 // RingIntegralGeodesic returns G'(U) of a ring U, Eq. 4: the interpolation
 // of G(o) and G(w) by the vertex-set geodesic distances g_vs(o, U) and
