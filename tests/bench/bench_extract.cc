@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "benchmark/benchmark.h"
@@ -133,6 +134,29 @@ void BM_Extract(benchmark::State& state) {
   state.counters["rings"] = rings;
   for (const StageTiming& t : last.timings) state.counters["ms_" + t.stage] = t.milliseconds;
 }
+
+// The synthetic generator (foundation issue): one posed shape per
+// iteration, cycling over every class and 8 poses, at range(0) vertices.
+// Counter meshes_per_s is the generator's throughput on one thread.
+void BM_GenerateShape(benchmark::State& state) {
+  const std::vector<std::string> classes = synth::ClassNames();
+  synth::ShapeOptions options;
+  options.target_vertices = static_cast<int>(state.range(0));
+  int64_t i = 0;
+  for (auto _ : state) {
+    absl::StatusOr<Mesh> mesh =
+        synth::GenerateShape(classes[i % classes.size()], (i / classes.size()) % 8, options);
+    if (!mesh.ok()) {
+      state.SkipWithError("GenerateShape failed");
+      break;
+    }
+    benchmark::DoNotOptimize(mesh->positions.data());
+    ++i;
+  }
+  state.counters["meshes_per_s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_GenerateShape)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond);
 
 // The issue's sizes: 5k, 10k, 20k, 50k and 100k vertices.
 void Sizes(benchmark::internal::Benchmark* b) {
