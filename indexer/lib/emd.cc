@@ -635,6 +635,7 @@ double EmdSolver::Impl::Solve() {
   for (int j = m; j < cs; ++j) vpad[j] = -kInf;
   static const CollectFn collect = PickCollect();
   int candidates = 0;
+  bool fresh = false;  // no pivot since the last major pass
   while (stats.pivots < max_pivots) {
     // Minor pass over the candidates.
     // Candidates whose reduced cost is no longer below -tol are dropped
@@ -656,7 +657,14 @@ double EmdSolver::Impl::Solve() {
       kept += rc < -tol;
     }
     candidates = kept;
-    if (pick < 0) {
+    // A major pass also runs early when fewer than kMinCandidates are left
+    // (but never twice without a pivot in between, so every major pass
+    // that finds candidates is followed by a pivot): a fresh Dantzig choice
+    // beats the last few stale candidates. Measured at n = m = 30: 45
+    // instead of 50 pivots and about 4% less time; at 60 no change.
+    constexpr int kMinCandidates = 3;
+    if (pick < 0 || (candidates < kMinCandidates && !fresh)) {
+      fresh = true;
       // Major pass.
       for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
       candidates =
@@ -665,6 +673,7 @@ double EmdSolver::Impl::Solve() {
       if (candidates == 0) break;  // optimal
       continue;
     }
+    fresh = false;
     Pivot(cand_i[pick], cand_j[pick], best);
   }
   assert(stats.pivots < max_pivots);
