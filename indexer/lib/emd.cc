@@ -5,7 +5,7 @@
 // liblemon-dev) is correct and is our test oracle, but it is generic graph
 // code (arc and node maps, block-search pricing tuned for large sparse
 // graphs, an all-artificial start that needs about n + m pivots just to
-// build a basis); in bench_match it takes about twice our time even with
+// build a basis); in bench_match it takes about 3x our time even with
 // its graph built once per size.
 // Rubner's emd.c keeps static state (not thread-safe) and has fixed maximum
 // sizes. Here the arcs are implicit (arc (i, j) is cell (i, j) of a dense
@@ -23,15 +23,17 @@
 // root -> anything), so it is not stored.
 //
 // Start. A greedy assignment (least reduced cost per row, see
-// InitialBasis) ships all mass along at most n + m - 1 cells, which form a forest (each allocation exhausts its row or its
-// column, so no cycle can close). Each forest component hangs
+// InitialBasis) ships all mass along at most n + m - 1 cells, which form a
+// forest (each allocation exhausts its row or its column, so no cycle can
+// close). Each forest component hangs
 // from R by an artificial arc R -> v of flow 0. Every zero-flow tree arc is
 // therefore an artificial arc directed away from the root: the tree is
 // STRONGLY FEASIBLE (Cunningham 1976).
 //
 // Pricing. Candidate lists: a full (vectorized) scan of the reduced costs
-// keeps each row's most negative one, and pivots are taken among those
-// until none is negative; only a full scan can declare optimality.
+// keeps each column's most negative one, and pivots are taken among those
+// until fewer than three are negative; only a full scan can declare
+// optimality.
 //
 // Degeneracy and cycling. The leaving arc is chosen by Cunningham's rule:
 // among the blocking arcs of the pivot cycle, the last one met when the
