@@ -149,7 +149,7 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
         << " v=" << config.synthetic_vertices;
   } else {
     std::error_code ec;
-    key << " path=" << fs::absolute(model.path).string()
+    key << " path=" << fs::weakly_canonical(fs::absolute(model.path), ec).string()
         << " size=" << fs::file_size(model.path, ec);
   }
   const extract::Options& e = config.extract;
@@ -549,11 +549,15 @@ int Run(int argc, char** argv) {
       return v[v.size() / 2];
     };
     const double copy_max = copy_d.empty() ? 0.0 : *std::max_element(copy_d.begin(), copy_d.end());
-    char buf[300];
+    const double class_median = median(class_d);
+    int far_copies = 0;
+    for (double d : copy_d) far_copies += d > 0.1 * class_median;
+    char buf[400];
     std::snprintf(buf, sizeof(buf),
-                  "TPR EMD from a rotated/scaled copy to its original: median %.4g, max %.4g; "
-                  "median EMD between two models of one class: %.4g",
-                  median(copy_d), copy_max, median(class_d));
+                  "TPR EMD from a rotated/scaled copy to its original: median %.4g, max %.4g, "
+                  "%d of %zu copies beyond a tenth of the median EMD between two models of "
+                  "one class (%.4g)",
+                  median(copy_d), copy_max, far_copies, copy_d.size(), class_median);
     copy_note = buf;
     std::printf("%s\n", buf);
   }
