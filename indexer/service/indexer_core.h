@@ -120,15 +120,22 @@ class IndexerCore {
 
   // BatchWriter groups a stream of upserts into synced writes of
   // options.batch_group models (one fsync per group). Add() validates the
-  // request and queues it, writing a full group; Finish() writes the rest.
-  // Every model of a group is durable and indexed when the call that wrote
-  // the group returns OK. On an error, everything queued before the failing
-  // request is written first (so models before it are kept), then the error
-  // is returned. Not thread-safe itself (one stream); many BatchWriters may
-  // run at once.
+  // request and queues it; a full group is handed to a writer thread, so the
+  // next group is received and validated while the previous one is synced
+  // (at most one group in flight). Finish() writes the rest and waits: every
+  // model counted in its answer is durable and indexed when it returns OK.
+  // On an error, everything queued before the failing request is written
+  // first (so models before it are kept), then the error is returned; a
+  // failed group write is reported by the next Add() or Finish(), and no
+  // later group is written. Not thread-safe itself (one stream); many
+  // BatchWriters may run at once. The destructor waits for the group in
+  // flight.
   class BatchWriter {
    public:
     explicit BatchWriter(IndexerCore* core) : core_(core) {}
+    ~BatchWriter();
+    BatchWriter(const BatchWriter&) = delete;
+    BatchWriter& operator=(const BatchWriter&) = delete;
     // Add queues one request. Errors as for Upsert, except that an existing
     // id without overwrite is skipped (counted), not an error.
     absl::Status Add(tpr::v1::UpsertRequest request);
@@ -136,8 +143,14 @@ class IndexerCore {
     absl::StatusOr<tpr::v1::BatchUpsertResponse> Finish();
 
    private:
-    absl::Status Flush();
+    // Starts writing the queued group on the writer thread (after the group
+    // in flight is done); returns that earlier group's error.
+    absl::Status FlushAsync();
+    // Waits for the group in flight; returns its error.
+    absl::Status Wait();
     IndexerCore* core_;
+    std::thread inflight_;
+    absl::Status inflight_status_;  // written by inflight_, read after join
     std::vector<tpr::v1::UpsertRequest> pending_;
     std::vector<tpr::index::Signature> signatures_;
     tpr::v1::BatchUpsertResponse counts_;

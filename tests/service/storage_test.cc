@@ -2,6 +2,11 @@
 // sequence numbers across reopen, exclusive open. A fresh temp dir per test.
 #include "indexer/service/storage.h"
 
+#include <map>
+#include <mutex>
+#include <string>
+#include <utility>
+
 #include "gtest/gtest.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
@@ -48,6 +53,57 @@ TEST(StorageTest, WriteGetDeleteAndScanInIdOrder) {
   // Reverse write order: model 0 was written last (seq 5), model 4 first.
   EXPECT_EQ(seqs, (std::vector<uint64_t>{5, 3, 2, 1}));
   EXPECT_GT((*storage)->DiskBytes(), 0);
+}
+
+// The parallel scan visits exactly what the sequential one does (the
+// oracle), each model once with its sequence number, and stops with the
+// callback's error.
+TEST(StorageTest, ParallelScanMatchesSequentialScanAndStopsAtAnError) {
+  TempDir dir;
+  auto storage = Storage::Open(dir.path());
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  // More than a few chunks of 128 records, so both workers get some.
+  const std::vector<TestModel> models = MakeModels(700, 3, 5);
+  std::vector<tpr::v1::Model> protos;
+  for (const TestModel& m : models) protos.push_back(ModelOf(m));
+  std::vector<ModelWrite> writes;
+  for (const tpr::v1::Model& p : protos) writes.push_back({p.id(), &p});
+  ASSERT_TRUE((*storage)->Write(writes).ok());
+
+  std::map<std::string, std::pair<uint64_t, std::string>> sequential;
+  ASSERT_TRUE((*storage)
+                  ->ForEachModel([&](uint64_t seq, tpr::v1::Model&& m) {
+                    sequential[m.id()] = {seq, m.SerializeAsString()};
+                    return absl::OkStatus();
+                  })
+                  .ok());
+  ASSERT_EQ(sequential.size(), models.size());
+  std::mutex mu;
+  std::map<std::string, std::pair<uint64_t, std::string>> parallel;
+  int duplicates = 0;
+  ASSERT_TRUE((*storage)
+                  ->ForEachModel(
+                      [&](uint64_t seq, tpr::v1::Model&& m) {
+                        std::lock_guard<std::mutex> lock(mu);
+                        if (!parallel.emplace(m.id(), std::make_pair(seq, m.SerializeAsString()))
+                                 .second) {
+                          ++duplicates;
+                        }
+                        return absl::OkStatus();
+                      },
+                      /*threads=*/2)
+                  .ok());
+  EXPECT_EQ(duplicates, 0);
+  EXPECT_EQ(parallel, sequential);
+
+  const std::string bad = models[400].id;
+  absl::Status st = (*storage)->ForEachModel(
+      [&](uint64_t, tpr::v1::Model&& m) {
+        return m.id() == bad ? absl::DataLossError("bad " + bad) : absl::OkStatus();
+      },
+      /*threads=*/2);
+  EXPECT_TRUE(absl::IsDataLoss(st)) << st;
+  EXPECT_EQ(st.message(), "bad " + bad);
 }
 
 TEST(StorageTest, TreeAndSequenceSurviveReopen) {
