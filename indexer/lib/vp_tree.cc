@@ -6,6 +6,10 @@
 //   search bounds a subtree or an item by the triangle inequality against
 //   ALL ancestors' vantage points, not only the parent's, at no metric cost.
 //   Memory is O(n log n) doubles (about 14 per item at n = 100k).
+// - The item rows are laid out in tree order, a bucket's rows contiguous
+//   and item-major (item_row below), so that scanning a bucket reads one
+//   linear block: with rows in item-id order a scan took a cache miss per
+//   item and dominated a 10-NN query over 100k items.
 // - The search is the incremental nearest-neighbour algorithm of Hjaltason
 //   and Samet: one priority queue holds nodes (keyed by lower bound) and
 //   items (keyed by a lower bound that is refined lazily: stored distances,
@@ -66,15 +70,39 @@ struct VpTree::Data {
   std::vector<double> ranges;
   // Per item: the node holding it, and its distances to the vantage points
   // of that node's ancestors (root first) at item_dists[item_row[item]].
+  // Rows are in node order (a vantage point's row, or its bucket's rows in
+  // leaf_items order, back to back): see AssignRows. Serialized bytes keep
+  // them in item-id order, independent of this layout.
   std::vector<uint32_t> item_holder;
   std::vector<uint64_t> item_row;
   std::vector<double> item_dists;
+
+  // Sets item_row from nodes (with depths), leaf_items and the vantage
+  // points, in the tree-order layout above; returns the total row length.
+  uint64_t AssignRows();
 };
 
 VpTree::VpTree() : data_(std::make_unique<Data>()) {}
 VpTree::~VpTree() = default;
 VpTree::VpTree(VpTree&&) noexcept = default;
 VpTree& VpTree::operator=(VpTree&&) noexcept = default;
+
+uint64_t VpTree::Data::AssignRows() {
+  item_row.assign(n_items, 0);
+  uint64_t row = 0;
+  for (const Node& n : nodes) {
+    if (n.vp != kNone) {
+      item_row[n.vp] = row;
+      row += n.depth;
+      continue;
+    }
+    for (uint32_t p = n.begin; p < n.end; ++p) {
+      item_row[leaf_items[p]] = row;
+      row += n.depth;
+    }
+  }
+  return row;
+}
 
 size_t VpTree::size() const { return data_->n_items; }
 size_t VpTree::height() const { return data_->height; }
@@ -117,15 +145,12 @@ class VpTreeBuilder {
     for (size_t i = 0; i < n_; ++i) work_[i] = static_cast<uint32_t>(i);
     if (n_ > 0) BuildNode(kNone, 0, 0, static_cast<uint32_t>(n_));
     if (cancelled_) return absl::CancelledError("VP-tree build cancelled");
-    // Flatten the per-item rows.
-    data_->item_row.resize(n_);
-    size_t total = 0;
-    for (size_t i = 0; i < n_; ++i) total += rows_[i].size();
-    data_->item_dists.reserve(total);
+    // Flatten the per-item rows in tree order.
+    data_->item_dists.resize(data_->AssignRows());
     for (size_t i = 0; i < n_; ++i) {
-      data_->item_row[i] = data_->item_dists.size();
-      data_->item_dists.insert(data_->item_dists.end(), rows_[i].begin(),
-                               rows_[i].end());
+      std::copy(rows_[i].begin(), rows_[i].end(),
+                data_->item_dists.begin() +
+                    static_cast<ptrdiff_t>(data_->item_row[i]));
       std::vector<double>().swap(rows_[i]);
     }
     return tree;
@@ -417,17 +442,23 @@ class VpCursor : public NeighborCursor {
     if (node.vp == kNone) {
       CollectPath(node);
       run_.clear();
-      for (uint32_t p = node.begin; p < node.end; ++p) {
-        const uint32_t item = data_->leaf_items[p];
-        const double* row = &data_->item_dists[data_->item_row[item]];
+      if (node.begin == node.end) return;
+      // Every ancestor was expanded to reach this leaf, so path_ has no
+      // NaN; the rows of the bucket are contiguous (see Data). The bound is
+      // max(e.key, max_j Deflate(|q_j - r_j|, max(q_j, r_j))), written
+      // without branches so the compiler can vectorize it.
+      const uint32_t depth = node.depth;
+      const double* q = path_.data();
+      const double* row =
+          &data_->item_dists[data_->item_row[data_->leaf_items[node.begin]]];
+      for (uint32_t p = node.begin; p < node.end; ++p, row += depth) {
         double bound = e.key;
-        for (uint32_t j = 0; j < node.depth; ++j) {
-          const double q = path_[j];
-          if (std::isnan(q)) continue;
-          bound = std::max(bound, Deflate(std::fabs(q - row[j]),
-                                          std::max(q, row[j])));
+        for (uint32_t j = 0; j < depth; ++j) {
+          const double b = std::fabs(q[j] - row[j]) -
+                           kRelativeSlack * std::max(q[j], row[j]);
+          bound = std::max(bound, b);
         }
-        AddToRun(item, bound);
+        AddToRun(data_->leaf_items[p], bound);
       }
       PushRun();
       return;
@@ -514,8 +545,14 @@ std::string VpTree::Serialize() const {
   for (uint32_t v : d.leaf_items) PutU(&out, v, 4);
   PutU(&out, d.ranges.size(), 8);
   for (double v : d.ranges) PutF(&out, v);
+  // Rows in item-id order (format version 1), whatever the memory layout.
   PutU(&out, d.item_dists.size(), 8);
-  for (double v : d.item_dists) PutF(&out, v);
+  for (uint32_t item = 0; item < d.n_items; ++item) {
+    const uint32_t depth = d.nodes[d.item_holder[item]].depth;
+    for (uint32_t j = 0; j < depth; ++j) {
+      PutF(&out, d.item_dists[d.item_row[item] + j]);
+    }
+  }
   PutU(&out, Fnv1a(out.data(), out.size()), 8);
   return out;
 }
@@ -655,16 +692,16 @@ class VpTreeReader {
         n_dists * 8 != r.remaining()) {
       return Corrupt("item distance count");
     }
+    // The bytes hold rows in item-id order; memory holds them in tree order.
+    d.AssignRows();
     d.item_dists.resize(n_dists);
-    for (double& v : d.item_dists) {
-      r.F(&v);
-      if (!(v >= 0.0) || !std::isfinite(v)) return Corrupt("item distance");
-    }
-    d.item_row.resize(d.n_items);
-    uint64_t row = 0;
     for (uint32_t item = 0; item < d.n_items; ++item) {
-      d.item_row[item] = row;
-      row += d.nodes[d.item_holder[item]].depth;
+      const uint32_t depth = d.nodes[d.item_holder[item]].depth;
+      for (uint32_t j = 0; j < depth; ++j) {
+        double& v = d.item_dists[d.item_row[item] + j];
+        r.F(&v);
+        if (!(v >= 0.0) || !std::isfinite(v)) return Corrupt("item distance");
+      }
     }
     return tree;
   }

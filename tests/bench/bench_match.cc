@@ -141,9 +141,10 @@ struct DbKey {
   int64_t n;
   int classes;
   int jitter_permille;
+  size_t leaf_size = VpTreeOptions{}.leaf_size;
   bool operator<(const DbKey& o) const {
-    return std::tie(n, classes, jitter_permille) <
-           std::tie(o.n, o.classes, o.jitter_permille);
+    return std::tie(n, classes, jitter_permille, leaf_size) <
+           std::tie(o.n, o.classes, o.jitter_permille, o.leaf_size);
   }
 };
 
@@ -191,10 +192,12 @@ Db& GetDb(const DbKey& key) {
   const std::vector<PreparedSignature>& items = slot->items;
   const auto start = std::chrono::steady_clock::now();
   const std::clock_t cpu_start = std::clock();
+  VpTreeOptions tree_options;
+  tree_options.leaf_size = key.leaf_size;
   slot->tree = *VpTree::Build(
       items.size(),
       [&items](uint32_t i, uint32_t j) { return Emd(items[i], items[j]); },
-      VpTreeOptions{});
+      tree_options);
   slot->build_seconds = std::chrono::duration<double>(
                             std::chrono::steady_clock::now() - start)
                             .count();
@@ -255,6 +258,18 @@ BENCHMARK(BM_KnnVpTree)
     ->Args({10000, 10})
     ->Args({100000, 1})
     ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeLeaf/<n>/<k>/<leaf_size>: as BM_KnnVpTree with another bucket
+// size (VpTreeOptions.leaf_size), to tune it. Each leaf size builds its own
+// tree (about a minute at 100k).
+void BM_KnnVpTreeLeaf(benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.leaf_size = static_cast<size_t>(state.range(2));
+  RunTree(state, key, static_cast<size_t>(state.range(1)));
+}
+BENCHMARK(BM_KnnVpTreeLeaf)
+    ->ArgsProduct({{600, 10000, 100000}, {10}, {64, 128, 192, 256, 512, 1024}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnBruteForce/<n>/<k>: every EMD, same data and queries.
