@@ -14,23 +14,9 @@
 #include <Eigen/Geometry>
 
 #include "gtest/gtest.h"
+#include "tests/allocation_counter.h"
 #include "tests/extractor/test_meshes.h"
 
-// Counts heap allocations, to check that repeated sweeps reuse buffers.
-// The replacement new/delete pair is malloc/free on both sides, which GCC's
-// inliner cannot see and warns about.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-namespace {
-std::atomic<int64_t> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace tpr::extract {
 namespace {
@@ -318,9 +304,9 @@ TEST_P(SolverFamilyTest, OrderParentAndReuseAreConsistent) {
 TEST_P(SolverFamilyTest, RepeatedSweepsDoNotAllocate) {
   const Mesh mesh = MakeMesh(GetParam());
   const MeshGraph graph = MeshGraph::Build(mesh, MakeOptions(GetParam()));
-  const int64_t at_start = g_allocations.load();
+  const int64_t at_start = ::tpr::testing::Allocations();
   DijkstraSolver solver(graph);
-  EXPECT_GT(g_allocations.load(), at_start);  // the counter does count
+  EXPECT_GT(::tpr::testing::Allocations(), at_start);  // the counter does count
   const int32_t n = graph.num_vertices();
   const std::vector<int32_t> set = {1, n / 2, n - 2};
   const std::vector<double> starts = {0.0, 0.3, 0.1};
@@ -333,10 +319,10 @@ TEST_P(SolverFamilyTest, RepeatedSweepsDoNotAllocate) {
     solver.Run(4, bounded);
   };
   sweeps();  // warm-up: buffers reach their sizes
-  const int64_t before = g_allocations.load();
+  const int64_t before = ::tpr::testing::Allocations();
   sweeps();
   sweeps();
-  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(::tpr::testing::Allocations() - before, 0);
 }
 
 TEST_P(SolverFamilyTest, BoundedRunMatchesFullRunInsideTheRadius) {

@@ -14,24 +14,9 @@
 #include "gtest/gtest.h"
 #include "indexer/lib/ground_distance.h"
 #include "tests/indexer/emd_oracle.h"
+#include "tests/allocation_counter.h"
 #include "tests/indexer/signature_testing.h"
 
-// GCC cannot see that these replacements pair malloc with free.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
-// Counts heap allocations, to check that a warmed-up solver allocates
-// nothing. Replacing the global operators is allowed by the standard.
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace tpr::index {
 namespace {
@@ -354,12 +339,12 @@ TEST(EmdTest, WarmSolverDoesNotAllocate) {
   }
   EmdSolver solver;
   solver.Distance(sigs[0], sigs[0]);  // warm-up at the largest size
-  const long before = g_allocations.load();
+  const int64_t before = ::tpr::testing::Allocations();
   double sum = 0.0;
   for (const PreparedSignature& a : sigs) {
     for (const PreparedSignature& b : sigs) sum += solver.Distance(a, b);
   }
-  EXPECT_EQ(g_allocations.load(), before);
+  EXPECT_EQ(::tpr::testing::Allocations(), before);
   EXPECT_GT(sum, 0.0);
 }
 

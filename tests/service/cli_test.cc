@@ -27,34 +27,8 @@ namespace {
 
 using ::tpr::testing::Ranked;
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
-
-// Runs `tpr ARGS` against `cluster` (addresses through the environment, as
-// a user would set them) and captures stdout and stderr.
-CommandResult RunTpr(testing::Cluster& cluster, const std::string& args) {
-  const std::string err_path = cluster.dir() + "/tpr.stderr";
-  const std::string command =
-      absl::StrCat("TPR_EXTRACTOR=", cluster.extractor_addresses(),
-                   " TPR_INDEXER=", cluster.indexer().address(), " ",
-                   testing::BinaryPath("tpr"), " ", args, " 2>", err_path);
-  CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  size_t n;
-  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) result.out.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(err_path);
-  std::stringstream err;
-  err << in.rdbuf();
-  result.err = err.str();
-  return result;
-}
+using ::tpr::testing::CommandResult;
+using ::tpr::testing::RunTpr;
 
 std::vector<std::string> Lines(const std::string& text) {
   std::vector<std::string> lines;

@@ -353,6 +353,36 @@ inline std::string SameRanking(const std::vector<Ranked>& got, const std::vector
   return "";
 }
 
+// CommandResult: what one run of the `tpr` command printed and returned.
+struct CommandResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+// RunTpr runs `tpr ARGS` against `cluster` (addresses through the
+// environment, as a user sets them) and captures stdout and stderr.
+inline CommandResult RunTpr(Cluster& cluster, const std::string& args) {
+  const std::string err_path = cluster.dir() + "/tpr.stderr";
+  const std::string command =
+      absl::StrCat("TPR_EXTRACTOR=", cluster.extractor_addresses(),
+                   " TPR_INDEXER=", cluster.indexer().address(), " ",
+                   BinaryPath("tpr"), " ", args, " 2>", err_path);
+  CommandResult result;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return result;
+  char buffer[4096];
+  size_t n;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) result.out.append(buffer, n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(err_path);
+  std::stringstream err;
+  err << in.rdbuf();
+  result.err = err.str();
+  return result;
+}
+
 }  // namespace tpr::testing
 
 #endif  // TPR_TESTS_SERVICE_EXTSVC_TEST_UTIL_H_
