@@ -24,6 +24,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
 #include "indexer/lib/byte_codec.h"
+#include "indexer/lib/centroid_table.h"
 #include "indexer/lib/emd.h"
 
 namespace tpr::index {
@@ -63,6 +64,14 @@ struct TreePart {
   std::vector<PreparedPtr> prepared;  // null: signature unavailable
   std::vector<uint64_t> fingerprints;
   std::unordered_map<std::string, uint32_t> item_of;
+  // The centroids of `prepared` (absent where null), read by the search's
+  // lower bound; built once the prepared signatures are final.
+  CentroidTable centroids;
+
+  void BuildCentroids() {
+    centroids = CentroidTable::Build(
+        prepared.size(), [this](uint32_t i) { return prepared[i].get(); });
+  }
 };
 
 struct SignatureIndex::Snapshot {
@@ -136,9 +145,11 @@ class IndexCursor : public SignatureIndex::Cursor {
       return p == nullptr ? std::numeric_limits<double>::quiet_NaN()
                           : Emd(query_, *p);
     };
-    spec.lower_bound = [this](uint32_t i) {
-      const PreparedSignature* p = Item(i);
-      return p == nullptr ? 0.0 : EmdLowerBound(query_, *p);
+    // Tree items read the flat centroid table (one contiguous row, no
+    // pointer chase); the small buffer is read directly.
+    spec.lower_bound = [this, t](uint32_t i) {
+      if (i < n_tree_) return t->centroids.LowerBound(query_, i);
+      return EmdLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
     };
     spec.accept = [this, s, t](uint32_t i) {
       if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i))) return false;
@@ -375,6 +386,7 @@ void SignatureIndex::Rebuild() {
     part->prepared.push_back(l.prepared);
     part->fingerprints.push_back(l.fingerprint);
   }
+  part->BuildCentroids();  // outside mu_, like the tree
   const std::vector<PreparedPtr>& items = part->prepared;
   absl::StatusOr<VpTree> tree = VpTree::Build(
       items.size(),
@@ -542,6 +554,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   for (uint32_t i = 0; i < n; ++i) {
     if (!seen[i]) snap->tombstones.push_back(i);
   }
+  part->BuildCentroids();
   snap->tree = std::move(part);
   std::lock_guard<std::mutex> lock(index->mu_);
   index->InstallLocked(std::move(snap));

@@ -25,6 +25,7 @@
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
 #include "indexer/lib/brute_force_index.h"
+#include "indexer/lib/centroid_table.h"
 #include "indexer/lib/signature_index.h"
 #include "indexer/lib/vp_tree.h"
 #include "tests/indexer/emd_oracle.h"
@@ -151,6 +152,9 @@ struct DbKey {
 struct Db {
   std::vector<PreparedSignature> items;
   std::vector<PreparedSignature> queries;
+  // The items' centroids in one flat array, as SignatureIndex keeps them for
+  // its lower bound.
+  tpr::index::CentroidTable centroids;
   VpTree tree;
   double build_seconds = 0.0;      // wall clock
   double build_cpu_seconds = 0.0;  // one thread
@@ -190,6 +194,8 @@ Db& GetDb(const DbKey& key) {
     to.push_back(*Prepare(s, ground));
   });
   const std::vector<PreparedSignature>& items = slot->items;
+  slot->centroids = tpr::index::CentroidTable::Build(
+      items.size(), [&items](uint32_t i) { return &items[i]; });
   const auto start = std::chrono::steady_clock::now();
   const std::clock_t cpu_start = std::clock();
   VpTreeOptions tree_options;
@@ -210,7 +216,7 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Emd(q, db.items[i]); };
   spec.lower_bound = [&db, &q](uint32_t i) {
-    return EmdLowerBound(q, db.items[i]);
+    return db.centroids.LowerBound(q, i);
   };
   return spec;
 }
