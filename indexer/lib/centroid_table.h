@@ -17,6 +17,7 @@
 #include <functional>
 #include <vector>
 
+#include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
 
 namespace tpr::index {
@@ -48,26 +49,12 @@ class CentroidTable {
   double LowerBound(const PreparedSignature& query, uint32_t i) const {
     const double* cb = rows_.data() + static_cast<size_t>(i) * width_;
     if (std::isnan(cb[0])) return 0.0;  // absent slot
-    // The same sums in the same order as EmdLowerBound (emd.cc), so the
-    // value is identical: a row is padded with zeros to bands_ per block,
+    // CentroidBound is EmdLowerBound's own arithmetic, so the value is
+    // identical: a row is padded with zeros to bands_ per block,
     // and (x - 0) * (x - 0) == x * x and s + 0 * 0 == s exactly, so where
     // the item has fewer bands than bands_ the padding terms reproduce the
     // "d >= common" tails of EmdLowerBound term for term.
-    const double* ca = query.centroid();
-    const int ba = query.bands();
-    const int bb = bands_;
-    const int common = std::min(ba, bb);
-    double result = std::abs(ca[0] - cb[0]);
-    for (int block = 0; block < 3; ++block) {
-      const double* x = ca + 1 + block * ba;
-      const double* y = cb + 1 + block * bb;
-      double s = 0.0;
-      for (int d = 0; d < common; ++d) s += (x[d] - y[d]) * (x[d] - y[d]);
-      for (int d = common; d < ba; ++d) s += x[d] * x[d];
-      for (int d = common; d < bb; ++d) s += y[d] * y[d];
-      result += std::sqrt(s);
-    }
-    return result;
+    return CentroidBound(query.centroid(), query.bands(), cb, bands_);
   }
 
  private:

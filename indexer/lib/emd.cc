@@ -751,11 +751,7 @@ double Emd(const PreparedSignature& a, const PreparedSignature& b) {
 // This holds for every plan, so also for the optimal one, whose cost is the
 // EMD (total flow 1, so no normalization). Equal masses are essential: with
 // unequal totals the first equality fails.
-double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
-  const double* ca = a.centroid();
-  const double* cb = b.centroid();
-  const int ba = a.bands();
-  const int bb = b.bands();
+double CentroidBound(const double* ca, int ba, const double* cb, int bb) {
   const int common = std::min(ba, bb);
   double result = std::abs(ca[0] - cb[0]);
   for (int block = 0; block < 3; ++block) {
@@ -768,6 +764,10 @@ double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
     result += std::sqrt(s);
   }
   return result;
+}
+
+double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
+  return CentroidBound(a.centroid(), a.bands(), b.centroid(), b.bands());
 }
 
 }  // namespace tpr::index

@@ -79,6 +79,12 @@ double Emd(const PreparedSignature& a, const PreparedSignature& b);
 // Cost O(bands), no allocation; thread-safe.
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b);
 
+// CentroidBound is EmdLowerBound on raw centroids laid out as
+// PreparedSignature::centroid() does ([g, K x ba, A x ba, H x ba] and the
+// same for b with bb bands; missing bands count as zero). For callers that
+// keep centroids apart from their signatures (CentroidTable). Thread-safe.
+double CentroidBound(const double* ca, int ba, const double* cb, int bb);
+
 }  // namespace tpr::index
 
 #endif  // TPR_INDEXER_LIB_EMD_H_
