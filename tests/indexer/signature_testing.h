@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "indexer/lib/signature.h"
@@ -52,6 +53,15 @@ class SignatureGenerator {
     for (int c = 0; c < options_.classes; ++c) {
       prototypes_.push_back(Prototype(options_.features));
     }
+  }
+
+  // SignatureGenerator with given prototypes (e.g. signatures extracted
+  // from generated shapes) instead of drawn ones; options.classes and
+  // options.features are ignored.
+  SignatureGenerator(const SignatureGeneratorOptions& options,
+                     std::vector<Signature> prototypes)
+      : options_(options), rng_(options.seed), prototypes_(std::move(prototypes)) {
+    options_.classes = static_cast<int>(prototypes_.size());
   }
 
   // Next returns a member of a uniformly chosen class.
