@@ -36,25 +36,13 @@
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
 #include "tests/indexer/signature_testing.h"
+#include "tests/service/indexer_testing.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
 namespace tpr::indexer {
 namespace {
 
-tpr::v1::Signature ToWire(const tpr::index::Signature& s) {
-  tpr::v1::Signature out;
-  for (size_t i = 0; i < s.features.size(); ++i) {
-    const tpr::index::Feature& f = s.features[i];
-    tpr::v1::Feature* w = out.add_features();
-    w->set_kind(i % 2 == 0 ? tpr::v1::FEATURE_KIND_POINT : tpr::v1::FEATURE_KIND_RING);
-    w->set_weight(f.weight);
-    w->set_integral_geodesic(f.g);
-    for (double x : f.k) w->add_curvature(x);
-    for (double x : f.a) w->add_area(x);
-    for (double x : f.h) w->add_distance(x);
-  }
-  return out;
-}
+using testing::ToWire;
 
 std::vector<tpr::v1::UpsertRequest> Requests(int n, uint64_t seed, const std::string& prefix) {
   tpr::index::testing::SignatureGeneratorOptions o;
