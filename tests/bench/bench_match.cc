@@ -128,7 +128,6 @@ namespace knn {
 
 using tpr::index::BruteForceIndex;
 using tpr::index::Emd;
-using tpr::index::EmdLowerBound;
 using tpr::index::GroundDistanceOptions;
 using tpr::index::ItemNeighbor;
 using tpr::index::PreparedSignature;
