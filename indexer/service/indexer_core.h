@@ -1,45 +1,48 @@
 // IndexerCore: the logic of tpr-indexer without the wire. It validates
-// requests, converts tpr.v1 messages to the library's tpr::index::Signature,
-// and keeps the durable store (Storage, RocksDB) and the in-memory EMD index
-// (tpr::index::SignatureIndex, a VP-tree, Tam & Lau 2007 section 6.2) in
-// step. The gRPC service (indexer_service.h) is a thin shell over it.
+// requests, keeps the durable store (Storage, RocksDB) and the in-memory EMD
+// index (tpr::index::SignatureIndex, a VP-tree, Tam & Lau 2007 section 6.2)
+// in step, and starts searches. The gRPC service (indexer_service.h) is a
+// thin shell over it. Its rooms:
+//   model_table.h     the live id table (List, Stats, "does the id exist")
+//   label_map.h       the copy-on-write id -> label map searches use
+//   tree_persister.h  saves the VP-tree in the background
+//   batch_writer.h    the BatchUpsert stream's group commit
+//   search_session.h  one running search
 //
 //   absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(opts);
 //   absl::StatusOr<bool> created = (*core)->Upsert(request);
 //   auto search = (*core)->StartSearch(search_request, /*cancelled=*/nullptr);
 //
-// Consistency: writes are serialized by one mutex held across the synced
-// RocksDB write and the index update, so the index never holds a model that
-// is not durable and an acknowledged write is visible to every later search.
-// A search sees one consistent state: the index snapshot (signatures and
-// tree) and the id -> label map snapshot taken together when it starts, so
-// a model relabelled or deleted during a search keeps, for that search, the
-// label that went with the signature it is ranked by. The label map is
-// copy-on-write in hash shards: a write copies the shards it touches (plus
-// a vector of shard pointers), a search start copies one shared pointer.
+// Consistency: every write goes through WriteGroup, which holds the writer
+// lock across the synced RocksDB write and the index update, so the index
+// never holds a model that is not durable and an acknowledged write is
+// visible to every later search. A search sees one consistent state: the
+// index snapshot (signatures and tree) and the label map snapshot taken
+// together when it starts, so a model relabelled or deleted during a search
+// keeps, for that search, the label that went with the signature it is
+// ranked by.
 #ifndef TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 #define TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 
-#include <atomic>
-#include <condition_variable>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
-#include <map>
 #include <memory>
-#include <mutex>
-#include <optional>
 #include <string>
-#include <thread>
-#include <unordered_map>
-#include <utility>
 #include <vector>
 
+#include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "indexer/lib/signature.h"
 #include "indexer/lib/signature_index.h"
+#include "indexer/service/batch_writer.h"
+#include "indexer/service/label_map.h"
+#include "indexer/service/model_table.h"
+#include "indexer/service/search_session.h"
 #include "indexer/service/storage.h"
+#include "indexer/service/tree_persister.h"
 #include "tpr/v1/indexer.pb.h"
 
 namespace tpr::indexer {
@@ -79,16 +82,11 @@ struct CoreOptions {
 // tpr::index::kMaxFeatures features. O(size); thread-safe.
 absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s);
 
-// SearchSession: one running ranked search. Not thread-safe: one caller.
-class SearchSession {
- public:
-  virtual ~SearchSession() = default;
-  // Next returns the next neighbour (rank, id, label, distance) in ascending
-  // distance, or nullopt when k were returned, none is left, or the search
-  // was cancelled. Cost: a few EMDs per call, amortized.
-  virtual std::optional<tpr::v1::Neighbor> Next() = 0;
-  // Stats returns the work done so far and the elapsed time.
-  virtual tpr::v1::SearchStats Stats() const = 0;
+// WriteOutcome: what a write group did with one request.
+enum class WriteOutcome {
+  kSkipped,   // the id existed and overwrite was false: nothing written
+  kCreated,   // a new id was stored
+  kReplaced,  // an existing model was replaced
 };
 
 // IndexerCore: see the file comment. Thread-safe: every method may be called
@@ -118,43 +116,27 @@ class IndexerCore {
   // INTERNAL/UNAVAILABLE for a storage failure. Cost: one fsync + O(size).
   absl::StatusOr<bool> Upsert(const tpr::v1::UpsertRequest& request);
 
-  // BatchWriter groups a stream of upserts into synced writes of
-  // options.batch_group models (one fsync per group). Add() validates the
-  // request and queues it; a full group is handed to a writer thread, so the
-  // next group is received and validated while the previous one is synced
-  // (at most one group in flight). Finish() writes the rest and waits: every
-  // model counted in its answer is durable and indexed when it returns OK.
-  // On an error, everything queued before the failing request is written
-  // first (so models before it are kept), then the error is returned; a
-  // failed group write is reported by the next Add() or Finish(), and no
-  // later group is written. Not thread-safe itself (one stream); many
-  // BatchWriters may run at once. The destructor waits for the group in
-  // flight.
-  class BatchWriter {
-   public:
-    explicit BatchWriter(IndexerCore* core) : core_(core) {}
-    ~BatchWriter();
-    BatchWriter(const BatchWriter&) = delete;
-    BatchWriter& operator=(const BatchWriter&) = delete;
-    // Add queues one request. Errors as for Upsert, except that an existing
-    // id without overwrite is skipped (counted), not an error.
-    absl::Status Add(tpr::v1::UpsertRequest request);
-    // Finish writes what is queued and returns the counts.
-    absl::StatusOr<tpr::v1::BatchUpsertResponse> Finish();
+  // CheckModel validates `model` (id, metadata size, signature) and
+  // converts its signature into *signature. Errors as for Upsert, with the
+  // model's id in the message. Cost: O(model size). Thread-safe.
+  absl::Status CheckModel(const tpr::v1::Model& model, tpr::index::Signature* signature) const;
 
-   private:
-    // Starts writing the queued group on the writer thread (after the group
-    // in flight is done); returns that earlier group's error.
-    absl::Status FlushAsync();
-    // Waits for the group in flight; returns its error.
-    absl::Status Wait();
-    IndexerCore* core_;
-    std::thread inflight_;
-    absl::Status inflight_status_;  // written by inflight_, read after join
-    std::vector<tpr::v1::UpsertRequest> pending_;
-    std::vector<tpr::index::Signature> signatures_;
-    tpr::v1::BatchUpsertResponse counts_;
-  };
+  // WriteGroup is the one write path of models (Upsert and BatchWriter use
+  // it): it stores `requests` (validated by CheckModel, `signatures[i]`
+  // converted from requests[i]) in one synced RocksDB write, then indexes
+  // them with one SignatureIndex::UpsertBatch and updates the label map and
+  // the table. Returns each request's outcome; an existing id without
+  // overwrite is skipped. Sets each written model's added_unix_micros (a
+  // replacement keeps the first time). Moves from `signatures`. Errors:
+  // the store's (UNAVAILABLE/INTERNAL/DATA_LOSS; nothing written then).
+  // Cost: one fsync + O(group size). Thread-safe (serialized with every
+  // other write).
+  absl::StatusOr<std::vector<WriteOutcome>> WriteGroup(
+      std::vector<tpr::v1::UpsertRequest>& requests,
+      std::vector<tpr::index::Signature>& signatures);
+
+  // batch_group returns CoreOptions::batch_group.
+  size_t batch_group() const { return options_.batch_group; }
 
   // Delete removes model `id`, durably. NOT_FOUND when unknown,
   // INVALID_ARGUMENT for an empty id. Cost: one fsync.
@@ -186,9 +168,9 @@ class IndexerCore {
       const tpr::v1::SearchRequest& request, std::function<bool()> cancelled) const;
 
   // PersistTree saves the index's current VP-tree to the store when it
-  // changed since the last save. Cost: O(n log n) bytes serialized + one
-  // fsync. Thread-safe.
-  absl::Status PersistTree();
+  // changed since the last save (TreePersister::PersistNow). Cost: O(n log n)
+  // bytes serialized + one fsync. Thread-safe.
+  absl::Status PersistTree() { return persister_->PersistNow(); }
 
   // Close stops the background persister and persists the tree once more.
   // Idempotent. For shutdown, after the server stopped: other calls made
@@ -203,70 +185,26 @@ class IndexerCore {
   const tpr::index::SignatureIndex& index() const { return *index_; }
 
  private:
-  struct Info {
-    std::string label;
-    int64_t added_unix_micros = 0;
-  };
-
-  // Outcome of one request of a write group.
-  static constexpr int kSkipped = 0;
-  static constexpr int kCreated = 1;
-  static constexpr int kReplaced = 2;
-
   IndexerCore(CoreOptions options, std::unique_ptr<Storage> storage);
   void Log(const std::string& message) const;
   absl::Status LoadIndex();
-  // Validates `request` and converts its signature; fills added time later.
-  absl::Status CheckModel(const tpr::v1::Model& model,
-                          tpr::index::Signature* signature) const;
-  // Writes `requests` (validated, with converted signatures) durably and
-  // indexes them with one SignatureIndex::UpsertBatch. Requires write_mu_.
-  // Counts created/replaced/skipped. Moves from `signatures`.
-  absl::Status WriteGroupLocked(std::vector<tpr::v1::UpsertRequest>& requests,
-                                std::vector<tpr::index::Signature>& signatures,
-                                std::vector<int>* outcome);
-  // Publishes a new label map with `changes` applied (label set, or nullopt:
-  // removed). Requires view_mu_.
-  void ApplyLabelsLocked(
-      const std::vector<std::pair<std::string, std::optional<std::string>>>& changes);
-  void PersisterLoop();
+  absl::StatusOr<std::vector<WriteOutcome>> WriteGroupLocked(
+      std::vector<tpr::v1::UpsertRequest>& requests,
+      std::vector<tpr::index::Signature>& signatures) ABSL_EXCLUSIVE_LOCKS_REQUIRED(write_mu_);
 
   const CoreOptions options_;
   std::unique_ptr<Storage> storage_;
   std::unique_ptr<tpr::index::SignatureIndex> index_;
+  ModelTable table_;
+  std::unique_ptr<TreePersister> persister_;
 
-  // Serializes writes: storage write + index update + table update.
-  std::mutex write_mu_;
-  // The id -> label map searches use: kLabelShards shards by id hash, each
-  // immutable once published (copy-on-write).
-  static constexpr size_t kLabelShards = 4096;
-  using LabelShard = std::unordered_map<std::string, std::string>;
-  using LabelMap = std::vector<std::shared_ptr<const LabelShard>>;
-  static size_t LabelShardOf(const std::string& id) {
-    return std::hash<std::string>()(id) % kLabelShards;
-  }
-  static const std::string* FindLabel(const LabelMap& labels, const std::string& id);
+  // Serializes writes: storage write, then index, label map and table
+  // updates. Order: write_mu_, then view_mu_.
+  absl::Mutex write_mu_;
   // Pairs index updates with label map updates: writers hold it across
-  // both, a search start across taking both snapshots. Order: write_mu_,
-  // then view_mu_, then table_mu_.
-  mutable std::mutex view_mu_;
-  std::shared_ptr<const LabelMap> labels_;  // guarded by view_mu_
-  // The live id table: id -> label and time added, plus label counts.
-  mutable absl::Mutex table_mu_;
-  std::map<std::string, Info> table_ ABSL_GUARDED_BY(table_mu_);
-  std::map<std::string, int64_t> label_counts_ ABSL_GUARDED_BY(table_mu_);
-
-  // Tree persistence: bytes hash of the last saved tree; writes since then.
-  std::mutex persist_mu_;
-  size_t persisted_hash_ = 0;      // guarded by persist_mu_
-  size_t persisted_indexed_ = 0;   // guarded by persist_mu_
-  size_t persisted_buffered_ = 0;  // guarded by persist_mu_
-  std::atomic<uint64_t> writes_since_persist_{0};
-  std::mutex stop_mu_;
-  std::condition_variable stop_cv_;
-  bool stopping_ = false;  // guarded by stop_mu_
-  std::thread persister_;
-  bool closed_ = false;    // guarded by stop_mu_
+  // both, a search start across taking both snapshots.
+  mutable absl::Mutex view_mu_;
+  LabelMap labels_ ABSL_GUARDED_BY(view_mu_);
 };
 
 }  // namespace tpr::indexer

@@ -49,7 +49,7 @@ grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
 grpc::Status IndexerService::BatchUpsert(grpc::ServerContext* context,
                                          grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
                                          tpr::v1::BatchUpsertResponse* response) {
-  IndexerCore::BatchWriter batch(core_);
+  BatchWriter batch(core_);
   tpr::v1::UpsertRequest request;
   while (reader->Read(&request)) {
     absl::Status st = batch.Add(std::move(request));

@@ -106,7 +106,7 @@ Served* ServedWith(int n) {
   options.data_dir = s.dir;
   options.persist_interval_ms = 0;
   s.core = std::move(*IndexerCore::Open(options));
-  IndexerCore::BatchWriter batch(s.core.get());
+  BatchWriter batch(s.core.get());
   for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
     if (!batch.Add(std::move(r)).ok()) std::abort();
   }
