@@ -454,10 +454,10 @@ int Run(int argc, char** argv) {
       for (const index::Feature& fa : a.features) {
         for (const index::Feature& fb : b.features) {
           const double w = fa.weight * fb.weight;
-          sum[0] += w * std::abs(fa.g - fb.g);
-          sum[1] += w * config.ground.k_scale * l2(fa.k, fb.k);
-          sum[2] += w * config.ground.a_scale * l2(fa.a, fb.a);
-          sum[3] += w * config.ground.h_scale * l2(fa.h, fb.h);
+          sum[0] += w * std::abs(fa.integral_geodesic - fb.integral_geodesic);
+          sum[1] += w * config.ground.k_scale * l2(fa.curvature, fb.curvature);
+          sum[2] += w * config.ground.a_scale * l2(fa.area, fb.area);
+          sum[3] += w * config.ground.h_scale * l2(fa.distance, fb.distance);
           mass += w;
         }
       }
@@ -473,13 +473,13 @@ int Run(int argc, char** argv) {
           << " rings " << d.rings << "\n";
       for (size_t f = 0; f < d.raw.features.size(); ++f) {
         const index::Feature& x = d.raw.features[f];
-        out << (static_cast<int>(f) < d.points ? "P" : "R") << " w " << x.weight << " g " << x.g;
+        out << (static_cast<int>(f) < d.points ? "P" : "R") << " w " << x.weight << " g " << x.integral_geodesic;
         out << "\n  K";
-        for (double v : x.k) out << " " << v;
+        for (double v : x.curvature) out << " " << v;
         out << "\n  A";
-        for (double v : x.a) out << " " << v;
+        for (double v : x.area) out << " " << v;
         out << "\n  H";
-        for (double v : x.h) out << " " << v;
+        for (double v : x.distance) out << " " << v;
         out << "\n";
       }
     }

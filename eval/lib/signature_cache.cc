@@ -68,9 +68,9 @@ bool LoadCached(const std::string& dir, const std::string& key,
   if (!ReadVector(in, &d.d2) || !(in >> features) || features > 100000) return false;
   d.signature.features.resize(features);
   for (index::Feature& f : d.signature.features) {
-    if (!(in >> f.weight >> f.g)) return false;
-    if (!ReadVector(in, &f.k) || !ReadVector(in, &f.a) || !ReadVector(in, &f.h)) {
-      return false;
+    if (!(in >> f.weight >> f.integral_geodesic)) return false;
+    for (std::vector<double>* band : index::BandVectors(f)) {
+      if (!ReadVector(in, band)) return false;
     }
   }
   std::string end;
@@ -101,11 +101,9 @@ bool StoreCached(const std::string& dir, const std::string& key,
     WriteVector(out, d.d2);
     out << d.signature.features.size() << "\n";
     for (const index::Feature& f : d.signature.features) {
-      std::snprintf(buf, sizeof(buf), "%.17g %.17g\n", f.weight, f.g);
+      std::snprintf(buf, sizeof(buf), "%.17g %.17g\n", f.weight, f.integral_geodesic);
       out << buf;
-      WriteVector(out, f.k);
-      WriteVector(out, f.a);
-      WriteVector(out, f.h);
+      for (const std::vector<double>* band : index::BandVectors(f)) WriteVector(out, *band);
     }
     out << "end\n";
     if (!out) return false;

@@ -68,7 +68,7 @@ absl::Status ValidateSignature(const Signature& signature) {
         absl::StrCat("signature has ", f.size(), " features, at most ",
                      kMaxFeatures, " are supported"));
   }
-  const size_t bands = f[0].k.size();
+  const size_t bands = f[0].curvature.size();
   double sum = 0.0;
   for (size_t i = 0; i < f.size(); ++i) {
     const Feature& x = f[i];
@@ -77,19 +77,21 @@ absl::Status ValidateSignature(const Signature& signature) {
           absl::StrCat("feature ", i, ": weight ", x.weight,
                        " must be finite and >= 0"));
     }
-    if (!std::isfinite(x.g)) {
+    if (!std::isfinite(x.integral_geodesic)) {
       return absl::InvalidArgumentError(
           absl::StrCat("feature ", i, ": integral geodesic is not finite"));
     }
-    if (x.k.size() != bands || x.a.size() != bands || x.h.size() != bands) {
+    if (x.curvature.size() != bands || x.area.size() != bands || x.distance.size() != bands) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "feature ", i, ": band vectors K, A, H have lengths ", x.k.size(),
-          ", ", x.a.size(), ", ", x.h.size(), "; expected ", bands,
-          " each (the length of feature 0's K)"));
+          "feature ", i, ": curvature, area, distance have lengths ", x.curvature.size(),
+          ", ", x.area.size(), ", ", x.distance.size(), "; expected ", bands,
+          " each (the length of feature 0's curvature)"));
     }
-    if (!AllFinite(x.k) || !AllFinite(x.a) || !AllFinite(x.h)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "feature ", i, ": a band vector holds a non-finite value"));
+    for (const std::vector<double>* band : BandVectors(x)) {
+      if (!AllFinite(*band)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "feature ", i, ": a band vector holds a non-finite value"));
+      }
     }
     sum += x.weight;
   }
@@ -107,7 +109,7 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   const auto& f = signature.features;
   PreparedSignature p;
   p.size_ = static_cast<int>(f.size());
-  p.bands_ = static_cast<int>(f[0].k.size());
+  p.bands_ = static_cast<int>(f[0].curvature.size());
   p.stride_ = PaddedStride(p.size_);
   const int n = p.size_;
   const int bands = p.bands_;
@@ -126,11 +128,11 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   const double ch = options.w4 * options.h_scale;
   for (int i = 0; i < n; ++i) {
     const Feature& x = f[i];
-    p.coords_[i] = options.w1 * x.g;
+    p.coords_[i] = options.w1 * x.integral_geodesic;
     for (int b = 0; b < bands; ++b) {
-      p.coords_[(1 + b) * stride + i] = ck * x.k[b];
-      p.coords_[(1 + bands + b) * stride + i] = ca * x.a[b];
-      p.coords_[(1 + 2 * bands + b) * stride + i] = ch * x.h[b];
+      p.coords_[(1 + b) * stride + i] = ck * x.curvature[b];
+      p.coords_[(1 + bands + b) * stride + i] = ca * x.area[b];
+      p.coords_[(1 + 2 * bands + b) * stride + i] = ch * x.distance[b];
     }
   }
   p.centroid_.assign(rows, 0.0);

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/service/convert.h"
 
 namespace tpr::indexer {
 namespace {
@@ -29,36 +30,6 @@ absl::Status CheckId(const std::string& id) {
 }
 
 }  // namespace
-
-absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s) {
-  if (s.features_size() > tpr::index::kMaxFeatures) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("signature has ", s.features_size(), " features; at most ",
-                     tpr::index::kMaxFeatures, " are accepted"));
-  }
-  tpr::index::Signature out;
-  out.features.reserve(static_cast<size_t>(s.features_size()));
-  for (int i = 0; i < s.features_size(); ++i) {
-    const tpr::v1::Feature& f = s.features(i);
-    if (f.kind() != tpr::v1::FEATURE_KIND_POINT && f.kind() != tpr::v1::FEATURE_KIND_RING) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature feature ", i, " has no kind (point or ring)"));
-    }
-    tpr::index::Feature g;
-    g.weight = f.weight();
-    g.g = f.integral_geodesic();
-    g.k.assign(f.curvature().begin(), f.curvature().end());
-    g.a.assign(f.area().begin(), f.area().end());
-    g.h.assign(f.distance().begin(), f.distance().end());
-    out.features.push_back(std::move(g));
-  }
-  absl::Status valid = tpr::index::ValidateSignature(out);
-  if (!valid.ok()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("malformed signature: ", valid.message()));
-  }
-  return out;
-}
 
 // ---------------------------------------------------------------------------
 // Open and load.

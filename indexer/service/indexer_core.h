@@ -75,13 +75,6 @@ struct CoreOptions {
   std::function<void(const std::string&)> log;
 };
 
-// ToIndexSignature converts a wire signature to the library's form and
-// validates it (tpr::index::ValidateSignature). Returns INVALID_ARGUMENT
-// naming the feature at fault (unspecified kind, weights not summing to 1,
-// unequal band lengths, non-finite values); RESOURCE_EXHAUSTED above
-// tpr::index::kMaxFeatures features. O(size); thread-safe.
-absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s);
-
 // WriteOutcome: what a write group did with one request.
 enum class WriteOutcome {
   kSkipped,   // the id existed and overwrite was false: nothing written

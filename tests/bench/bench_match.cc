@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "eval/lib/tpr_descriptor.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/synth/synth.h"
@@ -187,11 +188,7 @@ std::vector<tpr::index::Signature> ExtractedPrototypes(int count) {
     absl::StatusOr<tpr::extract::ExtractResult> r = tpr::extract::ExtractSignature(
         *mesh, tpr::extract::ComputeMeshStats(*mesh), tpr::extract::Options{});
     if (!r.ok()) continue;
-    tpr::index::Signature sig;
-    for (const tpr::extract::Feature& f : r->signature.features) {
-      sig.features.push_back({f.weight, f.integral_geodesic, f.curvature, f.area, f.distance});
-    }
-    out.push_back(std::move(sig));
+    out.push_back(tpr::eval::ToIndexSignature(r->signature));
   }
   return out;
 }

@@ -255,10 +255,10 @@ TEST(EmdTest, ManyTiesAndZeroMassesMatchLemon) {
       Feature f;
       f.weight = (zero_masses && i % 3 == 1) ? 0.0 : 1.0;
       positive += f.weight > 0 ? 1 : 0;
-      f.g = 0.5 * level(rng);
-      f.k = {1.0 * level(rng), 1.0 * level(rng)};
-      f.a = {0.5 * level(rng), 0.5 * level(rng)};
-      f.h = {0.1 * level(rng), 0.1 * level(rng)};
+      f.integral_geodesic = 0.5 * level(rng);
+      f.curvature = {1.0 * level(rng), 1.0 * level(rng)};
+      f.area = {0.5 * level(rng), 0.5 * level(rng)};
+      f.distance = {0.1 * level(rng), 0.1 * level(rng)};
       s.features.push_back(f);
     }
     for (Feature& f : s.features) f.weight /= positive;

@@ -28,8 +28,8 @@ double DirectEq7(const Feature& x, const Feature& y,
     }
     return std::sqrt(s);
   };
-  return o.w1 * std::abs(x.g - y.g) + o.w2 * o.k_scale * l2(x.k, y.k) +
-         o.w3 * o.a_scale * l2(x.a, y.a) + o.w4 * o.h_scale * l2(x.h, y.h);
+  return o.w1 * std::abs(x.integral_geodesic - y.integral_geodesic) + o.w2 * o.k_scale * l2(x.curvature, y.curvature) +
+         o.w3 * o.a_scale * l2(x.area, y.area) + o.w4 * o.h_scale * l2(x.distance, y.distance);
 }
 
 PreparedSignature Prep(const Signature& s, const GroundDistanceOptions& o) {
@@ -75,24 +75,24 @@ TEST(GroundDistanceTest, InvalidSignaturesRejectedWithReason) {
   }
   {
     Signature s = Valid();
-    s.features[1].a.push_back(0.0);
+    s.features[1].area.push_back(0.0);
     cases.push_back({"lengths", s});
   }
   {
     Signature s = Valid();
-    s.features[1].k = {1, 2, 3};
-    s.features[1].a = {1, 2, 3};
-    s.features[1].h = {1, 2, 3};
+    s.features[1].curvature = {1, 2, 3};
+    s.features[1].area = {1, 2, 3};
+    s.features[1].distance = {1, 2, 3};
     cases.push_back({"lengths", s});
   }
   {
     Signature s = Valid();
-    s.features[1].h[0] = inf;
+    s.features[1].distance[0] = inf;
     cases.push_back({"non-finite", s});
   }
   {
     Signature s = Valid();
-    s.features[0].g = nan;
+    s.features[0].integral_geodesic = nan;
     cases.push_back({"not finite", s});
   }
   {

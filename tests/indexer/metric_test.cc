@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "eval/lib/tpr_descriptor.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/synth/synth.h"
@@ -93,10 +94,10 @@ TEST(MetricTest, EmdIsAMetricOnDegenerateSignatures) {
     for (int i = 0; i < n; ++i) {
       Feature f;
       f.weight = (i % 4 == 3) ? 0.0 : 1.0;
-      f.g = level(rng);
-      f.k = {1.0 * level(rng)};
-      f.a = {1.0 * level(rng)};
-      f.h = {1.0 * level(rng)};
+      f.integral_geodesic = level(rng);
+      f.curvature = {1.0 * level(rng)};
+      f.area = {1.0 * level(rng)};
+      f.distance = {1.0 * level(rng)};
       sig.features.push_back(f);
     }
     double sum = 0.0;
@@ -105,15 +106,6 @@ TEST(MetricTest, EmdIsAMetricOnDegenerateSignatures) {
     sigs.push_back(Prep(sig));
   }
   EXPECT_EQ(CheckMetric(sigs, 5000, 6), 5000);
-}
-
-Signature FromExtracted(const extract::Signature& e) {
-  Signature s;
-  for (const extract::Feature& f : e.features) {
-    s.features.push_back(
-        {f.weight, f.integral_geodesic, f.curvature, f.area, f.distance});
-  }
-  return s;
 }
 
 TEST(MetricTest, EmdIsAMetricOnExtractedSignatures) {
@@ -131,7 +123,7 @@ TEST(MetricTest, EmdIsAMetricOnExtractedSignatures) {
           extract::ExtractSignature(*mesh, stats, extract::Options{});
       ASSERT_TRUE(r.ok()) << classes[c] << " pose " << pose << ": "
                           << r.status();
-      const Signature s = FromExtracted(r->signature);
+      const Signature s = eval::ToIndexSignature(r->signature);
       ASSERT_TRUE(ValidateSignature(s).ok())
           << classes[c] << ": " << ValidateSignature(s);
       sigs.push_back(Prep(s));

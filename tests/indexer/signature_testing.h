@@ -77,11 +77,11 @@ class SignatureGenerator {
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     for (Feature& f : s.features) {
       f.weight *= std::exp(noise(rng_));
-      f.g = std::clamp(f.g + noise(rng_) * 0.5, 0.0, 1.0);
-      for (double& x : f.k) x *= 1.0 + noise(rng_);
-      for (double& x : f.a) x *= std::exp(noise(rng_));
-      for (double& x : f.h) x *= std::exp(noise(rng_));
-      Normalize(&f.a);
+      f.integral_geodesic = std::clamp(f.integral_geodesic + noise(rng_) * 0.5, 0.0, 1.0);
+      for (double& x : f.curvature) x *= 1.0 + noise(rng_);
+      for (double& x : f.area) x *= std::exp(noise(rng_));
+      for (double& x : f.distance) x *= std::exp(noise(rng_));
+      Normalize(&f.area);
     }
     if (s.features.size() > 1 && unit(rng_) < options_.feature_change) {
       // Drop the lightest feature: a small protrusion not detected.
@@ -96,7 +96,7 @@ class SignatureGenerator {
       Feature& f = s.features[pick(rng_)];
       f.weight *= 0.5;
       Feature twin = f;
-      twin.g = std::clamp(twin.g + 0.02, 0.0, 1.0);
+      twin.integral_geodesic = std::clamp(twin.integral_geodesic + 0.02, 0.0, 1.0);
       s.features.push_back(twin);
     }
     NormalizeWeights(&s);
@@ -156,15 +156,15 @@ class SignatureGenerator {
       f.weight = std::exp(1.2 * normal(rng_));
       // Tips sit far from the surface centre, rings in between.
       const bool tip = unit(rng_) < 0.4;
-      f.g = tip ? 0.6 + 0.4 * unit(rng_) : unit(rng_) * 0.8;
-      f.k = Profile(0.2 * kFourPi, (tip ? 3.0 : 1.0) * kFourPi);
+      f.integral_geodesic = tip ? 0.6 + 0.4 * unit(rng_) : unit(rng_) * 0.8;
+      f.curvature = Profile(0.2 * kFourPi, (tip ? 3.0 : 1.0) * kFourPi);
       // Some saddle bands: negative curvature.
-      for (double& x : f.k) {
+      for (double& x : f.curvature) {
         if (unit(rng_) < 0.1) x = -0.5 * x;
       }
-      f.a = Profile(0.05, 1.0);
-      Normalize(&f.a);
-      f.h = Profile(0.03, 0.2);
+      f.area = Profile(0.05, 1.0);
+      Normalize(&f.area);
+      f.distance = Profile(0.03, 0.2);
       s.features.push_back(std::move(f));
     }
     NormalizeWeights(&s);

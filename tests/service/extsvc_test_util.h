@@ -44,6 +44,7 @@
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
 #include "indexer/lib/signature.h"
+#include "indexer/service/convert.h"
 #include "tpr/v1/signature.pb.h"
 
 namespace tpr::testing {
@@ -206,21 +207,6 @@ inline absl::StatusOr<int> HealthCheck(const std::shared_ptr<grpc::Channel>& cha
   return absl::InternalError("unexpected health response");
 }
 
-// The indexer library's view of a wire signature (what the indexer stores).
-inline index::Signature ToIndexSignature(const v1::Signature& wire) {
-  index::Signature s;
-  for (const v1::Feature& f : wire.features()) {
-    index::Feature g;
-    g.weight = f.weight();
-    g.g = f.integral_geodesic();
-    g.k.assign(f.curvature().begin(), f.curvature().end());
-    g.a.assign(f.area().begin(), f.area().end());
-    g.h.assign(f.distance().begin(), f.distance().end());
-    s.features.push_back(std::move(g));
-  }
-  return s;
-}
-
 // FreePort returns a loopback TCP port that was free a moment ago.
 inline int FreePort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -314,12 +300,15 @@ struct Ranked {
 inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     const v1::Signature& query, const std::vector<std::pair<std::string, v1::Signature>>& models) {
   const index::GroundDistanceOptions options;
-  absl::StatusOr<index::PreparedSignature> q = index::Prepare(ToIndexSignature(query), options);
+  absl::StatusOr<index::Signature> query_signature = indexer::ToIndexSignature(query);
+  if (!query_signature.ok()) return query_signature.status();
+  absl::StatusOr<index::PreparedSignature> q = index::Prepare(*query_signature, options);
   if (!q.ok()) return q.status();
   std::vector<Ranked> ranked;
   for (const auto& [id, signature] : models) {
-    absl::StatusOr<index::PreparedSignature> m =
-        index::Prepare(ToIndexSignature(signature), options);
+    absl::StatusOr<index::Signature> model_signature = indexer::ToIndexSignature(signature);
+    if (!model_signature.ok()) return model_signature.status();
+    absl::StatusOr<index::PreparedSignature> m = index::Prepare(*model_signature, options);
     if (!m.ok()) return m.status();
     ranked.push_back({index::Emd(*q, *m), id});
   }

@@ -30,6 +30,7 @@
 #include "common/server_lifecycle.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/service/convert.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
 #include "tests/indexer/signature_testing.h"
@@ -37,22 +38,11 @@
 
 namespace tpr::indexer::testing {
 
-// ToWire returns `s` as the extractor would send it (the first feature a
-// point, the rest alternating rings and points; the kind is not matched).
+// ToWire returns `s` as the extractor would send it (the first half of the
+// features points, the rest rings; the kind is not matched), through the
+// indexer's own converter (indexer/service/convert.h).
 inline tpr::v1::Signature ToWire(const tpr::index::Signature& s) {
-  tpr::v1::Signature out;
-  for (size_t i = 0; i < s.features.size(); ++i) {
-    const tpr::index::Feature& f = s.features[i];
-    tpr::v1::Feature* w = out.add_features();
-    w->set_kind(i % 2 == 0 ? tpr::v1::FEATURE_KIND_POINT : tpr::v1::FEATURE_KIND_RING);
-    w->set_weight(f.weight);
-    w->set_integral_geodesic(f.g);
-    for (double x : f.k) w->add_curvature(x);
-    for (double x : f.a) w->add_area(x);
-    for (double x : f.h) w->add_distance(x);
-  }
-  out.set_extractor_version("test");
-  return out;
+  return ToWireSignature(s, static_cast<int>(s.features.size() + 1) / 2);
 }
 
 // A generated model: id, label and signature.

@@ -1,0 +1,48 @@
+// Conversions between the wire signature (tpr.v1.Signature) and the indexer
+// library's (tpr::index::Signature). This is the ONE place where the indexer
+// reads a wire signature, and therefore its single validator: every stored,
+// upserted or query signature passes through ToIndexSignature. A new feature
+// field is added here (both directions), in the proto, in
+// indexer/lib/signature.h and in the extractor's converter
+// (extractor/service/convert.h); nothing else copies fields.
+//
+//   absl::StatusOr<index::Signature> s = ToIndexSignature(request.signature());
+//   if (!s.ok()) return s.status();            // INVALID_ARGUMENT, names the field
+#ifndef TPR_INDEXER_SERVICE_CONVERT_H_
+#define TPR_INDEXER_SERVICE_CONVERT_H_
+
+#include "absl/status/statusor.h"
+#include "indexer/lib/signature.h"
+#include "tpr/v1/signature.pb.h"
+
+namespace tpr::indexer {
+
+// kMaxBands: the largest band count a signature may carry (the extractor's
+// options.bands range, 1..256).
+inline constexpr int kMaxBands = 256;
+
+// ToIndexSignature validates the wire signature `s` against every range the
+// contract (proto/tpr/v1/signature.proto) documents and returns it in the
+// library's form. Errors:
+//  - RESOURCE_EXHAUSTED: more than tpr::index::kMaxFeatures features;
+//  - INVALID_ARGUMENT, naming the feature index and field at fault: no
+//    feature; options.bands outside 1..256; a feature whose kind is neither
+//    point nor ring; curvature, area or distance not of length
+//    options.bands; integral_geodesic outside [0, 1]; a weight, area or
+//    distance that is negative; an area above 1; any value not finite;
+//    weights not summing to 1 within 1e-6 (Eq. 6).
+// O(features x bands); thread-safe.
+absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s);
+
+// ToWireSignature is the inverse of ToIndexSignature for code that builds
+// library signatures directly (tests, benchmarks, fuzz seeds): features
+// [0, points) become FEATURE_KIND_POINT, the rest FEATURE_KIND_RING (the
+// library form does not keep the kind; matching ignores it), options.bands
+// is the band vectors' length and extractor_version is "test".
+// ToIndexSignature(ToWireSignature(s, p)) == s for every valid s. O(size);
+// thread-safe.
+tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points);
+
+}  // namespace tpr::indexer
+
+#endif  // TPR_INDEXER_SERVICE_CONVERT_H_
