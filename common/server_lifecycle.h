@@ -2,15 +2,16 @@
 // grpc::Server with the standard health service, server reflection (v1alpha)
 // and message-size limits; wait for SIGTERM/SIGINT; shut down gracefully
 // (stop accepting, let in-flight calls finish until a deadline, then cancel
-// them). Also a tiny stderr logger, one line per event (Debian's Abseil
-// 20220623 has no absl/log).
+// them). Every call passes the call interceptor (request ids, one log line
+// per call, observers such as metrics: common/call_interceptor.h); the
+// service's own health status is readiness (common/health.h).
 //
 //   tpr::common::ServerOptions options;  options.listen_address = "127.0.0.1:7002";
 //   absl::StatusOr<tpr::common::StartedServer> s = StartServer(options, {&service});
 //   if (s.ok()) return ServeUntilSignal(*s->server, options, s->port);
 //
-// Header-only so that both services' main.cc and the tests use it without a
-// library of its own; it needs gRPC::grpc++ and gRPC::grpc++_reflection.
+// Header-only; it needs tpr_server_common (common/*.cc), gRPC::grpc++ and
+// gRPC::grpc++_reflection.
 #ifndef TPR_COMMON_SERVER_LIFECYCLE_H_
 #define TPR_COMMON_SERVER_LIFECYCLE_H_
 
@@ -38,6 +39,9 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/string_view.h"
+#include "common/call_interceptor.h"
+#include "common/health.h"
+#include "common/logging.h"
 
 namespace tpr::common {
 
@@ -60,34 +64,30 @@ struct ServerOptions {
   int shutdown_grace_ms = 10000;
   // Name written in front of every log line. Default "tpr".
   std::string log_name = "tpr";
+  // Whether every call (but health checks and reflection) is logged, one
+  // line each (common/logging.h). Default false; the services' --log-calls.
+  bool log_calls = false;
+  // Receivers of every finished call (e.g. metrics). Default none.
+  std::vector<CallObserver> call_observers;
+  // The health-service name whose status is readiness, e.g.
+  // "tpr.v1.Indexer". Empty: none (only the overall status). Default empty.
+  std::string readiness_service;
+  // Polled every readiness_poll_ms while serving: "" when ready, else the
+  // reason. Empty function: always ready. Default empty, 1000 ms.
+  ReadinessCheck readiness_check;
+  int readiness_poll_ms = 1000;
+  // Credentials the port is opened with. nullptr: plaintext
+  // (grpc::InsecureServerCredentials). Default nullptr.
+  std::shared_ptr<grpc::ServerCredentials> credentials;
 };
 
-// LogEvent writes one line "<UTC time> <name>: <message>" to stderr. The whole
-// line is written with a single fwrite under a mutex, so concurrent events do
-// not interleave. Thread-safe. Cost: one formatted write.
-inline void LogEvent(absl::string_view name, absl::string_view message) {
-  static std::mutex* const mu = new std::mutex;
-  const auto now = std::chrono::system_clock::now();
-  const auto micros = std::chrono::duration_cast<std::chrono::microseconds>(
-                          now.time_since_epoch())
-                          .count();
-  const time_t seconds = static_cast<time_t>(micros / 1000000);
-  struct tm utc;
-  gmtime_r(&seconds, &utc);
-  char stamp[96];
-  std::snprintf(stamp, sizeof(stamp), "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ",
-                utc.tm_year + 1900, utc.tm_mon + 1, utc.tm_mday, utc.tm_hour,
-                utc.tm_min, utc.tm_sec, static_cast<int>((micros / 1000) % 1000));
-  const std::string line = absl::StrCat(stamp, " ", name, ": ", message, "\n");
-  std::lock_guard<std::mutex> lock(*mu);
-  std::fwrite(line.data(), 1, line.size(), stderr);
-  std::fflush(stderr);
-}
-
 // StartedServer: a running server and the port it actually bound.
+// Destroying it stops the readiness monitor before the server.
 struct StartedServer {
   std::unique_ptr<grpc::Server> server;
   int port = 0;
+  // Set when ServerOptions::readiness_service is.
+  std::unique_ptr<ReadinessMonitor> readiness;
 };
 
 // StartServer builds and starts a server that serves `services` (sync or
@@ -108,8 +108,20 @@ inline absl::StatusOr<StartedServer> StartServer(
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   StartedServer started;
-  builder.AddListeningPort(options.listen_address,
-                           grpc::InsecureServerCredentials(), &started.port);
+  builder.AddListeningPort(
+      options.listen_address,
+      options.credentials ? options.credentials : grpc::InsecureServerCredentials(),
+      &started.port);
+  {
+    CallInterceptorOptions calls;
+    calls.service = options.log_name;
+    calls.log_calls = options.log_calls;
+    calls.observers = options.call_observers;
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
+        interceptors;
+    interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
+    builder.experimental().SetInterceptorCreators(std::move(interceptors));
+  }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
   builder.SetMaxSendMessageSize(options.max_send_message_bytes);
   if (options.max_threads > 0) {
@@ -130,6 +142,11 @@ inline absl::StatusOr<StartedServer> StartServer(
   if (grpc::HealthCheckServiceInterface* health =
           started.server->GetHealthCheckService()) {
     health->SetServingStatus(true);
+  }
+  if (!options.readiness_service.empty()) {
+    started.readiness = std::make_unique<ReadinessMonitor>(
+        started.server.get(), options.readiness_service, options.readiness_check,
+        options.readiness_poll_ms, options.log_name);
   }
   return started;
 }
@@ -194,20 +211,46 @@ inline void ShutdownGracefully(grpc::Server& server, const ServerOptions& option
   server.Wait();
 }
 
-// ServeUntilSignal logs that the server is serving, blocks until SIGTERM or
-// SIGINT, then shuts it down gracefully (see ShutdownGracefully) and logs
-// each step. Returns the process exit code to use: 0.
-inline int ServeUntilSignal(grpc::Server& server, const ServerOptions& options,
-                            int port) {
+// ShutdownGracefully for a StartedServer: stops the readiness monitor first
+// (readiness NOT_SERVING), then as above.
+inline void ShutdownGracefully(StartedServer& started, const ServerOptions& options) {
+  if (started.readiness) started.readiness->Stop();
+  ShutdownGracefully(*started.server, options);
+}
+
+namespace internal {
+
+// ServeUntilSignalWith logs, waits for SIGTERM/SIGINT, calls `shut_down`,
+// logs again; returns 0.
+template <typename ShutDown>
+int ServeUntilSignalWith(const ServerOptions& options, int port, ShutDown shut_down) {
   LogEvent(options.log_name,
            absl::StrCat("serving on ", options.listen_address, " (port ", port, ")"));
   const int signo = WaitForShutdownSignal();
   LogEvent(options.log_name,
            absl::StrCat("signal ", signo, ": shutting down, grace ",
                         options.shutdown_grace_ms, " ms"));
-  ShutdownGracefully(server, options);
+  shut_down();
   LogEvent(options.log_name, "stopped");
   return 0;
+}
+
+}  // namespace internal
+
+// ServeUntilSignal logs that the server is serving, blocks until SIGTERM or
+// SIGINT, then shuts it down gracefully (see ShutdownGracefully) and logs
+// each step. Returns the process exit code to use: 0.
+inline int ServeUntilSignal(grpc::Server& server, const ServerOptions& options,
+                            int port) {
+  return internal::ServeUntilSignalWith(options, port,
+                                        [&] { ShutdownGracefully(server, options); });
+}
+
+// ServeUntilSignal for a StartedServer (its readiness monitor stops, and
+// readiness turns NOT_SERVING, when draining starts).
+inline int ServeUntilSignal(StartedServer& started, const ServerOptions& options) {
+  return internal::ServeUntilSignalWith(options, started.port,
+                                        [&] { ShutdownGracefully(started, options); });
 }
 
 }  // namespace tpr::common

@@ -11,6 +11,9 @@
 #include <CLI/CLI.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "common/config.h"
+#include "common/logging.h"
+#include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "extractor/service/extractor_service.h"
 
@@ -49,7 +52,20 @@ int main(int argc, char** argv) {
                  "on SIGTERM/SIGINT, how long in-flight calls may finish")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  tpr::common::ServerFlags ops_flags;
+  tpr::common::AddServerFlags(app, &ops_flags);
+  tpr::common::ConfigSupport config =
+      tpr::common::AddConfigSupport(app, "TPR_EXTRACTOR_");
   CLI11_PARSE(app, argc, argv);
+  if (config.print_requested()) {
+    std::fputs(config.Effective().c_str(), stdout);
+    return 0;
+  }
+  if (absl::Status s = tpr::common::ApplyServerFlags(ops_flags, &server_options); !s.ok()) {
+    std::fprintf(stderr, "tpr-extractor: %s\n", std::string(s.message()).c_str());
+    return 2;
+  }
+  server_options.readiness_service = "tpr.v1.Extractor";
 
   // A chunk is at most 4 MiB by convention (1 MiB recommended); allow some
   // slack above it but never more than the whole-mesh limit.
@@ -71,5 +87,5 @@ int main(int argc, char** argv) {
                    service_options.max_concurrent, ", max-mesh-bytes ",
                    service_options.max_mesh_bytes, ", max-vertices ",
                    service_options.max_vertices));
-  return tpr::common::ServeUntilSignal(*started->server, server_options, started->port);
+  return tpr::common::ServeUntilSignal(*started, server_options);
 }

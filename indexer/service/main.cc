@@ -9,6 +9,9 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
+#include "common/config.h"
+#include "common/logging.h"
+#include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
@@ -41,7 +44,20 @@ int main(int argc, char** argv) {
                  "On SIGTERM, how long in-flight calls may finish (ms)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  tpr::common::ServerFlags ops_flags;
+  tpr::common::AddServerFlags(app, &ops_flags);
+  tpr::common::ConfigSupport config =
+      tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
   CLI11_PARSE(app, argc, argv);
+  if (config.print_requested()) {
+    std::fputs(config.Effective().c_str(), stdout);
+    return 0;
+  }
+  if (absl::Status s = tpr::common::ApplyServerFlags(ops_flags, &server_options); !s.ok()) {
+    std::fprintf(stderr, "tpr-indexer: %s\n", std::string(s.message()).c_str());
+    return 2;
+  }
+  server_options.readiness_service = "tpr.v1.Indexer";
   // gRPC needs a few threads of its own besides the handlers.
   if (threads > 0) server_options.max_threads = threads + 2;
 
@@ -69,7 +85,7 @@ int main(int argc, char** argv) {
     log(started.status().ToString());
     return 1;
   }
-  const int code = tpr::common::ServeUntilSignal(*started->server, server_options, started->port);
+  const int code = tpr::common::ServeUntilSignal(*started, server_options);
   started->server.reset();
   (*core)->Close();
   log("data directory closed");

@@ -1,0 +1,27 @@
+#include "common/server_flags.h"
+
+#include "absl/strings/str_cat.h"
+#include "common/logging.h"
+
+namespace tpr::common {
+
+void AddServerFlags(CLI::App& app, ServerFlags* flags) {
+  app.add_option("--log-format", flags->log_format,
+                 "log lines as 'text' or 'json' (time, level, service, rpc, peer, status, "
+                 "duration_ms, request_id)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"text", "json"}));
+  app.add_flag("--log-calls,!--no-log-calls", flags->log_calls,
+               "log one line per call (health checks and reflection excepted)")
+      ->default_str(flags->log_calls ? "true" : "false");
+}
+
+absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
+  absl::StatusOr<LogFormat> format = ParseLogFormat(flags.log_format);
+  if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
+  SetLogFormat(*format);
+  options->log_calls = flags.log_calls;
+  return absl::OkStatus();
+}
+
+}  // namespace tpr::common

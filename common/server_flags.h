@@ -1,0 +1,45 @@
+// The operational flags every TPR service shares, added to its CLI11 app in
+// one call and turned into ServerOptions in another, so that a service's
+// main.cc (extractor, indexer, gateway) wires logging, configuration files,
+// API keys, TLS and metrics in a few lines:
+//
+//   tpr::common::ServerFlags ops;
+//   tpr::common::AddServerFlags(app, &ops);
+//   ... the service's own options ...
+//   auto config = tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
+//   CLI11_PARSE(app, argc, argv);
+//   if (config.print_requested()) { std::fputs(config.Effective().c_str(), stdout); return 0; }
+//   absl::Status s = tpr::common::ApplyServerFlags(ops, &server_options);
+#ifndef TPR_COMMON_SERVER_FLAGS_H_
+#define TPR_COMMON_SERVER_FLAGS_H_
+
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "absl/status/status.h"
+#include "common/server_lifecycle.h"
+
+namespace tpr::common {
+
+// ServerFlags: the values of the shared flags (defaults as documented on
+// each flag).
+struct ServerFlags {
+  // --log-format: "text" or "json". Default "text".
+  std::string log_format = "text";
+  // --log-calls: one log line per call. Default true.
+  bool log_calls = true;
+};
+
+// AddServerFlags adds the shared flags to `app`, storing into `*flags`
+// (which must outlive parsing). Call before AddConfigSupport so that the
+// flags get environment variables too.
+void AddServerFlags(CLI::App& app, ServerFlags* flags);
+
+// ApplyServerFlags sets the process-wide log format and fills the matching
+// fields of `*options`. Returns INVALID_ARGUMENT naming the flag at fault.
+absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
+
+}  // namespace tpr::common
+
+#endif  // TPR_COMMON_SERVER_FLAGS_H_
