@@ -1,5 +1,7 @@
 #include "common/server_flags.h"
 
+#include <cstdio>
+
 #include "absl/strings/str_cat.h"
 #include "common/logging.h"
 
@@ -22,6 +24,19 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
   return absl::OkStatus();
+}
+
+std::optional<int> FinishServerFlags(const ConfigSupport& config, const ServerFlags& flags,
+                                     ServerOptions* options) {
+  if (config.print_requested()) {
+    std::fputs(config.Effective().c_str(), stdout);
+    return 0;
+  }
+  if (absl::Status s = ApplyServerFlags(flags, options); !s.ok()) {
+    std::fprintf(stderr, "%s: %s\n", options->log_name.c_str(), std::string(s.message()).c_str());
+    return 2;
+  }
+  return std::nullopt;
 }
 
 }  // namespace tpr::common

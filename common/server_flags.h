@@ -8,16 +8,20 @@
 //   ... the service's own options ...
 //   auto config = tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
 //   CLI11_PARSE(app, argc, argv);
-//   if (config.print_requested()) { std::fputs(config.Effective().c_str(), stdout); return 0; }
-//   absl::Status s = tpr::common::ApplyServerFlags(ops, &server_options);
+//   if (std::optional<int> exit_code =
+//           tpr::common::FinishServerFlags(config, ops, &server_options)) {
+//     return *exit_code;   // --print-config done, or a bad flag reported
+//   }
 #ifndef TPR_COMMON_SERVER_FLAGS_H_
 #define TPR_COMMON_SERVER_FLAGS_H_
 
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "absl/status/status.h"
+#include "common/config.h"
 #include "common/server_lifecycle.h"
 
 namespace tpr::common {
@@ -39,6 +43,14 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags);
 // ApplyServerFlags sets the process-wide log format and fills the matching
 // fields of `*options`. Returns INVALID_ARGUMENT naming the flag at fault.
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
+
+// FinishServerFlags runs after parsing: with --print-config it prints the
+// effective configuration to stdout and returns 0 (the exit code);
+// otherwise it applies the flags (ApplyServerFlags) and returns nullopt
+// (serve), or prints the error to stderr under options->log_name and
+// returns 2.
+std::optional<int> FinishServerFlags(const ConfigSupport& config, const ServerFlags& flags,
+                                     ServerOptions* options);
 
 }  // namespace tpr::common
 

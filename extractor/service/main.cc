@@ -5,6 +5,7 @@
 //
 //   tpr-extractor --listen 127.0.0.1:7001 --threads 2
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -12,7 +13,6 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/config.h"
-#include "common/logging.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "extractor/service/extractor_service.h"
@@ -57,13 +57,9 @@ int main(int argc, char** argv) {
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_EXTRACTOR_");
   CLI11_PARSE(app, argc, argv);
-  if (config.print_requested()) {
-    std::fputs(config.Effective().c_str(), stdout);
-    return 0;
-  }
-  if (absl::Status s = tpr::common::ApplyServerFlags(ops_flags, &server_options); !s.ok()) {
-    std::fprintf(stderr, "tpr-extractor: %s\n", std::string(s.message()).c_str());
-    return 2;
+  if (std::optional<int> exit_code =
+          tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
+    return *exit_code;
   }
   server_options.readiness_service = "tpr.v1.Extractor";
 

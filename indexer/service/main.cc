@@ -5,12 +5,12 @@
 //
 //   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
 #include <cstdlib>
+#include <optional>
 #include <string>
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
 #include "common/config.h"
-#include "common/logging.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "indexer/service/indexer_core.h"
@@ -49,13 +49,9 @@ int main(int argc, char** argv) {
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
   CLI11_PARSE(app, argc, argv);
-  if (config.print_requested()) {
-    std::fputs(config.Effective().c_str(), stdout);
-    return 0;
-  }
-  if (absl::Status s = tpr::common::ApplyServerFlags(ops_flags, &server_options); !s.ok()) {
-    std::fprintf(stderr, "tpr-indexer: %s\n", std::string(s.message()).c_str());
-    return 2;
+  if (std::optional<int> exit_code =
+          tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
+    return *exit_code;
   }
   server_options.readiness_service = "tpr.v1.Indexer";
   // gRPC needs a few threads of its own besides the handlers.

@@ -45,6 +45,7 @@
 #include "indexer/lib/ground_distance.h"
 #include "indexer/lib/signature.h"
 #include "indexer/service/convert.h"
+#include "tests/service/ops_testing.h"
 #include "tpr/v1/signature.pb.h"
 
 namespace tpr::testing {
@@ -179,32 +180,12 @@ inline void WriteFile(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;
 }
 
-// Calls grpc.health.v1.Health/Check for the overall server ("") with raw
-// bytes (gRPC's C++ package ships no health client stub): the request is the
-// empty message, the response field 1 (status) is SERVING = 1, so the
-// serialized answer is 0x08 0x01. Returns the status enum value.
+// Calls grpc.health.v1.Health/Check for the overall server (""); see
+// HealthStatus (tests/service/ops_testing.h). Any failure is UNAVAILABLE.
 inline absl::StatusOr<int> HealthCheck(const std::shared_ptr<grpc::Channel>& channel) {
-  grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-  // An empty HealthCheckRequest: a buffer holding one empty slice (a
-  // default-constructed ByteBuffer is "no message" and is refused).
-  grpc::Slice empty("", 0);
-  grpc::ByteBuffer request(&empty, 1);
-  grpc::ByteBuffer response;
-  const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
-                                         grpc::internal::RpcMethod::NORMAL_RPC);
-  grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
-      channel.get(), method, &context, request, &response);
-  if (!s.ok()) return absl::UnavailableError(s.error_message());
-  std::vector<grpc::Slice> slices;
-  if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read response");
-  std::string bytes;
-  for (const grpc::Slice& slice : slices) {
-    bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
-  }
-  if (bytes.size() == 2 && bytes[0] == 0x08) return static_cast<int>(bytes[1]);
-  if (bytes.empty()) return 0;  // UNKNOWN is the default, encoded as nothing
-  return absl::InternalError("unexpected health response");
+  absl::StatusOr<int> status = HealthStatus(channel, "");
+  if (!status.ok()) return absl::UnavailableError(status.status().message());
+  return status;
 }
 
 // FreePort returns a loopback TCP port that was free a moment ago.
