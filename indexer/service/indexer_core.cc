@@ -81,6 +81,8 @@ absl::Status IndexerCore::LoadIndex() {
           return absl::OkStatus();
         },
         /*threads=*/2));
+    // The scan must find every model the acknowledged writes left.
+    TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size()));
     table_.Put(infos);
   }
   {

@@ -1,6 +1,10 @@
 #include "indexer/service/storage.h"
 
+#include <algorithm>
 #include <atomic>
+#include <cstdio>
+#include <optional>
+#include <unordered_map>
 #include <cstring>
 #include <filesystem>
 #include <condition_variable>
@@ -10,7 +14,13 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_replace.h"
+#include "common/status_macros.h"
+#include "indexer/service/ack_file.h"
 #include "rocksdb/db.h"
+#include "rocksdb/env.h"
+#include "rocksdb/filter_policy.h"
 #include "rocksdb/options.h"
 #include "rocksdb/table.h"
 #include "rocksdb/write_batch.h"
@@ -22,6 +32,8 @@ constexpr char kModelsFamily[] = "models";
 constexpr char kTreeKey[] = "tree";
 constexpr char kTreeSeqKey[] = "tree_seq";
 constexpr char kLastSeqKey[] = "last_seq";
+constexpr char kModelCountKey[] = "model_count";
+constexpr char kWriteCountKey[] = "write_count";
 
 std::string EncodeSeq(uint64_t seq) {
   std::string out(8, '\0');
@@ -38,10 +50,13 @@ uint64_t DecodeSeq(const char* p) {
 }
 
 // Storage errors never name the server path (STYLE.md): the message says
-// what failed and RocksDB's reason, which is about the files, not the caller.
-absl::Status FromRocks(const rocksdb::Status& s, absl::string_view what) {
+// what failed and RocksDB's reason, which is about the files, not the
+// caller; the data directory is cut from RocksDB's file names.
+absl::Status FromRocks(const rocksdb::Status& s, absl::string_view what,
+                       const std::string& dir = "") {
   if (s.ok()) return absl::OkStatus();
-  const std::string message = absl::StrCat(what, ": ", s.ToString());
+  std::string message = absl::StrCat(what, ": ", s.ToString());
+  if (!dir.empty()) message = absl::StrReplaceAll(message, {{dir + "/", ""}});
   if (s.IsCorruption()) return absl::DataLossError(message);
   if (s.IsNotFound()) return absl::NotFoundError(message);
   if (s.IsIOError() && s.ToString().find("lock") != std::string::npos) {
@@ -68,6 +83,137 @@ absl::StatusOr<std::pair<uint64_t, tpr::v1::Model>> DecodeModel(
   return out;
 }
 
+// The files a data-loss message names: the MANIFEST that CURRENT points to
+// and the write-ahead logs, by file name (docs/recovery.md says what to do).
+std::string DescribeFiles(const std::string& dir) {
+  std::string manifest = "no CURRENT file";
+  std::vector<std::string> logs;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".log") == 0) logs.push_back(name);
+  }
+  std::sort(logs.begin(), logs.end());
+  if (FILE* f = std::fopen((dir + "/CURRENT").c_str(), "r")) {
+    char line[256] = {0};
+    if (std::fgets(line, sizeof line, f) != nullptr) {
+      manifest = line;
+      while (!manifest.empty() && (manifest.back() == '\n' || manifest.back() == '\r')) {
+        manifest.pop_back();
+      }
+    }
+    std::fclose(f);
+  }
+  return absl::StrCat(manifest, ", write-ahead log",
+                      logs.empty() ? "s: none" : absl::StrCat(": ", absl::StrJoin(logs, ", ")));
+}
+
+// What the meta family records about the models, written in the same batch
+// as the models: the last model sequence number, the number of write
+// batches and the model count.
+struct Counters {
+  uint64_t last_seq = 0;
+  uint64_t writes = 0;
+  std::optional<uint64_t> models;  // absent in databases written before it
+};
+
+absl::StatusOr<Counters> ReadCounters(rocksdb::DB* db, rocksdb::ColumnFamilyHandle* meta,
+                                      const std::string& dir) {
+  Counters out;
+  std::string value;
+  rocksdb::Status s = db->Get(rocksdb::ReadOptions(), meta, kLastSeqKey, &value);
+  if (s.ok() && value.size() == 8) {
+    out.last_seq = DecodeSeq(value.data());
+  } else if (!s.ok() && !s.IsNotFound()) {
+    return FromRocks(s, "cannot read the sequence counter", dir);
+  }
+  s = db->Get(rocksdb::ReadOptions(), meta, kModelCountKey, &value);
+  if (s.ok() && value.size() == 8) {
+    out.models = DecodeSeq(value.data());
+  } else if (!s.ok() && !s.IsNotFound()) {
+    return FromRocks(s, "cannot read the model count", dir);
+  }
+  s = db->Get(rocksdb::ReadOptions(), meta, kWriteCountKey, &value);
+  if (s.ok() && value.size() == 8) {
+    out.writes = DecodeSeq(value.data());
+  } else if (!s.ok() && !s.IsNotFound()) {
+    return FromRocks(s, "cannot read the write count", dir);
+  }
+  return out;
+}
+
+// The rule of docs/recovery.md: a database holding less than was
+// acknowledged is never served. Fewer write batches than acknowledged means
+// acknowledged writes are gone (a damaged MANIFEST or write-ahead log); the
+// same number with a different model count means models are. More batches
+// than acknowledged is a crash between a write and its record (the record
+// follows the write), not a loss.
+absl::Status CheckAgainstAcknowledged(const Acknowledged& ack, const Counters& db,
+                                      const std::string& dir) {
+  const bool writes_lost = db.writes < ack.writes;
+  const bool models_lost =
+      db.writes == ack.writes && db.models.has_value() && *db.models != ack.models;
+  if (!writes_lost && !models_lost) return absl::OkStatus();
+  return absl::DataLossError(absl::StrCat(
+      "the database holds ", db.writes, " write batches (",
+      db.models.has_value() ? absl::StrCat(*db.models) : std::string("unknown"),
+      " models) but ", ack.writes, " (", ack.models, " models) were acknowledged (",
+      AckFile::kName, "): acknowledged writes were lost from ", DescribeFiles(dir),
+      "; refusing to serve a smaller database (see docs/recovery.md)"));
+}
+
+// The RocksDB options of both opens (read-only check, then read-write).
+// Recovery and deletion are chosen for "never silently lose an
+// acknowledged write" (docs/recovery.md):
+// - wal_recovery_mode kTolerateCorruptedTailRecords: a record torn by a
+//   crash at the very end of a log (never acknowledged: acknowledged writes
+//   are synced whole) is dropped; any other corruption refuses the open.
+//   RocksDB's default, kPointInTimeRecovery, stops replay silently at the
+//   first bad record and serves what came before (issue 12, item 2).
+// - paranoid_checks (the default, stated): corruption found in reads or
+//   table files fails instead of being skipped; a failed write stops writes.
+// - best_efforts_recovery off (the default, stated): never fall back to an
+//   older MANIFEST, which would serve an older database.
+// - track_and_verify_wals_in_manifest: a closed write-ahead log that is
+//   missing or shorter than the MANIFEST recorded refuses the open.
+// - atomic_flush: the flushes of both families are recorded in the MANIFEST
+//   as one group, so the meta family's counters always speak for the models
+//   family (a MANIFEST cut between two flushes cannot keep one, lose the
+//   other).
+// - Deletion: a read-write open deletes every file the MANIFEST does not
+//   list, so Open first opens read-only (which deletes nothing) and checks
+//   the counters against ACKNOWLEDGED; a refused database keeps every file
+//   for the recovery procedure.
+rocksdb::Options DbOptions(const StorageOptions& options) {
+  rocksdb::Options db_options;
+  db_options.create_if_missing = options.create_if_missing;
+  db_options.create_missing_column_families = true;
+  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
+  db_options.paranoid_checks = true;
+  db_options.best_efforts_recovery = false;
+  db_options.track_and_verify_wals_in_manifest = true;
+  db_options.atomic_flush = true;
+  // Two cores shared with the search threads: one flush, one compaction.
+  db_options.IncreaseParallelism(2);
+  return db_options;
+}
+
+std::vector<rocksdb::ColumnFamilyDescriptor> Families() {
+  // Signatures are ~15 KB of doubles that barely compress; a larger write
+  // buffer means fewer flushes during bulk ingest. A Bloom filter keeps the
+  // existence checks of Write (new ids miss) off the table files.
+  rocksdb::ColumnFamilyOptions models_options;
+  models_options.write_buffer_size = 64 << 20;
+  models_options.compression = rocksdb::kNoCompression;
+  rocksdb::BlockBasedTableOptions table;
+  table.block_size = 32 << 10;
+  table.filter_policy.reset(rocksdb::NewBloomFilterPolicy(10));
+  models_options.table_factory.reset(rocksdb::NewBlockBasedTableFactory(table));
+  rocksdb::ColumnFamilyOptions meta_options;
+  meta_options.compression = rocksdb::kNoCompression;
+  return {{rocksdb::kDefaultColumnFamilyName, meta_options}, {kModelsFamily, models_options}};
+}
+
 }  // namespace
 
 struct Storage::Impl {
@@ -77,9 +223,13 @@ struct Storage::Impl {
   rocksdb::ColumnFamilyHandle* meta = nullptr;    // "default"
   rocksdb::ColumnFamilyHandle* models = nullptr;  // "models"
   // Sequence numbers are assigned under this mutex so that the order of
-  // numbers equals the order of the RocksDB writes that carry them.
+  // numbers equals the order of the RocksDB writes that carry them; the
+  // model count and the ACKNOWLEDGED record follow the same order.
   std::mutex write_mu;
   std::atomic<uint64_t> last_seq{0};
+  std::atomic<uint64_t> model_count{0};
+  std::atomic<uint64_t> writes{0};
+  std::unique_ptr<AckFile> ack;
 
   ~Impl() {
     if (db) {
@@ -92,6 +242,11 @@ struct Storage::Impl {
       if (models) families.push_back(models);
       if (!families.empty()) {
         db->Flush(rocksdb::FlushOptions(), families).PermitUncheckedError();
+      }
+      // Unsynced writes were acknowledged without a record; the flush made
+      // them durable, so the record catches up here.
+      if (ack && !options.sync_writes) {
+        ack->Record({writes.load(), model_count.load()}).IgnoreError();
       }
       if (meta) db->DestroyColumnFamilyHandle(meta);
       if (models) db->DestroyColumnFamilyHandle(models);
@@ -124,29 +279,59 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   impl->dir = dir;
   impl->options = options;
 
-  rocksdb::Options db_options;
-  db_options.create_if_missing = options.create_if_missing;
-  db_options.create_missing_column_families = true;
-  // Two cores shared with the search threads: one flush, one compaction.
-  db_options.IncreaseParallelism(2);
-  // Signatures are ~15 KB of doubles that barely compress; a larger write
-  // buffer means fewer flushes during bulk ingest.
-  rocksdb::ColumnFamilyOptions models_options;
-  models_options.write_buffer_size = 64 << 20;
-  models_options.compression = rocksdb::kNoCompression;
-  rocksdb::BlockBasedTableOptions table;
-  table.block_size = 32 << 10;
-  models_options.table_factory.reset(rocksdb::NewBlockBasedTableFactory(table));
-  rocksdb::ColumnFamilyOptions meta_options;
-  meta_options.compression = rocksdb::kNoCompression;
-
-  std::vector<rocksdb::ColumnFamilyDescriptor> families = {
-      {rocksdb::kDefaultColumnFamilyName, meta_options},
-      {kModelsFamily, models_options}};
+  const bool existed = std::filesystem::exists(dir + "/CURRENT");
+  absl::StatusOr<std::unique_ptr<AckFile>> ack = AckFile::Open(dir, options.create_if_missing);
+  if (!ack.ok()) {
+    if (absl::IsDataLoss(ack.status())) {
+      return absl::DataLossError(absl::StrCat(ack.status().message(),
+                                              "; see docs/recovery.md"));
+    }
+    return ack.status();
+  }
+  impl->ack = std::move(*ack);
+  const std::optional<Acknowledged> acknowledged = impl->ack->recorded();
+  const rocksdb::Options db_options = DbOptions(options);
   std::vector<rocksdb::ColumnFamilyHandle*> handles;
   rocksdb::DB* raw = nullptr;
-  rocksdb::Status s = rocksdb::DB::Open(db_options, dir, families, &handles, &raw);
-  if (!s.ok()) return FromRocks(s, "cannot open the model database");
+  auto open_failed = [&dir](const rocksdb::Status& s) {
+    absl::Status st = FromRocks(s, "cannot open the model database", dir);
+    if (!absl::IsDataLoss(st)) return st;
+    return absl::DataLossError(absl::StrCat(st.message(), " (", DescribeFiles(dir),
+                                            "); see docs/recovery.md"));
+  };
+  if (acknowledged.has_value() && !existed) {
+    return absl::DataLossError(absl::StrCat(
+        "the database is gone (no CURRENT file) but ", acknowledged->writes,
+        " write batches (", acknowledged->models, " models) were acknowledged (", AckFile::kName,
+        "); refusing to start an empty database (see docs/recovery.md)"));
+  }
+  if (acknowledged.has_value()) {
+    // The check before anything may be deleted (see DbOptions). A read-only
+    // open takes no lock, so RocksDB's own lock is taken around it: a
+    // directory in use by another process is UNAVAILABLE, never read while
+    // it changes.
+    rocksdb::Env* env = rocksdb::Env::Default();
+    rocksdb::FileLock* lock = nullptr;
+    rocksdb::Status s = env->LockFile(dir + "/LOCK", &lock);
+    if (!s.ok()) return FromRocks(s, "cannot open the model database", dir);
+    s = rocksdb::DB::OpenForReadOnly(db_options, dir, Families(), &handles, &raw);
+    absl::Status checked;
+    if (!s.ok()) {
+      checked = open_failed(s);
+    } else {
+      std::unique_ptr<rocksdb::DB> db(raw);
+      absl::StatusOr<Counters> counters = ReadCounters(db.get(), handles[0], dir);
+      for (rocksdb::ColumnFamilyHandle* h : handles) db->DestroyColumnFamilyHandle(h);
+      handles.clear();
+      checked = counters.ok() ? CheckAgainstAcknowledged(*acknowledged, *counters, dir)
+                              : counters.status();
+    }
+    env->UnlockFile(lock).PermitUncheckedError();
+    TPR_RETURN_IF_ERROR(checked);
+  }
+
+  rocksdb::Status s = rocksdb::DB::Open(db_options, dir, Families(), &handles, &raw);
+  if (!s.ok()) return open_failed(s);
   impl->db.reset(raw);
   impl->meta = handles[0];
   impl->models = handles[1];
@@ -154,15 +339,36 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   // The next sequence number continues after everything on disk: every
   // model write records the last number it used in the same atomic batch, so
   // no scan is needed (the tree marker is never above it).
-  uint64_t last = 0;
-  std::string value;
-  s = impl->db->Get(rocksdb::ReadOptions(), impl->meta, kLastSeqKey, &value);
-  if (s.ok() && value.size() == 8) {
-    last = DecodeSeq(value.data());
-  } else if (!s.ok() && !s.IsNotFound()) {
-    return FromRocks(s, "cannot read the sequence counter");
+  absl::StatusOr<Counters> counters = ReadCounters(impl->db.get(), impl->meta, dir);
+  if (!counters.ok()) return counters.status();
+  if (acknowledged.has_value()) {
+    TPR_RETURN_IF_ERROR(CheckAgainstAcknowledged(*acknowledged, *counters, dir));
   }
-  impl->last_seq = last;
+  if (!counters->models.has_value()) {
+    // A database written before the model count existed (or a new one):
+    // count once and record it, so every later open can check.
+    uint64_t n = 0;
+    std::unique_ptr<rocksdb::Iterator> it(
+        impl->db->NewIterator(rocksdb::ReadOptions(), impl->models));
+    for (it->SeekToFirst(); it->Valid(); it->Next()) ++n;
+    TPR_RETURN_IF_ERROR(FromRocks(it->status(), "cannot count the models", dir));
+    rocksdb::WriteBatch batch;
+    batch.Put(impl->meta, kModelCountKey, EncodeSeq(n));
+    rocksdb::WriteOptions w;
+    w.sync = true;
+    TPR_RETURN_IF_ERROR(
+        FromRocks(impl->db->Write(w, &batch), "cannot record the model count", dir));
+    counters->models = n;
+  }
+  impl->last_seq = counters->last_seq;
+  impl->writes = counters->writes;
+  impl->model_count = *counters->models;
+  if (!acknowledged.has_value() ||
+      acknowledged->writes != counters->writes || acknowledged->models != *counters->models) {
+    // New file (new or older database), or a crash between a write and its
+    // record (the database is then ahead, never behind: checked above).
+    TPR_RETURN_IF_ERROR(impl->ack->Record({counters->writes, *counters->models}));
+  }
   return std::unique_ptr<Storage>(new Storage(std::move(impl)));
 }
 
@@ -170,11 +376,28 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   if (writes.empty()) return absl::OkStatus();
   std::lock_guard<std::mutex> lock(impl_->write_mu);
   uint64_t seq = impl_->last_seq.load();
+  int64_t models = static_cast<int64_t>(impl_->model_count.load());
+  // Whether each id is stored, as of this batch's earlier writes: the model
+  // count changes by puts of new ids and deletes of stored ones.
+  std::unordered_map<std::string, bool> present;
+  auto stored = [&](const std::string& id) -> absl::StatusOr<bool> {
+    auto it = present.find(id);
+    if (it != present.end()) return it->second;
+    rocksdb::PinnableSlice value;
+    rocksdb::Status s = impl_->db->Get(rocksdb::ReadOptions(), impl_->models, id, &value);
+    if (s.IsNotFound()) return false;
+    if (!s.ok()) return FromRocks(s, "cannot read a model", impl_->dir);
+    return true;
+  };
   rocksdb::WriteBatch batch;
   std::string value;
   for (const ModelWrite& w : writes) {
+    absl::StatusOr<bool> was = stored(w.id);
+    if (!was.ok()) return was.status();
     if (w.model == nullptr) {
       batch.Delete(impl_->models, w.id);
+      if (*was) --models;
+      present[w.id] = false;
       continue;
     }
     value = EncodeSeq(++seq);
@@ -182,11 +405,27 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
       return absl::InternalError(absl::StrCat("cannot serialize model '", w.id, "'"));
     }
     batch.Put(impl_->models, w.id, value);
+    if (!*was) ++models;
+    present[w.id] = true;
   }
   batch.Put(impl_->meta, kLastSeqKey, EncodeSeq(seq));
+  batch.Put(impl_->meta, kModelCountKey, EncodeSeq(static_cast<uint64_t>(models)));
+  // Every batch, deletes included, counts one write, so that a crash between
+  // a write and its ACKNOWLEDGED record leaves the database ahead of the
+  // record (see CheckAgainstAcknowledged).
+  const uint64_t writes_after = impl_->writes.load() + 1;
+  batch.Put(impl_->meta, kWriteCountKey, EncodeSeq(writes_after));
   rocksdb::Status s = impl_->db->Write(impl_->WriteOpts(), &batch);
-  if (!s.ok()) return FromRocks(s, "cannot write models");
+  if (!s.ok()) return FromRocks(s, "cannot write models", impl_->dir);
   impl_->last_seq = seq;
+  impl_->writes = writes_after;
+  impl_->model_count = static_cast<uint64_t>(models);
+  // The record follows the synced write: the database is never behind it.
+  // Without sync_writes nothing is durable yet; the record is written at
+  // close, after the flush.
+  if (impl_->options.sync_writes) {
+    TPR_RETURN_IF_ERROR(impl_->ack->Record({writes_after, static_cast<uint64_t>(models)}));
+  }
   return absl::OkStatus();
 }
 
@@ -320,6 +559,17 @@ absl::StatusOr<PersistedTree> Storage::LoadTree() const {
 }
 
 uint64_t Storage::last_seq() const { return impl_->last_seq.load(); }
+
+uint64_t Storage::model_count() const { return impl_->model_count.load(); }
+
+absl::Status Storage::CheckScanned(uint64_t scanned) const {
+  const uint64_t recorded = impl_->model_count.load();
+  if (scanned == recorded) return absl::OkStatus();
+  return absl::DataLossError(absl::StrCat(
+      "the models family holds ", scanned, " models but ", recorded,
+      " were recorded with the acknowledged writes: models were lost from ",
+      DescribeFiles(impl_->dir), "; refusing to serve a smaller database (see docs/recovery.md)"));
+}
 
 int64_t Storage::DiskBytes() const {
   int64_t total = 0;

@@ -14,8 +14,12 @@
 //   "default"  key "tree" = the VP-tree bytes of the last persist
 //              (SignatureIndex::SerializeTree), key "tree_seq" = 8-byte
 //              little-endian write sequence number that tree reflects,
-//              key "last_seq" = the last sequence number any write used
-//              (written in the same batch as the models).
+//              key "last_seq" = the last sequence number any write used,
+//              key "model_count" = the number of models, key
+//              "write_count" = the number of Write batches (8-byte
+//              little-endian; all written in the same batch as the models).
+// Beside RocksDB's files, ACKNOWLEDGED (ack_file.h) records the write count
+// and model count acknowledged to a caller.
 // Every model write takes the next sequence number. A model whose sequence
 // number is greater than "tree_seq" was written after the tree was
 // persisted: on reopen it is certainly not in the tree (IndexerCore logs how
@@ -23,10 +27,17 @@
 // tree, or whose signature changed, into its insert buffer, by comparing
 // signature fingerprints. Tree and marker are written in one atomic batch.
 //
-// Durability: every Write and Delete uses WriteOptions::sync = true, so an
+// Durability: every Write uses WriteOptions::sync = true, so an
 // acknowledged write survives kill -9 and power loss (RocksDB replays the
 // synced write-ahead log on open). Batch upserts are grouped by the caller
-// into one Write (one fsync per group).
+// into one Write (one fsync per group, plus one of the small ACKNOWLEDGED).
+//
+// No silent loss: Open refuses, with DATA_LOSS naming the files, a database
+// that holds less than ACKNOWLEDGED says was acknowledged (a truncated
+// MANIFEST, a damaged write-ahead log), and checks it read-only first so
+// that a refused database loses no file; the caller's scan is checked with
+// CheckScanned. The RocksDB recovery settings and why: storage.cc
+// (DbOptions). What an operator does then: docs/recovery.md.
 #ifndef TPR_INDEXER_SERVICE_STORAGE_H_
 #define TPR_INDEXER_SERVICE_STORAGE_H_
 
@@ -73,8 +84,12 @@ class Storage {
  public:
   // Open opens or creates the database in `dir`. Returns INVALID_ARGUMENT for
   // an empty dir, UNAVAILABLE when RocksDB cannot open it (locked by another
-  // process, unreadable), DATA_LOSS when it is corrupt. Cost: RocksDB
-  // recovery (WAL replay), typically milliseconds to a second.
+  // process, unreadable), DATA_LOSS when it is corrupt or holds less than
+  // was acknowledged (the message names the MANIFEST and write-ahead logs;
+  // nothing is deleted then). Cost: RocksDB recovery (WAL replay) twice, a
+  // read-only check and the open, typically milliseconds to a second; a
+  // database written before the model count existed is counted once
+  // (a key scan).
   static absl::StatusOr<std::unique_ptr<Storage>> Open(
       const std::string& dir, const StorageOptions& options = {});
 
@@ -86,9 +101,13 @@ class Storage {
   Storage& operator=(const Storage&) = delete;
 
   // Write applies `writes` atomically in one RocksDB batch (synced when
-  // options.sync_writes) and assigns each put the next sequence number.
-  // Returns INTERNAL on an I/O error (then nothing was written). Cost: one
-  // fsync plus O(total bytes). Thread-safe.
+  // options.sync_writes), assigns each put the next sequence number, counts
+  // the batch and keeps the model count (a delete of an absent id changes
+  // nothing), then records both counts in ACKNOWLEDGED. Returns UNAVAILABLE/INTERNAL on an
+  // I/O error (then nothing was written, unless only the ACKNOWLEDGED
+  // record failed). Cost: one point lookup per id (Bloom-filtered), one
+  // fsync of the log and one of ACKNOWLEDGED, plus O(total bytes).
+  // Thread-safe.
   absl::Status Write(const std::vector<ModelWrite>& writes);
 
   // GetModel returns the stored model `id`; NOT_FOUND when absent, DATA_LOSS
@@ -123,6 +142,14 @@ class Storage {
   // last_seq returns the sequence number of the last model write (0 when
   // none). Thread-safe.
   uint64_t last_seq() const;
+
+  // model_count returns the number of stored models. Thread-safe.
+  uint64_t model_count() const;
+
+  // CheckScanned returns DATA_LOSS (naming the files) when a full scan
+  // found `scanned` models but model_count() were recorded; OK otherwise.
+  // IndexerCore calls it after its scan at open. Thread-safe.
+  absl::Status CheckScanned(uint64_t scanned) const;
 
   // DiskBytes returns the bytes the data directory occupies on disk (sum of
   // its files' sizes). Cost: one directory listing. Thread-safe.

@@ -1,11 +1,16 @@
 // tpr-indexer persistence: a restart gives identical answers from the
 // persisted VP-tree (no rebuild); kill -9 of the real binary during a batch
 // add keeps every acknowledged model and the index stays exact; SIGTERM
-// during a search stream ends cleanly with exit code 0.
+// during a search stream ends cleanly with exit code 0. Damaged files (a
+// truncated MANIFEST, a flipped byte in the write-ahead log) are refused
+// with DATA_LOSS naming the file, never served as a smaller database, and
+// the refusal deletes nothing (docs/recovery.md).
 #include <signal.h>
 
 #include <atomic>
+#include <filesystem>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -266,6 +271,145 @@ TEST(PersistenceTest, SigtermDuringASearchStreamExitsCleanly) {
   const std::string log = ReadText(dir.path() + "/log");
   EXPECT_NE(log.find("shutting down"), std::string::npos) << log;
   EXPECT_NE(log.find("stopped"), std::string::npos) << log;
+}
+
+// The files of a RocksDB directory with names ending in `suffix`.
+std::set<std::string> FilesEndingIn(const std::string& dir, const std::string& suffix) {
+  std::set<std::string> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (name.size() >= suffix.size() &&
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
+      out.insert(name);
+    }
+  }
+  return out;
+}
+
+// The MANIFEST the directory's CURRENT file names.
+std::string CurrentManifest(const std::string& dir) {
+  std::string name = ReadText(dir + "/CURRENT");
+  while (!name.empty() && (name.back() == '\n' || name.back() == '\r')) name.pop_back();
+  return dir + "/" + name;
+}
+
+// Writes 200 models in two sessions (so the MANIFEST records several
+// flushes), then applies `damage` to the closed directory and checks that
+// reopening is refused with DATA_LOSS naming the MANIFEST, and that the
+// refused open deleted no table file.
+void ExpectManifestDamageRefused(const std::function<void(const std::string&)>& damage, size_t kSessions = 1) {
+  TempDir dir;
+  const std::string data = dir.path() + "/data";
+  const std::vector<TestModel> models = MakeModels(200, 4, 21);
+  for (size_t session = 0; session < kSessions; ++session) {
+    CoreOptions core;
+    core.persist_interval_ms = 0;
+    InProcessIndexer server(data, core);
+    ASSERT_TRUE(server.Start().ok());
+    for (size_t begin = session * 200 / kSessions; begin < (session + 1) * 200 / kSessions; begin += 20) {
+      ASSERT_TRUE(BatchAdd(server.stub(), models, begin, begin + 20).ok());
+    }
+  }  // Stop: memtables flushed, write-ahead logs obsolete.
+  const std::set<std::string> tables = FilesEndingIn(data, ".sst");
+  damage(CurrentManifest(data));
+
+  CoreOptions core;
+  core.data_dir = data;
+  absl::StatusOr<std::unique_ptr<IndexerCore>> opened = IndexerCore::Open(core);
+  ASSERT_FALSE(opened.ok()) << "served " << (*opened)->Stats().models()
+                            << " models of 200 acknowledged";
+  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
+  EXPECT_NE(opened.status().message().find("MANIFEST-"), std::string::npos)
+      << opened.status();
+  EXPECT_EQ(FilesEndingIn(data, ".sst"), tables) << "the refused open deleted table files";
+  // Refused again: the first refusal changed nothing that would let a
+  // second open through.
+  opened = IndexerCore::Open(core);
+  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
+}
+
+TEST(PersistenceTest, ManifestTruncatedBy100BytesIsRefusedWithDataLoss) {
+  ExpectManifestDamageRefused([](const std::string& manifest) {
+    std::filesystem::resize_file(manifest, std::filesystem::file_size(manifest) - 100);
+  });
+}
+
+TEST(PersistenceTest, ManifestTruncatedTo300BytesIsRefusedWithDataLoss) {
+  ExpectManifestDamageRefused(
+      [](const std::string& manifest) { std::filesystem::resize_file(manifest, 300); });
+}
+
+// kill -9 of the real binary after 50 acknowledged models (in five batches),
+// then one byte flipped in the write-ahead log, at several places in turn
+// (each on a fresh copy of the killed directory): the open is refused with
+// DATA_LOSS naming the log, and the binary exits instead of serving.
+TEST(PersistenceTest, FlippedByteInTheWriteAheadLogIsRefusedWithDataLoss) {
+  const std::string binary = IndexerBinary();
+  if (!std::filesystem::exists(binary)) GTEST_SKIP() << "no " << binary;
+  TempDir dir;
+  const std::string killed = dir.path() + "/killed";
+  const std::vector<TestModel> models = MakeModels(50, 3, 22);
+  {
+    ServiceProcess p;
+    ASSERT_TRUE(p.Start(binary, {"--data-dir", killed}, dir.path() + "/log").ok());
+    auto stub = Connect(p.address());
+    for (size_t begin = 0; begin < models.size(); begin += 10) {
+      ASSERT_TRUE(BatchAdd(stub.get(), models, begin, begin + 10).ok());
+    }
+    EXPECT_EQ(p.Stop(SIGKILL), 128 + SIGKILL);
+  }
+  const std::set<std::string> logs = FilesEndingIn(killed, ".log");
+  std::string wal;
+  uintmax_t wal_size = 0;
+  for (const std::string& name : logs) {
+    const uintmax_t size = std::filesystem::file_size(killed + "/" + name);
+    if (size > wal_size) {
+      wal = name;
+      wal_size = size;
+    }
+  }
+  ASSERT_GT(wal_size, 1000u) << "the acknowledged writes are not in a write-ahead log";
+
+  // Undamaged, the killed directory opens with every acknowledged model.
+  {
+    const std::string copy = dir.path() + "/intact";
+    std::filesystem::copy(killed, copy);
+    CoreOptions core;
+    core.data_dir = copy;
+    auto opened = IndexerCore::Open(core);
+    ASSERT_TRUE(opened.ok()) << opened.status();
+    EXPECT_EQ((*opened)->Stats().models(), 50);
+  }
+  for (double at : {0.25, 0.5, 0.75, 0.98}) {
+    SCOPED_TRACE(absl::StrCat("byte flipped at ", at, " of ", wal, " (", wal_size, " bytes)"));
+    const std::string copy = absl::StrCat(dir.path(), "/flipped", static_cast<int>(at * 100));
+    std::filesystem::copy(killed, copy);
+    {
+      std::fstream f(copy + "/" + wal, std::ios::in | std::ios::out | std::ios::binary);
+      const std::streamoff offset = static_cast<std::streamoff>(wal_size * at);
+      f.seekg(offset);
+      char byte = 0;
+      f.read(&byte, 1);
+      byte = static_cast<char>(byte ^ 0x5a);
+      f.seekp(offset);
+      f.write(&byte, 1);
+    }
+    CoreOptions core;
+    core.data_dir = copy;
+    absl::StatusOr<std::unique_ptr<IndexerCore>> opened = IndexerCore::Open(core);
+    ASSERT_FALSE(opened.ok()) << "served " << (*opened)->Stats().models()
+                              << " models of 50 acknowledged";
+    EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
+    EXPECT_NE(opened.status().message().find(wal), std::string::npos) << opened.status();
+    if (at == 0.5) {
+      // The binary refuses to serve: it exits, saying why.
+      ServiceProcess p;
+      absl::Status started =
+          p.Start(binary, {"--data-dir", copy}, dir.path() + "/log_flipped");
+      EXPECT_FALSE(started.ok());
+      EXPECT_NE(ReadText(dir.path() + "/log_flipped").find("DATA_LOSS"), std::string::npos);
+    }
+  }
 }
 
 }  // namespace
