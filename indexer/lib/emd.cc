@@ -288,6 +288,26 @@ struct EmdSolver::Impl {
 
   EmdStats stats;
   double max_cost = 0.0;  // upper bound of the cost entries
+  // Serials of the pair whose ground-distance matrix `cost` holds (0: none).
+  uint64_t matrix_a = 0;
+  uint64_t matrix_b = 0;
+
+  // Fills cost (and max_cost, supply, demand) for the pair, unless it holds
+  // that pair's matrix already. Solve only reads cost, so the matrix stays
+  // valid after a solve.
+  void Load(const PreparedSignature& a, const PreparedSignature& b) {
+    n = a.size();
+    m = b.size();
+    cs = b.stride();
+    Reserve(n, m, cs);
+    if (a.serial() == 0 || a.serial() != matrix_a || b.serial() != matrix_b) {
+      max_cost = GroundDistanceMatrix(a, b, cost.data(), cs);
+      matrix_a = a.serial();
+      matrix_b = b.serial();
+    }
+    for (int i = 0; i < n; ++i) supply[i] = a.weight(i);
+    for (int j = 0; j < m; ++j) demand[j] = b.weight(j);
+  }
 
   void Reserve(int nn, int mm, int stride) {
     const size_t nodes = static_cast<size_t>(nn + mm + 1);
@@ -707,15 +727,43 @@ double EmdSolver::Distance(const PreparedSignature& a,
   assert(a.size() >= 1 && a.size() <= kMaxFeatures);
   assert(b.size() >= 1 && b.size() <= kMaxFeatures);
   if (impl_ == nullptr) impl_ = new Impl;
+  impl_->Load(a, b);
+  return impl_->Solve();
+}
+
+// Relaxed transport bound (Kusner et al. 2015). Any feasible plan f has row
+// sums w_i, and f_ij Dist(a_i, b_j) >= f_ij min_j' Dist(a_i, b_j') because
+// f_ij >= 0, so
+//   sum_ij f_ij Dist(a_i, b_j) >= sum_i (sum_j f_ij) min_j Dist(a_i, b_j)
+//                               = sum_i w_i min_j Dist(a_i, b_j);
+// the same holds by columns. Both hold for the optimal plan, whose cost is
+// the EMD, hence so does their maximum. No property of Dist is needed
+// beyond non-negativity of the flow; equal total masses make both sides
+// plans of the same problem.
+double EmdSolver::RelaxedBound(const PreparedSignature& a,
+                               const PreparedSignature& b) {
+  assert(a.size() >= 1 && a.size() <= kMaxFeatures);
+  assert(b.size() >= 1 && b.size() <= kMaxFeatures);
+  if (impl_ == nullptr) impl_ = new Impl;
   Impl& s = *impl_;
-  s.n = a.size();
-  s.m = b.size();
-  s.cs = b.stride();
-  s.Reserve(s.n, s.m, s.cs);
-  s.max_cost = GroundDistanceMatrix(a, b, s.cost.data(), s.cs);
-  for (int i = 0; i < s.n; ++i) s.supply[i] = a.weight(i);
-  for (int j = 0; j < s.m; ++j) s.demand[j] = b.weight(j);
-  return s.Solve();
+  s.Load(a, b);
+  constexpr double kInfCost = std::numeric_limits<double>::infinity();
+  // Column minima accumulate row by row (a row-major matrix: contiguous).
+  double* col_min = s.rem_b.data();  // scratch of m entries, free here
+  for (int j = 0; j < s.m; ++j) col_min[j] = kInfCost;
+  double rows = 0.0;
+  for (int i = 0; i < s.n; ++i) {
+    const double* row = s.cost.data() + static_cast<size_t>(i) * s.cs;
+    double row_min = kInfCost;
+    for (int j = 0; j < s.m; ++j) {
+      row_min = std::min(row_min, row[j]);
+      col_min[j] = std::min(col_min[j], row[j]);
+    }
+    rows += s.supply[i] * row_min;
+  }
+  double cols = 0.0;
+  for (int j = 0; j < s.m; ++j) cols += s.demand[j] * col_min[j];
+  return std::max(rows, cols);
 }
 
 const EmdStats& EmdSolver::Stats() const { return impl_->stats; }
@@ -734,9 +782,20 @@ std::vector<EmdSolver::FlowEntry> EmdSolver::LastFlow() const {
   return out;
 }
 
-double Emd(const PreparedSignature& a, const PreparedSignature& b) {
+namespace {
+EmdSolver& ThreadSolver() {
   thread_local EmdSolver solver;
-  return solver.Distance(a, b);
+  return solver;
+}
+}  // namespace
+
+double Emd(const PreparedSignature& a, const PreparedSignature& b) {
+  return ThreadSolver().Distance(a, b);
+}
+
+double RelaxedTransportBound(const PreparedSignature& a,
+                             const PreparedSignature& b) {
+  return ThreadSolver().RelaxedBound(a, b);
 }
 
 // Centroid bound (Rubner et al. [22], section 4.3). With phi and the norm N

@@ -3,6 +3,7 @@
 #include "indexer/lib/ground_distance.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <string>
@@ -107,7 +108,9 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   if (absl::Status s = ValidateOptions(options); !s.ok()) return s;
   if (absl::Status s = ValidateSignature(signature); !s.ok()) return s;
   const auto& f = signature.features;
+  static std::atomic<uint64_t> next_serial{1};
   PreparedSignature p;
+  p.serial_ = next_serial.fetch_add(1, std::memory_order_relaxed);
   p.size_ = static_cast<int>(f.size());
   p.bands_ = static_cast<int>(f[0].curvature.size());
   p.stride_ = PaddedStride(p.size_);

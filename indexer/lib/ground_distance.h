@@ -36,6 +36,7 @@
 #define TPR_INDEXER_LIB_GROUND_DISTANCE_H_
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -125,6 +126,11 @@ class PreparedSignature {
   // rows W3 c_A A; the next bands() rows W4 c_H H. Row r, feature i is
   // coords()[r * stride() + i]; padding entries are 0.
   int stride() const { return stride_; }
+  // serial returns a process-unique number of the Prepare call that made
+  // this object (copies share it, as they share the content): a cache key
+  // for work derived from the content (EmdSolver reuses a ground-distance
+  // matrix across a bound and the EMD of the same pair).
+  uint64_t serial() const { return serial_; }
   const double* coords() const { return coords_.data(); }
   // centroid returns sum_i weight(i) phi(U_i): 1 + 3 bands() values in row
   // order.
@@ -137,6 +143,7 @@ class PreparedSignature {
   int size_ = 0;
   int bands_ = 0;
   int stride_ = 0;
+  uint64_t serial_ = 0;
   std::vector<double> weights_;
   std::vector<double> coords_;
   std::vector<double> centroid_;

@@ -132,7 +132,8 @@ class IndexCursor : public SignatureIndex::Cursor {
  public:
   IndexCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
               PreparedSignature query, double radius,
-              std::function<bool(const std::string&)> filter)
+              std::function<bool(const std::string&)> filter,
+              bool relaxed_bound)
       : snapshot_(std::move(snapshot)),
         query_(std::move(query)),
         filter_(std::move(filter)) {
@@ -147,10 +148,19 @@ class IndexCursor : public SignatureIndex::Cursor {
     };
     // Tree items read the flat centroid table (one contiguous row, no
     // pointer chase); the small buffer is read directly.
-    spec.lower_bound = [this, t](uint32_t i) {
+    // The cascade of lower bounds (emd.h), cheapest first: the centroid
+    // bound (O(bands)), then the relaxed transport bound (the ground
+    // matrix, which the EMD that may follow reuses).
+    spec.lower_bounds.push_back([this, t](uint32_t i) {
       if (i < n_tree_) return t->centroids.LowerBound(query_, i);
       return EmdLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
-    };
+    });
+    if (relaxed_bound) {
+      spec.lower_bounds.push_back([this](uint32_t i) {
+        const PreparedSignature* p = Item(i);
+        return p == nullptr ? 0.0 : RelaxedTransportBound(query_, *p);
+      });
+    }
     spec.accept = [this, s, t](uint32_t i) {
       if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i))) return false;
       return !filter_ || filter_(Id(i));
@@ -333,7 +343,8 @@ absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
   }
   if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
-      snapshot(), *std::move(prepared), radius, std::move(filter)));
+      snapshot(), *std::move(prepared), radius, std::move(filter),
+      options_.relaxed_bound));
 }
 
 std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,

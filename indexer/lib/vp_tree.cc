@@ -307,7 +307,7 @@ class VpCursor : public NeighborCursor {
       : data_(data), spec_(std::move(spec)), queue_(Later{this}) {
     if (!data_->nodes.empty()) {
       dq_.assign(data_->nodes.size(), std::numeric_limits<double>::quiet_NaN());
-      queue_.push({0.0, 0, kNode});
+      queue_.push({0.0, 0, kNode, 0});
     }
     run_.clear();
     for (uint32_t item : spec_.extra_items) AddToRun(item, 0.0);
@@ -325,8 +325,8 @@ class VpCursor : public NeighborCursor {
         std::pop_heap(run.begin(), run.end(), std::greater<>());
         const std::pair<double, uint32_t> next = run.back();
         run.pop_back();
-        if (!run.empty()) queue_.push({run.front().first, e.index, kRun});
-        e = Entry{next.first, next.second, kItemStored};
+        if (!run.empty()) queue_.push({run.front().first, e.index, kRun, 0});
+        e = Entry{next.first, next.second, kItemBound, 0};
       }
       switch (e.kind) {
         case kNode:
@@ -334,20 +334,21 @@ class VpCursor : public NeighborCursor {
           break;
         case kRun:
           break;  // handled above
-        case kItemStored:
-          if (spec_.lower_bound) {
+        case kItemBound: {
+          // e.level bounds of the cascade have been applied; apply the next
+          // one, or the metric when none is left.
+          if (e.level < spec_.lower_bounds.size()) {
             ++stats_.lower_bounds;
-            const double lb = spec_.lower_bound(e.index);
+            const double lb = spec_.lower_bounds[e.level](e.index);
             const double key = std::max(e.key, Deflate(lb, lb));
             if (!(key <= spec_.radius)) break;
-            queue_.push({key, e.index, kItemBound});
+            queue_.push({key, e.index, kItemBound,
+                         static_cast<uint8_t>(e.level + 1)});
             break;
           }
-          [[fallthrough]];
-        case kItemBound: {
           ++stats_.emd_computations;
           const double d = spec_.distance(e.index);
-          if (d <= spec_.radius) queue_.push({d, e.index, kItemExact});
+          if (d <= spec_.radius) queue_.push({d, e.index, kItemExact, 0});
           break;
         }
         case kItemExact:
@@ -363,11 +364,15 @@ class VpCursor : public NeighborCursor {
   // kRun: a bucket's items still keyed by their stored-distance bounds,
   // kept in a heap of their own (runs_) so that the main queue holds one
   // entry per bucket instead of one per item (buckets are large).
-  enum Kind : uint8_t { kNode, kRun, kItemStored, kItemBound, kItemExact };
+  enum Kind : uint8_t { kNode, kRun, kItemBound, kItemExact };
   struct Entry {
     double key;
     uint32_t index;  // node or item
     Kind kind;
+    // kItemBound: how many of spec_.lower_bounds have been applied (0: only
+    // the stored distances). Refining is cheapest first, so at equal keys
+    // the entry with fewer levels applied is refined first.
+    uint8_t level = 0;
   };
   // Heap order: smaller key first; at equal keys every bound (node or
   // unrefined item) before any exact item, so that an exact item is
@@ -385,6 +390,7 @@ class VpCursor : public NeighborCursor {
                                     : b.index < a.index;
       }
       if (a.kind != b.kind) return a.kind > b.kind;
+      if (a.level != b.level) return a.level > b.level;
       return a.index > b.index;
     }
   };
@@ -400,7 +406,7 @@ class VpCursor : public NeighborCursor {
     if (run_.empty()) return;
     std::make_heap(run_.begin(), run_.end(), std::greater<>());
     const uint32_t id = static_cast<uint32_t>(runs_.size());
-    queue_.push({run_.front().first, id, kRun});
+    queue_.push({run_.front().first, id, kRun, 0});
     runs_.push_back(std::move(run_));
     run_.clear();
   }
@@ -467,12 +473,12 @@ class VpCursor : public NeighborCursor {
     const double d = spec_.distance(node.vp);
     dq_[e.index] = d;
     if ((!spec_.accept || spec_.accept(node.vp)) && d <= spec_.radius) {
-      queue_.push({d, node.vp, kItemExact});
+      queue_.push({d, node.vp, kItemExact, 0});
     }
     for (uint32_t child : {node.inner, node.outer}) {
       if (child == kNone) continue;
       const double bound = NodeBound(child, e.key);
-      if (bound <= spec_.radius) queue_.push({bound, child, kNode});
+      if (bound <= spec_.radius) queue_.push({bound, child, kNode, 0});
     }
   }
 

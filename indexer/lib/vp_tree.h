@@ -39,7 +39,7 @@ namespace tpr::index {
 struct SearchStats {
   // Full metric evaluations (EMDs), vantage points included.
   int64_t emd_computations = 0;
-  // Cheap lower bounds evaluated (QuerySpec::lower_bound calls).
+  // Lower bounds evaluated (QuerySpec::lower_bounds calls, all levels).
   int64_t lower_bounds = 0;
   // Tree nodes expanded.
   int64_t nodes_visited = 0;
@@ -86,9 +86,14 @@ struct QuerySpec {
   // available; such an item is never returned and its distances are not used
   // for pruning.
   std::function<double(uint32_t)> distance;
-  // Optional: a cheap bound <= distance(item) (the EMD centroid bound); it
-  // is consulted before every non-vantage distance.
-  std::function<double(uint32_t)> lower_bound;
+  // Optional: a cascade of lower bounds on distance(item), cheapest first
+  // (for the EMD: the centroid bound, then the relaxed transport bound).
+  // Bound l is consulted for an item only when bounds 0..l-1 left it below
+  // every answer still to come, so a costly bound runs only where the cheap
+  // ones failed; the metric runs only where every bound failed. Each must
+  // be <= distance(item) (to rounding; see the deflation in vp_tree.cc).
+  // At most 254 bounds.
+  std::vector<std::function<double(uint32_t)>> lower_bounds;
   // Optional: false for items that must never be returned (tombstones,
   // filters); their distance is then not computed unless they are vantage
   // points. Called at most once per item per search.

@@ -129,6 +129,7 @@ namespace knn {
 
 using tpr::index::BruteForceIndex;
 using tpr::index::Emd;
+using tpr::index::RelaxedTransportBound;
 using tpr::index::GroundDistanceOptions;
 using tpr::index::ItemNeighbor;
 using tpr::index::PreparedSignature;
@@ -242,12 +243,19 @@ Db& GetDb(const DbKey& key) {
   return *slot;
 }
 
-QuerySpec Spec(const Db& db, const PreparedSignature& q) {
+// Spec is the query as SignatureIndex builds it: the cascade of lower
+// bounds (`bounds` of them: 1 = the centroid bound, 2 = then the relaxed
+// transport bound) before the EMD.
+QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Emd(q, db.items[i]); };
-  spec.lower_bound = [&db, &q](uint32_t i) {
-    return db.centroids.LowerBound(q, i);
-  };
+  spec.lower_bounds.push_back(
+      [&db, &q](uint32_t i) { return db.centroids.LowerBound(q, i); });
+  if (bounds >= 2) {
+    spec.lower_bounds.push_back([&db, &q](uint32_t i) {
+      return RelaxedTransportBound(q, db.items[i]);
+    });
+  }
   return spec;
 }
 
@@ -264,14 +272,15 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["build_cpu_s"] = db.build_cpu_seconds;
 }
 
-void RunTree(benchmark::State& state, const DbKey& key, size_t k) {
+void RunTree(benchmark::State& state, const DbKey& key, size_t k,
+             int bounds = 2) {
   Db& db = GetDb(key);
   SearchStats total;
   int64_t queries = 0;
   for (auto _ : state) {
     SearchStats stats;
-    std::vector<ItemNeighbor> result =
-        db.tree.Knn(Spec(db, db.queries[queries % db.queries.size()]), k, &stats);
+    std::vector<ItemNeighbor> result = db.tree.Knn(
+        Spec(db, db.queries[queries % db.queries.size()], bounds), k, &stats);
     benchmark::DoNotOptimize(result);
     total.emd_computations += stats.emd_computations;
     total.lower_bounds += stats.lower_bounds;
@@ -310,6 +319,29 @@ BENCHMARK(BM_KnnVpTreeExtracted)
     ->Args({100000, 10})
     ->Unit(benchmark::kMillisecond);
 
+// BM_KnnVpTreeExtractedCentroid/<n>/<k>: the same with the centroid bound
+// alone (no relaxed transport bound), to measure what the cascade saves.
+void BM_KnnVpTreeExtractedCentroid(benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.extracted = true;
+  RunTree(state, key, static_cast<size_t>(state.range(1)), /*bounds=*/1);
+}
+BENCHMARK(BM_KnnVpTreeExtractedCentroid)
+    ->Args({1000, 10})
+    ->Args({10000, 10})
+    ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeCentroid/<n>/<k>: BM_KnnVpTree with the centroid bound alone.
+void BM_KnnVpTreeCentroid(benchmark::State& state) {
+  RunTree(state, {state.range(0), kClasses, kJitterPermille},
+          static_cast<size_t>(state.range(1)), /*bounds=*/1);
+}
+BENCHMARK(BM_KnnVpTreeCentroid)
+    ->Args({10000, 10})
+    ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
 // BM_KnnVpTreeLeaf/<n>/<k>/<leaf_size>: as BM_KnnVpTree with another bucket
 // size (VpTreeOptions.leaf_size), to tune it. Each leaf size builds its own
 // tree (about a minute at 100k).
@@ -330,7 +362,7 @@ void BM_KnnBruteForce(benchmark::State& state) {
   int64_t queries = 0;
   for (auto _ : state) {
     QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()]);
-    spec.lower_bound = nullptr;
+    spec.lower_bounds.clear();
     SearchStats stats;
     std::vector<ItemNeighbor> result =
         oracle.Knn(std::move(spec), static_cast<size_t>(state.range(1)), &stats);

@@ -321,6 +321,76 @@ TEST(EmdTest, LowerBoundNeverExceedsEmd) {
   EXPECT_GT(tightest, 0.1);  // the bound is not trivially 0
 }
 
+// The relaxed transport bound against its definition (brute force over the
+// ground distances) and against the exact EMD; and it is tighter than the
+// centroid bound on average between unrelated signatures.
+TEST(EmdTest, RelaxedBoundMatchesDefinitionAndNeverExceedsEmd) {
+  SignatureGeneratorOptions o;
+  o.seed = 19;
+  SignatureGenerator gen(o);
+  std::mt19937_64 rng(20);
+  std::uniform_int_distribution<int> size(1, 60);
+  EmdSolver solver;
+  double relaxed_sum = 0.0;
+  double centroid_sum = 0.0;
+  for (int t = 0; t < 3000; ++t) {
+    const PreparedSignature a =
+        Prep(t % 2 ? gen.Next() : gen.Random(size(rng)));
+    const PreparedSignature b =
+        Prep(t % 3 ? gen.Next() : gen.Random(size(rng)));
+    // Definition, from GroundDistance (scalar code, not the matrix kernel).
+    double rows = 0.0;
+    for (int i = 0; i < a.size(); ++i) {
+      double best = 1e300;
+      for (int j = 0; j < b.size(); ++j) {
+        best = std::min(best, GroundDistance(a, i, b, j));
+      }
+      rows += a.weight(i) * best;
+    }
+    double cols = 0.0;
+    for (int j = 0; j < b.size(); ++j) {
+      double best = 1e300;
+      for (int i = 0; i < a.size(); ++i) {
+        best = std::min(best, GroundDistance(a, i, b, j));
+      }
+      cols += b.weight(j) * best;
+    }
+    const double rb = solver.RelaxedBound(a, b);
+    ExpectRelNear(rb, std::max(rows, cols), 1e-12);
+    EXPECT_EQ(RelaxedTransportBound(a, b), rb);
+    const double d = solver.Distance(a, b);
+    ASSERT_LE(rb, d * (1 + 1e-12) + 1e-15) << t;
+    relaxed_sum += rb;
+    centroid_sum += EmdLowerBound(a, b);
+  }
+  EXPECT_GT(relaxed_sum, centroid_sum);
+}
+
+// Distance after RelaxedBound reuses the pair's matrix only for that pair:
+// the EMD equals a fresh solver's, whatever came in between, including a
+// signature re-prepared at the same address.
+TEST(EmdTest, DistanceAfterRelaxedBoundEqualsFreshDistance) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  EmdSolver solver;
+  PreparedSignature a = Prep(gen.Next());
+  PreparedSignature b = Prep(gen.Next());
+  const PreparedSignature c = Prep(gen.Next());
+  for (int t = 0; t < 200; ++t) {
+    EmdSolver fresh;
+    solver.RelaxedBound(a, b);
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));  // kept after
+    solver.RelaxedBound(a, c);
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));  // other pair
+    solver.RelaxedBound(a, b);
+    a = Prep(gen.Next());  // same object, new content and serial
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
+    solver.RelaxedBound(b, a);
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));  // transposed
+    std::swap(a, b);
+  }
+}
+
 TEST(EmdTest, LowerBoundIsExactForSingleFeatures) {
   SignatureGenerator gen(SignatureGeneratorOptions{});
   for (int t = 0; t < 100; ++t) {

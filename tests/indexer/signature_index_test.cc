@@ -144,6 +144,42 @@ TEST(SignatureIndexTest, KnnMatchesBruteForceBeforeAndAfterRebuild) {
   CheckKnn(index, oracle, queries, "tree");
 }
 
+// The bound cascade changes work, never answers: with and without the
+// relaxed transport bound, both equal brute force, and the cascade computes
+// no more EMDs.
+TEST(SignatureIndexTest, RelaxedBoundKeepsAnswersAndSavesEmds) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 5;
+  gopt.classes = 15;
+  SignatureGenerator gen(gopt);
+  IndexOptions with = ManualOptions();
+  IndexOptions without = ManualOptions();
+  without.relaxed_bound = false;
+  SignatureIndex a(with);
+  SignatureIndex b(without);
+  Oracle oracle;
+  for (int i = 0; i < 600; ++i) {
+    const Signature s = gen.Next();
+    ASSERT_TRUE(a.Upsert(Id(i), s).ok());
+    ASSERT_TRUE(b.Upsert(Id(i), s).ok());
+    oracle.Upsert(Id(i), s);
+  }
+  a.Rebuild();
+  b.Rebuild();
+  int64_t emds_with = 0;
+  int64_t emds_without = 0;
+  for (const Signature& q : Queries(&gen, 40)) {
+    SearchStats sa;
+    SearchStats sb;
+    const std::vector<Neighbor> want = oracle.Search(q, 10);
+    ExpectSame(a.Knn(q, 10, &sa), want, "with relaxed bound");
+    ExpectSame(b.Knn(q, 10, &sb), want, "centroid bound only");
+    emds_with += sa.emd_computations;
+    emds_without += sb.emd_computations;
+  }
+  EXPECT_LE(emds_with, emds_without);
+}
+
 TEST(SignatureIndexTest, DuplicateSignaturesTieByIdAndQueryHitsItself) {
   SignatureGenerator gen(SignatureGeneratorOptions{});
   SignatureIndex index(ManualOptions());

@@ -234,6 +234,45 @@ TEST(VpTreeTest, RangeSearchMatchesBruteForce) {
                           [](const ItemNeighbor& n) { return n.item == 9; }));
 }
 
+// A cascade of two bounds (|‖q‖ - ‖x‖| <= L2, then LInf <= L2): exact
+// results, each level consulted, and no more metric evaluations than with
+// the first bound alone.
+TEST(VpTreeTest, BoundCascadeKeepsResultsAndRefinesInOrder) {
+  const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 83);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  auto norm = [](const Point& p) {
+    double s = 0.0;
+    for (double x : p) s += x * x;
+    return std::sqrt(s);
+  };
+  int64_t one_level = 0;
+  int64_t two_levels = 0;
+  for (const Point& query : Queries(points, 200, 84)) {
+    QuerySpec spec = Spec(points, query, L2);
+    const double qn = norm(query);
+    spec.lower_bounds.push_back([&points, &norm, qn](uint32_t i) {
+      return std::abs(qn - norm(points[i]));
+    });
+    SearchStats first;
+    const std::vector<ItemNeighbor> got1 = tree.Knn(spec, 10, &first);
+    int64_t second_calls = 0;
+    spec.lower_bounds.push_back([&points, &query, &second_calls](uint32_t i) {
+      ++second_calls;
+      return LInf(query, points[i]);
+    });
+    SearchStats both;
+    ExpectSame(tree.Knn(spec, 10, &both), oracle.Knn(spec, 10), "cascade");
+    ExpectSame(got1, oracle.Knn(spec, 10), "first bound");
+    EXPECT_GT(second_calls, 0);
+    // The second level runs only on items that passed the first.
+    EXPECT_LE(second_calls, first.emd_computations);
+    one_level += first.emd_computations;
+    two_levels += both.emd_computations;
+  }
+  EXPECT_LE(two_levels, one_level);
+}
+
 TEST(VpTreeTest, LowerBoundFilterKeepsResultsAndSavesDistances) {
   const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 81);
   const VpTree tree = BuildTree(points, L2);
@@ -245,9 +284,8 @@ TEST(VpTreeTest, LowerBoundFilterKeepsResultsAndSavesDistances) {
     QuerySpec spec = Spec(points, query, L2);
     SearchStats plain;
     const std::vector<ItemNeighbor> want = tree.Knn(spec, 10, &plain);
-    spec.lower_bound = [&points, &query](uint32_t i) {
-      return LInf(query, points[i]);
-    };
+    spec.lower_bounds.push_back(
+        [&points, &query](uint32_t i) { return LInf(query, points[i]); });
     SearchStats filtered;
     ExpectSame(tree.Knn(spec, 10, &filtered), oracle.Knn(spec, 10), "bound");
     ExpectSame(want, oracle.Knn(spec, 10), "plain");
