@@ -336,14 +336,28 @@ class VpCursor : public NeighborCursor {
           break;  // handled above
         case kItemBound: {
           // e.level bounds of the cascade have been applied; apply the next
-          // one, or the metric when none is left.
-          if (e.level < spec_.lower_bounds.size()) {
+          // ones, then the metric. While the refined key stays strictly
+          // below every other key the item would be popped next anyway, so
+          // it is refined on the spot (same order, no queue round trip, and
+          // a bound's cached work, such as the EMD's ground matrix, is
+          // still warm for the next level).
+          bool alive = true;
+          bool next = true;  // still strictly the smallest key
+          while (e.level < spec_.lower_bounds.size()) {
             ++stats_.lower_bounds;
             const double lb = spec_.lower_bounds[e.level](e.index);
-            const double key = std::max(e.key, Deflate(lb, lb));
-            if (!(key <= spec_.radius)) break;
-            queue_.push({key, e.index, kItemBound,
-                         static_cast<uint8_t>(e.level + 1)});
+            e.key = std::max(e.key, Deflate(lb, lb));
+            ++e.level;
+            if (!(e.key <= spec_.radius)) {
+              alive = false;
+              break;
+            }
+            next = queue_.empty() || e.key < queue_.top().key;
+            if (!next) break;
+          }
+          if (!alive) break;
+          if (!next) {
+            queue_.push(e);
             break;
           }
           ++stats_.emd_computations;
