@@ -1,5 +1,6 @@
 #include "client/cli/add.h"
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -8,6 +9,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "client/cli/command.h"
 
 namespace tpr::cli {
 
@@ -15,16 +17,15 @@ namespace fs = std::filesystem;
 using tpr::client::ExtractorClient;
 using tpr::client::IndexerClient;
 
-absl::StatusOr<std::vector<AddOutcome>> AddItems(const ExtractorClient& extractor,
-                                                 const IndexerClient& indexer,
-                                                 const std::vector<Item>& items,
-                                                 const AddOptions& options,
-                                                 const tpr::client::CallOptions& call,
-                                                 Progress* progress) {
+absl::StatusOr<std::vector<AddOutcome>> AddItems(
+    const ExtractorClient& extractor, const IndexerClient& indexer,
+    const std::vector<Item>& items, const AddOptions& options,
+    const tpr::client::CallOptions& call, Progress* progress) {
   // Safe re-runs: one listing tells which ids exist, instead of a Get each.
   std::set<std::string> present;
   if (!options.update) {
-    absl::StatusOr<std::vector<tpr::v1::Model>> existing = indexer.ListAll("", &call);
+    absl::StatusOr<std::vector<tpr::v1::Model>> existing =
+        indexer.ListAll("", &call);
     if (!existing.ok()) return existing.status();
     for (const tpr::v1::Model& m : *existing) present.insert(m.id());
   }
@@ -39,12 +40,14 @@ absl::StatusOr<std::vector<AddOutcome>> AddItems(const ExtractorClient& extracto
     }
     absl::Status status;
     bool created = false;
-    absl::StatusOr<tpr::v1::ExtractResponse> r = extractor.ExtractFile(item.path, {}, &call);
+    absl::StatusOr<tpr::v1::ExtractResponse> r =
+        extractor.ExtractFile(item.path, {}, &call);
     if (r.ok()) {
       tpr::v1::Model model;
       model.set_id(item.id);
       model.set_label(item.label);
-      (*model.mutable_metadata())["file_name"] = fs::path(item.path).filename().string();
+      (*model.mutable_metadata())["file_name"] =
+          fs::path(item.path).filename().string();
       *model.mutable_signature() = std::move(*r->mutable_signature());
       absl::StatusOr<bool> c = indexer.Upsert(model, options.update, &call);
       status = c.status();
@@ -61,29 +64,39 @@ absl::StatusOr<std::vector<AddOutcome>> AddItems(const ExtractorClient& extracto
       out.kind = created ? AddOutcome::kAdded : AddOutcome::kUpdated;
     }
     if (progress != nullptr) {
-      static const char* const kNames[] = {"added", "updated", "skipped", "FAILED"};
+      static const char* const kNames[] = {"added", "updated", "skipped",
+                                           "FAILED"};
       progress->Step(item.id, kNames[out.kind]);
     }
   });
   return outcomes;
 }
 
-int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::string& manifest,
-           const AddOptions& options) {
-  absl::StatusOr<std::vector<Item>> items = CollectItems(paths);
+namespace {
+
+struct AddFlags {
+  std::vector<std::string> paths;
+  std::string manifest;
+  AddOptions options;
+};
+
+int RunAdd(const Globals& g, const AddFlags& flags) {
+  const AddOptions& options = flags.options;
+  absl::StatusOr<std::vector<Item>> items = eval::CollectItems(flags.paths);
   if (!items.ok()) return Fail("add", items.status());
-  if (!manifest.empty()) {
-    absl::StatusOr<std::map<std::string, std::string>> labels = ReadManifest(manifest);
+  if (!flags.manifest.empty()) {
+    absl::StatusOr<std::map<std::string, std::string>> labels =
+        eval::ReadManifest(flags.manifest);
     if (!labels.ok()) return Fail("--manifest", labels.status());
     for (Item& item : *items) {
       auto it = labels->find(item.id);
       if (it != labels->end()) item.label = it->second;
     }
   }
-  absl::StatusOr<ExtractorClient> extractor = ExtractorClient::Connect(g.extractor);
-  if (!extractor.ok()) return Fail("--extractor", extractor.status());
-  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(g.indexer);
-  if (!indexer.ok()) return Fail("--indexer", indexer.status());
+  std::optional<ExtractorClient> extractor = ConnectExtractor(g);
+  if (!extractor) return 1;
+  std::optional<IndexerClient> indexer = ConnectIndexer(g);
+  if (!indexer) return 1;
   const tpr::client::CallOptions call = CallOptionsFor(g);
 
   Progress progress(items->size());
@@ -96,10 +109,18 @@ int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::s
   for (size_t i = 0; i < items->size(); ++i) {
     const AddOutcome& o = (*outcomes)[i];
     switch (o.kind) {
-      case AddOutcome::kAdded: ++added; break;
-      case AddOutcome::kUpdated: ++updated; break;
-      case AddOutcome::kSkipped: ++skipped; break;
-      case AddOutcome::kFailed: failures.emplace_back((*items)[i].id, o.error); break;
+      case AddOutcome::kAdded:
+        ++added;
+        break;
+      case AddOutcome::kUpdated:
+        ++updated;
+        break;
+      case AddOutcome::kSkipped:
+        ++skipped;
+        break;
+      case AddOutcome::kFailed:
+        failures.emplace_back((*items)[i].id, o.error);
+        break;
     }
   }
   std::sort(failures.begin(), failures.end());
@@ -109,17 +130,46 @@ int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::s
       absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
                       ",\"error\":", JsonString(why), "}");
     }
-    std::printf("{\"files\":%zu,\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
-                "\"seconds\":%.3f,\"failures\":[%s]}\n",
-                items->size(), added, updated, skipped, failures.size(), progress.Elapsed(),
-                f.c_str());
+    std::printf(
+        "{\"files\":%zu,\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%"
+        "zu,"
+        "\"seconds\":%.3f,\"failures\":[%s]}\n",
+        items->size(), added, updated, skipped, failures.size(),
+        progress.Elapsed(), f.c_str());
   } else {
-    std::printf("%zu files: %d added, %d updated, %d skipped (already present), %zu failed "
-                "in %.1f s\n",
-                items->size(), added, updated, skipped, failures.size(), progress.Elapsed());
-    for (const auto& [id, why] : failures) std::printf("  failed %s: %s\n", id.c_str(), why.c_str());
+    std::printf(
+        "%zu files: %d added, %d updated, %d skipped (already present), %zu "
+        "failed "
+        "in %.1f s\n",
+        items->size(), added, updated, skipped, failures.size(),
+        progress.Elapsed());
+    for (const auto& [id, why] : failures) {
+      std::printf("  failed %s: %s\n", TextField(id).c_str(),
+                  TextField(why).c_str());
+    }
   }
   return failures.empty() ? 0 : 1;
 }
+
+const bool kRegistered = RegisterCommand(
+    {"add",
+     "index mesh files or folders (recursive); ids are paths relative to the "
+     "folder given (a file argument: its path as given), labels the parent "
+     "folder names (or --manifest)",
+     [](CLI::App& sub) {
+       auto flags = std::make_shared<AddFlags>();
+       sub.add_option("PATH", flags->paths, "mesh files or folders")
+           ->required();
+       sub.add_option("--manifest", flags->manifest,
+                      "file of 'RELATIVE/PATH LABEL' lines");
+       sub.add_option("--jobs,-j", flags->options.jobs, "parallel uploads")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 64));
+       sub.add_flag("--update", flags->options.update,
+                    "replace ids already present (default: skip them)");
+       return [flags](const Globals& g) { return RunAdd(g, *flags); };
+     }});
+
+}  // namespace
 
 }  // namespace tpr::cli

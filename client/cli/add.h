@@ -1,6 +1,6 @@
-// Indexing mesh files through the services: each file is extracted by
-// tpr-extractor and its signature stored in tpr-indexer under the item's id
-// and label, several at once. Used by `tpr add` and `tpr eval`.
+// `tpr add`, and the indexing it shares with `tpr eval`: each mesh file is
+// extracted by tpr-extractor and its signature stored in tpr-indexer under
+// the item's id and label, several at once.
 //
 //   AddOptions options;  options.jobs = 4;
 //   absl::StatusOr<std::vector<AddOutcome>> out =
@@ -14,10 +14,13 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "client/cli/cli_util.h"
-#include "client/cli/dataset.h"
+#include "client/cli/connection.h"
+#include "eval/lib/dataset.h"
 #include "tpr/client.h"
 
 namespace tpr::cli {
+
+using tpr::eval::Item;
 
 // AddOptions: how AddItems works.
 struct AddOptions {
@@ -46,19 +49,11 @@ struct AddOutcome {
 // Errors: only the listing's (e.g. UNAVAILABLE); per-item failures are
 // outcomes. Cost: one extract and one upsert call per item not skipped.
 // Thread-safe (the clients are).
-absl::StatusOr<std::vector<AddOutcome>> AddItems(const tpr::client::ExtractorClient& extractor,
-                                                 const tpr::client::IndexerClient& indexer,
-                                                 const std::vector<Item>& items,
-                                                 const AddOptions& options,
-                                                 const tpr::client::CallOptions& call,
-                                                 Progress* progress);
-
-// RunAdd is `tpr add`: indexes the files under `paths` (labels from the
-// folders, or from `manifest` when not empty) and prints a summary (one JSON
-// object with g.json) listing each failure with its reason. Returns the
-// exit code: 0 when nothing failed, else 1.
-int RunAdd(const Globals& g, const std::vector<std::string>& paths, const std::string& manifest,
-           const AddOptions& options);
+absl::StatusOr<std::vector<AddOutcome>> AddItems(
+    const tpr::client::ExtractorClient& extractor,
+    const tpr::client::IndexerClient& indexer, const std::vector<Item>& items,
+    const AddOptions& options, const tpr::client::CallOptions& call,
+    Progress* progress);
 
 }  // namespace tpr::cli
 

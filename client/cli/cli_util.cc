@@ -1,47 +1,26 @@
 #include "client/cli/cli_util.h"
 
+#include <google/protobuf/util/json_util.h>
 #include <unistd.h>
 
 #include <cstdio>
-
-#include <google/protobuf/util/json_util.h>
+#include <utility>
 
 #include "absl/strings/str_format.h"
 
 namespace tpr::cli {
 
-tpr::client::CallOptions CallOptionsFor(const Globals& g) {
-  tpr::client::CallOptions call;
-  call.timeout = absl::Seconds(g.timeout_s);
-  return call;
-}
-
 int Fail(const std::string& what, const absl::Status& status) {
-  std::fprintf(stderr, "tpr: %s: %s\n", what.c_str(), status.ToString().c_str());
+  std::fprintf(stderr, "tpr: %s: %s\n", TextField(what).c_str(),
+               TextField(status.ToString()).c_str());
   return 1;
 }
 
-// Hand-written: the hot per-neighbour line of `tpr query --json` and the
-// evaluation report are printed by hand, where building a protobuf message
-// just to print a few fields would be wasteful.
-std::string JsonString(absl::string_view s) {
-  std::string out = "\"";
-  for (unsigned char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (c < 0x20) {
-          out += absl::StrFormat("\\u%04x", c);
-        } else {
-          out += static_cast<char>(c);
-        }
-    }
-  }
-  return out + "\"";
+int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind) {
+  int count = 0;
+  for (const tpr::v1::Feature& f : signature.features())
+    count += f.kind() == kind;
+  return count;
 }
 
 std::string ToJson(const google::protobuf::Message& message) {
@@ -63,19 +42,22 @@ Progress::Progress(size_t total, std::string what)
 void Progress::Step(const std::string& id, const std::string& outcome) {
   std::lock_guard<std::mutex> lock(mu_);
   ++done_;
-  const double elapsed = std::chrono::duration<double>(Clock::now() - start_).count();
+  const double elapsed =
+      std::chrono::duration<double>(Clock::now() - start_).count();
   const double rate = elapsed > 0 ? done_ / elapsed : 0;
   const double eta = rate > 0 ? (total_ - done_) / rate : 0;
   if (tty_) {
     constexpr int kWidth = 30;
-    const int filled = total_ ? static_cast<int>(kWidth * done_ / total_) : kWidth;
-    std::fprintf(stderr, "\r%s%s[%s%s] %zu/%zu  %.1f/s  ETA %.0fs  ", what_.c_str(),
-                 what_.empty() ? "" : " ", std::string(filled, '#').c_str(),
-                 std::string(kWidth - filled, '.').c_str(), done_, total_, rate, eta);
+    const int filled =
+        total_ ? static_cast<int>(kWidth * done_ / total_) : kWidth;
+    std::fprintf(
+        stderr, "\r%s%s[%s%s] %zu/%zu  %.1f/s  ETA %.0fs  ", what_.c_str(),
+        what_.empty() ? "" : " ", std::string(filled, '#').c_str(),
+        std::string(kWidth - filled, '.').c_str(), done_, total_, rate, eta);
     if (done_ == total_) std::fprintf(stderr, "\n");
   } else {
-    std::fprintf(stderr, "%zu/%zu %s %s (%.1f/s, ETA %.0fs)\n", done_, total_, outcome.c_str(),
-                 id.c_str(), rate, eta);
+    std::fprintf(stderr, "%zu/%zu %s %s (%.1f/s, ETA %.0fs)\n", done_, total_,
+                 outcome.c_str(), TextField(id).c_str(), rate, eta);
   }
   std::fflush(stderr);
 }

@@ -1,53 +1,44 @@
-// Shared plumbing of the `tpr` subcommands: global flags, error printing,
-// JSON string escaping, the progress bar and a small parallel loop.
+// Shared output plumbing of the `tpr` subcommands: error printing, the
+// escapers (from eval/lib/report.h), and the progress bar.
 //
 //   Progress progress(items.size(), "adding");
-//   ParallelFor(items.size(), jobs, [&](size_t i) { ...; progress.Step(id, "added"); });
-//   if (!status.ok()) return Fail("add", status);
+//   ParallelFor(items.size(), jobs, [&](size_t i) { ...; progress.Step(id,
+//   "added"); }); if (!status.ok()) return Fail("add", status);
 #ifndef TPR_CLIENT_CLI_CLI_UTIL_H_
 #define TPR_CLIENT_CLI_CLI_UTIL_H_
 
-#include <algorithm>
-#include <atomic>
+#include <google/protobuf/message.h>
+
 #include <chrono>
 #include <cstddef>
 #include <mutex>
 #include <string>
-#include <thread>
-#include <vector>
-
-#include <google/protobuf/message.h>
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
-#include "tpr/client.h"
+#include "eval/lib/parallel.h"
+#include "eval/lib/report.h"
+#include "tpr/v1/signature.pb.h"
 
 namespace tpr::cli {
 
-// Globals: flags every subcommand shares.
-struct Globals {
-  // tpr-extractor address(es). Default 127.0.0.1:7001 (or TPR_EXTRACTOR).
-  std::string extractor = "127.0.0.1:7001";
-  // tpr-indexer address(es). Default 127.0.0.1:7002 (or TPR_INDEXER).
-  std::string indexer = "127.0.0.1:7002";
-  // Machine output. Default false.
-  bool json = false;
-  // Deadline per call, in seconds. Default 120.
-  double timeout_s = 120;
-};
-
-// CallOptionsFor returns the SDK call options of `g` (its deadline, the
-// SDK's default retry policy).
-tpr::client::CallOptions CallOptionsFor(const Globals& g);
+// One escaper and one loop for the whole command (eval/lib is shared with
+// tpr-eval-local).
+using tpr::eval::JsonNumber;
+using tpr::eval::JsonString;
+using tpr::eval::ParallelFor;
+using tpr::eval::TextField;
 
 // Fail prints "tpr: WHAT: STATUS" on stderr and returns exit code 1.
 int Fail(const std::string& what, const absl::Status& status);
 
-// JsonString returns `s` as a JSON string literal (RFC 8259 escaping).
-std::string JsonString(absl::string_view s);
+// CountKind returns the number of features of `kind` in `signature`.
+int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);
 
 // ToJson returns `message` as one line of JSON (proto field names, every
-// primitive field printed).
+// primitive field printed; 64-bit integers as strings, non-finite doubles
+// as the strings "Infinity", "-Infinity" and "NaN": protobuf's JSON
+// mapping, valid JSON).
 std::string ToJson(const google::protobuf::Message& message);
 
 // Progress reports work done on stderr: a redrawn bar with rate and ETA on a
@@ -71,22 +62,6 @@ class Progress {
   const bool tty_;
   const Clock::time_point start_;
 };
-
-// ParallelFor runs fn(i) for every i in [0, n) on max(1, threads) threads,
-// each taking the next index when it is free (so slow items do not hold up
-// a fixed share). Returns when all are done. `fn` must be thread-safe.
-template <typename Fn>
-void ParallelFor(size_t n, int threads, Fn fn) {
-  std::atomic<size_t> next{0};
-  std::vector<std::thread> pool;
-  const size_t count = std::min<size_t>(std::max(1, threads), std::max<size_t>(1, n));
-  for (size_t t = 0; t < count; ++t) {
-    pool.emplace_back([&] {
-      for (size_t i = next++; i < n; i = next++) fn(i);
-    });
-  }
-  for (std::thread& t : pool) t.join();
-}
 
 }  // namespace tpr::cli
 

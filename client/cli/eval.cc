@@ -1,5 +1,8 @@
 #include "client/cli/eval.h"
 
+#include <stdlib.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -13,9 +16,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "client/cli/dataset.h"
+#include "client/cli/command.h"
+#include "eval/lib/dataset.h"
 #include "eval/lib/metrics.h"
 #include "eval/lib/plots.h"
+#include "eval/lib/report.h"
 
 namespace tpr::cli {
 namespace {
@@ -24,55 +29,50 @@ namespace fs = std::filesystem;
 using tpr::client::ExtractorClient;
 using tpr::client::IndexerClient;
 
-// A number for the JSON report: full precision, so that a reader can compare
-// it with its own computation; JSON has no NaN or infinity.
-std::string JsonNumber(double x) {
-  if (!(x == x) || x == std::numeric_limits<double>::infinity() ||
-      x == -std::numeric_limits<double>::infinity()) {
-    return "null";
+// The folder the pictures go to: `requested`, or a new temporary one.
+absl::StatusOr<std::string> OutputFolder(const std::string& requested) {
+  if (!requested.empty()) {
+    std::error_code ec;
+    fs::create_directories(requested, ec);
+    if (ec) {
+      return absl::PermissionDeniedError(
+          absl::StrCat("cannot create ", requested, ": ", ec.message()));
+    }
+    return requested;
   }
-  return absl::StrFormat("%.17g", x);
-}
-
-std::string MetricsFields(const eval::Metrics& m) {
-  std::string out = absl::StrCat("\"queries\":", m.queries, ",\"nn\":", JsonNumber(m.nn),
-                                 ",\"ft\":", JsonNumber(m.ft), ",\"st\":", JsonNumber(m.st),
-                                 ",\"e\":", JsonNumber(m.e), ",\"dcg\":", JsonNumber(m.dcg),
-                                 ",\"map\":", JsonNumber(m.map), ",\"pr\":[");
-  for (int r = 0; r < eval::kRecallLevels; ++r) {
-    absl::StrAppend(&out, r ? "," : "", JsonNumber(m.pr[r]));
+  const char* tmp = std::getenv("TMPDIR");
+  std::string pattern =
+      absl::StrCat(tmp != nullptr && *tmp ? tmp : "/tmp", "/tpr-eval-XXXXXX");
+  if (mkdtemp(pattern.data()) == nullptr) {
+    return absl::PermissionDeniedError(
+        absl::StrCat("cannot create a temporary folder ", pattern));
   }
-  return out + "]";
-}
-
-absl::Status WriteText(const fs::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  out.close();
-  if (!out) return absl::PermissionDeniedError(absl::StrCat("cannot write ", path.string()));
-  return absl::OkStatus();
+  return pattern;
 }
 
 // One leave-one-out search: `query` (index into `ids`) against the index,
 // by id, without itself, k = every model. Neighbours that are not part of
 // the evaluated set (other models the indexer holds) are dropped; Evaluate
 // counts evaluated models absent from a ranking as retrieved last.
-absl::StatusOr<eval::Query> SearchOne(const IndexerClient& indexer, const std::vector<Item>& items,
-                                      const std::vector<int>& evaluated,
-                                      const std::unordered_map<std::string, int>& index_of,
-                                      int query, int k, const tpr::client::CallOptions& call) {
+absl::StatusOr<eval::Query> SearchOne(
+    const IndexerClient& indexer, const std::vector<Item>& items,
+    const std::vector<int>& evaluated,
+    const std::unordered_map<std::string, int>& index_of, int query, int k,
+    const tpr::client::CallOptions& call) {
   const std::string& id = items[evaluated[query]].id;
   tpr::v1::SearchRequest request;
   request.set_id(id);
   request.set_exclude_self(true);
   request.set_k(k);
-  std::unique_ptr<tpr::client::SearchStream> stream = indexer.Search(request, &call);
+  std::unique_ptr<tpr::client::SearchStream> stream =
+      indexer.Search(request, &call);
   eval::Query q;
   q.model = query;
   std::vector<bool> seen(evaluated.size(), false);
   for (tpr::v1::Neighbor n; stream->Next(&n);) {
     auto it = index_of.find(n.id());
-    if (it == index_of.end() || it->second == query || seen[it->second]) continue;
+    if (it == index_of.end() || it->second == query || seen[it->second])
+      continue;
     seen[it->second] = true;
     q.ranking.push_back({it->second, n.distance()});
   }
@@ -81,38 +81,19 @@ absl::StatusOr<eval::Query> SearchOne(const IndexerClient& indexer, const std::v
   return q;
 }
 
-void PrintTable(const std::map<std::string, int>& models_per_class, const eval::Scores& s,
-                int models) {
-  std::printf("%-24s %6s %6s %6s %6s %6s %6s %6s\n", "class", "models", "NN", "FT", "ST", "E",
-              "DCG", "mAP");
-  auto row = [](const std::string& cls, int n, const eval::Metrics* m) {
-    if (m == nullptr) {
-      std::printf("%-24s %6d %6s %6s %6s %6s %6s %6s  (one model: no query)\n", cls.c_str(), n,
-                  "-", "-", "-", "-", "-", "-");
-      return;
-    }
-    std::printf("%-24s %6d %6.3f %6.3f %6.3f %6.3f %6.3f %6.3f\n", cls.c_str(), n, m->nn, m->ft,
-                m->st, m->e, m->dcg, m->map);
-  };
-  for (const auto& [cls, n] : models_per_class) {
-    auto it = s.per_class.find(cls);
-    row(cls, n, it == s.per_class.end() ? nullptr : &it->second);
-  }
-  row("ALL", models, &s.overall);
-}
-
 }  // namespace
 
-int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& options) {
-  absl::StatusOr<std::vector<Item>> items = ItemsFromDataset(dataset);
+int RunEval(const Globals& g, const std::string& dataset,
+            const EvalOptions& options) {
+  absl::StatusOr<std::vector<Item>> items = eval::ReadDataset(dataset);
   if (!items.ok()) {
     Fail("eval", items.status());
     return 2;
   }
-  absl::StatusOr<ExtractorClient> extractor = ExtractorClient::Connect(g.extractor);
-  if (!extractor.ok()) return Fail("--extractor", extractor.status());
-  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(g.indexer);
-  if (!indexer.ok()) return Fail("--indexer", indexer.status());
+  std::optional<ExtractorClient> extractor = ConnectExtractor(g);
+  if (!extractor) return 1;
+  std::optional<IndexerClient> indexer = ConnectIndexer(g);
+  if (!indexer) return 1;
   const tpr::client::CallOptions call = CallOptionsFor(g);
 
   // 1. Extract and index, exactly as `tpr add` (same skip/--update rules).
@@ -131,7 +112,9 @@ int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& opt
       failures.emplace_back((*items)[i].id, o.error);
       continue;
     }
-    (o.kind == AddOutcome::kAdded ? added : o.kind == AddOutcome::kUpdated ? updated : skipped)++;
+    (o.kind == AddOutcome::kAdded     ? added
+     : o.kind == AddOutcome::kUpdated ? updated
+                                      : skipped)++;
     evaluated.push_back(static_cast<int>(i));
   }
 
@@ -142,9 +125,11 @@ int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& opt
   if (evaluated.size() >= 2) {
     absl::StatusOr<tpr::v1::StatsResponse> stats = indexer->Stats(&call);
     if (!stats.ok()) return Fail("indexer stats", stats.status());
-    const int64_t k = std::max<int64_t>(stats->models(), static_cast<int64_t>(evaluated.size()));
+    const int64_t k = std::max<int64_t>(stats->models(),
+                                        static_cast<int64_t>(evaluated.size()));
     if (k > std::numeric_limits<int32_t>::max()) {
-      return Fail("eval", absl::ResourceExhaustedError("the index is too large to rank fully"));
+      return Fail("eval", absl::ResourceExhaustedError(
+                              "the index is too large to rank fully"));
     }
     std::unordered_map<std::string, int> index_of;
     for (size_t e = 0; e < evaluated.size(); ++e) {
@@ -153,9 +138,10 @@ int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& opt
     std::vector<absl::StatusOr<eval::Query>> results(evaluated.size());
     Progress query_progress(evaluated.size(), "querying  ");
     ParallelFor(evaluated.size(), options.add.jobs, [&](size_t e) {
-      results[e] = SearchOne(*indexer, *items, evaluated, index_of, static_cast<int>(e),
-                             static_cast<int>(k), call);
-      query_progress.Step((*items)[evaluated[e]].id, results[e].ok() ? "queried" : "FAILED");
+      results[e] = SearchOne(*indexer, *items, evaluated, index_of,
+                             static_cast<int>(e), static_cast<int>(k), call);
+      query_progress.Step((*items)[evaluated[e]].id,
+                          results[e].ok() ? "queried" : "FAILED");
     });
     query_seconds = query_progress.Elapsed();
     for (size_t e = 0; e < evaluated.size(); ++e) {
@@ -164,43 +150,44 @@ int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& opt
       } else {
         // The model stays in the others' rankings; only its own query is
         // left out.
-        failures.emplace_back((*items)[evaluated[e]].id,
-                              absl::StrCat("query: ", results[e].status().ToString()));
+        failures.emplace_back(
+            (*items)[evaluated[e]].id,
+            absl::StrCat("query: ", results[e].status().ToString()));
       }
     }
   }
   std::sort(failures.begin(), failures.end());
 
   std::vector<std::string> labels;
-  std::map<std::string, int> models_per_class;
-  for (int i : evaluated) {
-    labels.push_back((*items)[i].label);
-    ++models_per_class[(*items)[i].label];
-  }
+  for (int i : evaluated) labels.push_back((*items)[i].label);
+  const eval::ClassSizes models_per_class = eval::CountClasses(labels);
   const eval::Scores scores = eval::Evaluate(labels, queries);
   const bool evaluable = scores.overall.queries > 0;
 
   // 3. Pictures.
   std::string written;
   absl::Status pictures = absl::OkStatus();
+  std::string out_dir;
   if (evaluable) {
-    std::error_code ec;
-    fs::create_directories(options.out_dir, ec);
-    if (ec) {
-      pictures = absl::PermissionDeniedError(
-          absl::StrCat("cannot create ", options.out_dir, ": ", ec.message()));
+    absl::StatusOr<std::string> folder = OutputFolder(options.out_dir);
+    if (!folder.ok()) {
+      pictures = folder.status();
     } else {
-      const fs::path out(options.out_dir);
-      const std::string name = fs::path(dataset).lexically_normal().filename().string();
-      pictures = WriteText(
-          out / "precision_recall.svg",
-          eval::PrecisionRecallSvg({{"TPR, all classes", scores.overall.pr}},
-                                   absl::StrCat("Precision-recall, ", name, " (",
-                                                evaluated.size(), " models)")));
+      out_dir = *folder;
+      const fs::path out(out_dir);
+      const std::string name =
+          fs::path(dataset).lexically_normal().filename().string();
+      pictures =
+          eval::WriteTextFile((out / "precision_recall.svg").string(),
+                              eval::PrecisionRecallSvg(
+                                  {{"TPR, all classes", scores.overall.pr}},
+                                  absl::StrCat("Precision-recall, ", name, " (",
+                                               evaluated.size(), " models)")));
       if (pictures.ok()) {
-        pictures = WriteText(out / "similarity.svg",
-                             eval::SimilaritySvg(eval::MeanSimilarity(labels, queries),
-                                                 absl::StrCat("Mean class similarity, ", name)));
+        pictures = eval::WriteTextFile(
+            (out / "similarity.svg").string(),
+            eval::SimilaritySvg(eval::MeanSimilarity(labels, queries),
+                                absl::StrCat("Mean class similarity, ", name)));
       }
       written = (out / "precision_recall.svg").string() + ", " +
                 (out / "similarity.svg").string();
@@ -209,44 +196,85 @@ int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& opt
 
   // 4. Report.
   if (g.json) {
-    std::string per_class;
-    for (const auto& [cls, n] : models_per_class) {
-      auto it = scores.per_class.find(cls);
-      absl::StrAppend(&per_class, per_class.empty() ? "" : ",", JsonString(cls),
-                      ":{\"models\":", n,
-                      it == scores.per_class.end() ? std::string(",\"queries\":0")
-                                                   : "," + MetricsFields(it->second),
-                      "}");
-    }
     std::string f;
     for (const auto& [id, why] : failures) {
       absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
                       ",\"error\":", JsonString(why), "}");
     }
-    std::printf("{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":{%s},\"files\":%zu,"
-                "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,\"failures\":[%s],"
-                "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
-                evaluated.size(), models_per_class.size(), MetricsFields(scores.overall).c_str(),
-                per_class.c_str(), items->size(), added, updated, skipped, failures.size(),
-                f.c_str(), add_seconds, query_seconds,
-                evaluable && pictures.ok() ? JsonString(options.out_dir).c_str() : "null");
+    std::printf(
+        "{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":%s,\"files\":%zu,"
+        "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
+        "\"failures\":[%s],"
+        "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
+        evaluated.size(), models_per_class.size(),
+        eval::MetricsJsonFields(scores.overall).c_str(),
+        eval::PerClassJson(scores, models_per_class).c_str(), items->size(),
+        added, updated, skipped, failures.size(), f.c_str(), add_seconds,
+        query_seconds,
+        evaluable && pictures.ok() ? JsonString(out_dir).c_str() : "null");
   } else {
-    std::printf("%zu models in %zu classes (%d added, %d updated, %d already indexed, %zu "
-                "failed); extraction and indexing %.1f s, queries %.1f s\n\n",
-                evaluated.size(), models_per_class.size(), added, updated, skipped,
-                failures.size(), add_seconds, query_seconds);
-    if (evaluable) PrintTable(models_per_class, scores, static_cast<int>(evaluated.size()));
-    for (const auto& [id, why] : failures) std::printf("  failed %s: %s\n", id.c_str(), why.c_str());
-    if (evaluable && pictures.ok()) std::printf("\nwrote %s\n", written.c_str());
+    std::printf(
+        "%zu models in %zu classes (%d added, %d updated, %d already indexed, "
+        "%zu "
+        "failed); extraction and indexing %.1f s, queries %.1f s\n\n",
+        evaluated.size(), models_per_class.size(), added, updated, skipped,
+        failures.size(), add_seconds, query_seconds);
+    if (evaluable)
+      std::fputs(eval::ScoresTable(scores, models_per_class).c_str(), stdout);
+    for (const auto& [id, why] : failures) {
+      std::printf("  failed %s: %s\n", TextField(id).c_str(),
+                  TextField(why).c_str());
+    }
+    if (evaluable && pictures.ok())
+      std::printf("\nwrote %s\n", written.c_str());
   }
   if (!evaluable) {
-    std::fprintf(stderr, "tpr eval: nothing could be evaluated (%zu of %zu models usable; "
-                         "metrics need a class with at least two)\n",
-                 evaluated.size(), items->size());
+    std::fprintf(
+        stderr,
+        "tpr eval: nothing could be evaluated (%zu of %zu models usable; "
+        "metrics need a class with at least two)\n",
+        evaluated.size(), items->size());
     return 1;
   }
   if (!pictures.ok()) return Fail("eval pictures", pictures);
   return 0;
 }
+
+namespace {
+
+struct EvalFlags {
+  std::string dataset;
+  EvalOptions options;
+};
+
+const bool kRegistered = RegisterCommand(
+    {"eval",
+     "retrieval quality of a labelled set through the services: extract and "
+     "index every model (as add), query each by id against all others, print "
+     "NN, FT, ST, E, DCG and mAP per class and overall, and draw the "
+     "precision-recall curve and the mean class-similarity matrix (SVG)",
+     [](CLI::App& sub) {
+       auto flags = std::make_shared<EvalFlags>();
+       sub.add_option("DATASET", flags->dataset,
+                      "folder of class subfolders, or manifest file of 'PATH "
+                      "CLASS' lines (paths relative to it)")
+           ->required();
+       sub.add_option("--out,-o", flags->options.out_dir,
+                      "folder for precision_recall.svg and similarity.svg "
+                      "(default: a new temporary folder, e.g. "
+                      "/tmp/tpr-eval-XXXXXX, named in the output)");
+       sub.add_option("--jobs,-j", flags->options.add.jobs,
+                      "parallel uploads and queries")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 64));
+       sub.add_flag("--update", flags->options.add.update,
+                    "re-extract ids already in the indexer (default: use them "
+                    "as they are)");
+       return [flags](const Globals& g) {
+         return RunEval(g, flags->dataset, flags->options);
+       };
+     }});
+
+}  // namespace
 
 }  // namespace tpr::cli

@@ -4,10 +4,10 @@
 // then queried by id against all the others (leave-one-out); the rankings
 // give NN, FT, ST, E, DCG, mAP and the precision-recall curve
 // (eval/lib/metrics.h), per class and overall, and the pictures of
-// eval/lib/plots.h (precision-recall; mean class similarity, paper Fig. 11).
+// eval/lib/plots.h (precision-recall; mean class similarity, paper Fig. 11),
+// printed by eval/lib/report.h.
 //
-//   EvalOptions options;  options.out_dir = "results";
-//   int exit_code = RunEval(globals, "shapes/", options);   // or a MANIFEST.txt
+//   tpr eval shapes/ --out results/     # or a MANIFEST.txt
 //   // prints the table (or one JSON object), writes results/*.svg
 #ifndef TPR_CLIENT_CLI_EVAL_H_
 #define TPR_CLIENT_CLI_EVAL_H_
@@ -16,6 +16,7 @@
 
 #include "client/cli/add.h"
 #include "client/cli/cli_util.h"
+#include "client/cli/connection.h"
 
 namespace tpr::cli {
 
@@ -25,26 +26,30 @@ struct EvalOptions {
   // indexer are re-extracted (update) or used as they are (default), exactly
   // as `tpr add`. Defaults: 4 jobs, no update.
   AddOptions add;
-  // Folder the pictures are written to (created). Default "tpr-eval".
-  std::string out_dir = "tpr-eval";
+  // Folder the pictures are written to (created). Default "": a new
+  // temporary folder (mkdtemp under $TMPDIR, else /tmp), named in the
+  // output, so that a run never litters the working tree.
+  std::string out_dir;
 };
 
 // RunEval evaluates `dataset` (a folder of class subfolders, or a manifest
 // file of "<path> <class>" lines, paths relative to it; see
-// ItemsFromDataset) through the extractor and indexer of `g`: models that
+// eval::ReadDataset) through the extractor and indexer of `g`: models that
 // fail (unreadable or bad meshes, refused upserts, failed queries) are
 // listed with their reasons and left out of the metrics. Prints a table per
 // class and overall (models, NN, FT, ST, E, DCG, mAP), or with g.json one
 // object {"models", "classes", "nn", "ft", "st", "e", "dcg", "map", "pr",
 // "per_class": {class: {...}}, "failures": [...], ...}, and writes
-// OUT/precision_recall.svg and OUT/similarity.svg.
+// OUT/precision_recall.svg and OUT/similarity.svg (OUT: options.out_dir,
+// or a fresh temporary folder).
 // Returns the exit code: 0 when metrics were computed (even if some models
 // failed), 1 when nothing could be evaluated (no class with two models
 // left), the services could not be reached, or the pictures could not be
 // written; 2 for a bad dataset argument.
 // Cost: one extraction per model (unless skipped), N searches with k = the
 // index size, i.e. about N^2 EMDs on the indexer.
-int RunEval(const Globals& g, const std::string& dataset, const EvalOptions& options);
+int RunEval(const Globals& g, const std::string& dataset,
+            const EvalOptions& options);
 
 }  // namespace tpr::cli
 

@@ -200,9 +200,9 @@ TEST_F(CliTest, ManifestLabelsThenSigtermDuringASearchStreamEndsCleanly) {
   EXPECT_EQ(exit_code, 0);
 }
 
-// `tpr inspect` runs locally (no services): the PLY it writes has the input's
-// vertices, every point vertex red and every ring vertex black, as the
-// library's explanation of the same mesh says.
+// `tpr inspect --local` runs without services: the PLY it writes has the
+// input's vertices, every point vertex red and every ring vertex black, as
+// the library's explanation of the same mesh says.
 TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   testing::TempDir dir;
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
@@ -210,7 +210,7 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   ASSERT_TRUE(files.ok());
   const std::string mesh = dir.path() + "/set/" + files->front().relative_path;
   const std::string out = dir.path() + "/out.ply";
-  const std::string command = absl::StrCat(testing::BinaryPath("tpr"), " inspect --ascii ", mesh,
+  const std::string command = absl::StrCat(testing::BinaryPath("tpr"), " inspect --local --ascii ", mesh,
                                            " -o ", out, " > /dev/null");
   ASSERT_EQ(std::system(command.c_str()), 0);
 
@@ -260,6 +260,72 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
     return c == kRed || c == kBlack;
   });
   EXPECT_LT(marked, vertices);
+}
+
+// `tpr inspect` without --local extracts through tpr-extractor
+// (ExtractOptions.explain): the file equals the --local one byte for byte.
+// Without a reachable extractor it fails with exit code 1.
+TEST_F(CliTest, InspectThroughTheServiceEqualsTheLocalExtraction) {
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(cluster_.dir() + "/set", 1, 1, 2000);
+  ASSERT_TRUE(files.ok());
+  const std::string mesh = cluster_.dir() + "/set/" + files->front().relative_path;
+  const std::string remote = cluster_.dir() + "/remote.ply", local = cluster_.dir() + "/local.ply";
+  CommandResult r = RunTpr(cluster_, "--json inspect " + mesh + " -o " + remote);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"local\":false"), std::string::npos) << r.out;
+  ASSERT_EQ(RunTpr(cluster_, "inspect --local " + mesh + " -o " + local).exit_code, 0);
+  auto read = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream bytes;
+    bytes << in.rdbuf();
+    return bytes.str();
+  };
+  const std::string remote_bytes = read(remote);
+  EXPECT_GT(remote_bytes.size(), 1000u);
+  EXPECT_TRUE(remote_bytes == read(local)) << "service and local inspect differ";
+  CommandResult down = RunTpr(
+      cluster_, "--extractor 127.0.0.1:1 --timeout 2 inspect " + mesh + " -o " + remote + ".2");
+  EXPECT_EQ(down.exit_code, 1);
+  EXPECT_NE(down.err.find("UNAVAILABLE"), std::string::npos) << down.err;
+}
+
+// Ids and labels holding control characters stay on one line in the text
+// output of `tpr list` and `tpr query` (escaped as \n, \t, \xHH), and are
+// exact in --json output.
+TEST_F(CliTest, ControlCharactersInIdsAreEscapedInTextOutput) {
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(cluster_.dir() + "/set", 1, 1, 800);
+  ASSERT_TRUE(files.ok());
+  absl::StatusOr<client::ExtractorClient> extractor =
+      client::ExtractorClient::Connect(cluster_.extractor_addresses());
+  absl::StatusOr<client::IndexerClient> indexer =
+      client::IndexerClient::Connect(cluster_.indexer().address());
+  ASSERT_TRUE(extractor.ok() && indexer.ok());
+  absl::StatusOr<v1::ExtractResponse> r =
+      extractor->ExtractFile(cluster_.dir() + "/set/" + files->front().relative_path);
+  ASSERT_TRUE(r.ok()) << r.status();
+  v1::Model model;
+  model.set_id("two\nlines\x01");
+  model.set_label("tab\tbed");
+  *model.mutable_signature() = r->signature();
+  absl::StatusOr<bool> created = indexer->Upsert(model, true);
+  if (!created.ok()) {
+    // An indexer that defines an id alphabet may refuse such an id; then
+    // it must say so clearly, and nothing is left to escape.
+    ASSERT_TRUE(absl::IsInvalidArgument(created.status())) << created.status();
+    GTEST_SKIP() << "the indexer refuses control characters in ids";
+  }
+  CommandResult list = RunTpr(cluster_, "list");
+  ASSERT_EQ(list.exit_code, 0) << list.err;
+  EXPECT_EQ(Lines(list.out).size(), 1u) << list.out;
+  EXPECT_NE(list.out.find("two\\nlines\\x01"), std::string::npos) << list.out;
+  EXPECT_NE(list.out.find("tab\\tbed"), std::string::npos) << list.out;
+  CommandResult query = RunTpr(cluster_, "query -k 1 --id 'two\nlines\x01'");
+  ASSERT_EQ(query.exit_code, 0) << query.err;
+  EXPECT_EQ(Lines(query.out).size(), 2u) << query.out;  // header and one row
+  CommandResult json = RunTpr(cluster_, "--json list");
+  EXPECT_NE(json.out.find("\"id\":\"two\\nlines\\u0001\""), std::string::npos) << json.out;
 }
 
 }  // namespace

@@ -261,6 +261,33 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
   EXPECT_NE(again.out.find("ALL"), std::string::npos) << again.out;
 }
 
+// Without --out, the pictures go to a new temporary folder (under $TMPDIR)
+// named in the report, never into the working directory.
+TEST_F(EvalCliTest, DefaultOutputIsATemporaryFolderNotTheWorkingTree) {
+  const std::string cwd = cluster_.dir() + "/cwd", tmp = cluster_.dir() + "/tmp";
+  fs::create_directories(cwd);
+  fs::create_directories(tmp);
+  const std::string command = absl::StrCat(
+      "cd ", cwd, " && TMPDIR=", tmp, " TPR_EXTRACTOR=", cluster_.extractor_addresses(),
+      " TPR_INDEXER=", cluster_.indexer().address(), " ", testing::BinaryPath("tpr"),
+      " --json eval ", set_, " 2>/dev/null");
+  FILE* pipe = popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string out;
+  char buffer[4096];
+  for (size_t n; (n = fread(buffer, 1, sizeof(buffer), pipe)) > 0;) out.append(buffer, n);
+  ASSERT_EQ(pclose(pipe), 0) << out;
+  EXPECT_TRUE(fs::is_empty(cwd)) << "the working directory was written to";
+  const std::string key = "\"out\":\"";
+  const size_t at = out.find(key);
+  ASSERT_NE(at, std::string::npos) << out;
+  const std::string folder = out.substr(at + key.size(), out.find('"', at + key.size()) -
+                                                             at - key.size());
+  EXPECT_EQ(folder.rfind(tmp + "/tpr-eval-", 0), 0u) << folder;
+  ExpectSvg(folder + "/precision_recall.svg");
+  ExpectSvg(folder + "/similarity.svg");
+}
+
 TEST_F(EvalCliTest, NothingToEvaluateExitsNonZero) {
   // Only bad meshes: listed, and the exit code says nothing was evaluated.
   const std::string bad = cluster_.dir() + "/bad";

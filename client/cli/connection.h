@@ -1,0 +1,55 @@
+// How `tpr` reaches the services: the global flags every subcommand shares
+// (addresses, deadline, output mode) and the one place that turns them into
+// SDK clients and call options. Flags that change how a connection is made
+// (credentials, TLS) belong in Globals, AddGlobalFlags and Connect*, and
+// nowhere else.
+//
+//   Globals g;  AddGlobalFlags(&app, &g);   // before parsing
+//   std::optional<IndexerClient> indexer = ConnectIndexer(g);
+//   if (!indexer) return 1;                 // the reason is on stderr
+//   indexer->Stats(&CallOptionsFor(g));
+#ifndef TPR_CLIENT_CLI_CONNECTION_H_
+#define TPR_CLIENT_CLI_CONNECTION_H_
+
+#include <optional>
+#include <string>
+
+#include "tpr/client.h"
+
+namespace CLI {
+class App;
+}  // namespace CLI
+
+namespace tpr::cli {
+
+// Globals: flags every subcommand shares.
+struct Globals {
+  // tpr-extractor address(es). Default 127.0.0.1:7001 (or TPR_EXTRACTOR).
+  std::string extractor = "127.0.0.1:7001";
+  // tpr-indexer address(es). Default 127.0.0.1:7002 (or TPR_INDEXER).
+  std::string indexer = "127.0.0.1:7002";
+  // Machine output: one JSON object per line. Default false.
+  bool json = false;
+  // Deadline per call, in seconds. Default 120.
+  double timeout_s = 120;
+};
+
+// AddGlobalFlags declares --extractor, --indexer, --json and --timeout on
+// `app`, storing into `*g` (which must outlive parsing).
+void AddGlobalFlags(CLI::App* app, Globals* g);
+
+// CallOptionsFor returns the SDK call options of `g` (its deadline, the
+// SDK's default retry policy).
+tpr::client::CallOptions CallOptionsFor(const Globals& g);
+
+// ConnectExtractor returns a client for g.extractor, or prints
+// "tpr: --extractor: <reason>" on stderr and returns nullopt (e.g. an
+// address without a port). Connection itself happens at the first call.
+std::optional<tpr::client::ExtractorClient> ConnectExtractor(const Globals& g);
+
+// ConnectIndexer is ConnectExtractor for g.indexer.
+std::optional<tpr::client::IndexerClient> ConnectIndexer(const Globals& g);
+
+}  // namespace tpr::cli
+
+#endif  // TPR_CLIENT_CLI_CONNECTION_H_
