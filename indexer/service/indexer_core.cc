@@ -155,6 +155,11 @@ void IndexerCore::Close() {
 absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
                                      tpr::index::Signature* signature) const {
   TPR_RETURN_IF_ERROR(CheckId(model.id()));
+  if (model.label().size() > kMaxLabelBytes) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("model '", model.id(), "' has a label of ", model.label().size(),
+                     " bytes; at most ", kMaxLabelBytes, " allowed"));
+  }
   size_t metadata_bytes = 0;
   for (const auto& [key, value] : model.metadata()) metadata_bytes += key.size() + value.size();
   if (metadata_bytes > kMaxMetadataBytes) {
@@ -285,23 +290,40 @@ absl::StatusOr<tpr::v1::ListResponse> IndexerCore::List(
   const std::vector<std::string> ids =
       table_.Page(request.page_token(), request.label(), page_size, &more);
   tpr::v1::ListResponse response;
+  size_t bytes = 0;
+  const std::string* last = nullptr;
   for (const std::string& id : ids) {
     absl::StatusOr<tpr::v1::Model> model = storage_->GetModel(id);
     if (absl::IsNotFound(model.status())) continue;  // deleted meanwhile
     if (!model.ok()) return model.status();
     model->clear_signature();
+    // Bounded by construction: the page stops before kMaxListPageBytes, and
+    // one model is at most ~66 KiB (CheckModel's limits), so the answer
+    // stays far below gRPC's default 4 MiB receive limit. The framing of a
+    // repeated field adds at most 6 bytes per model.
+    const size_t model_bytes = model->ByteSizeLong() + 6;
+    if (bytes + model_bytes > kMaxListPageBytes && response.models_size() > 0) {
+      more = true;
+      break;
+    }
+    bytes += model_bytes;
+    last = &id;
     *response.add_models() = std::move(*model);
   }
   // The token is the last id of this page: ids are unique and ordered, so
   // the next page starts right after it whatever was written meanwhile.
-  if (more && !ids.empty()) response.set_next_page_token(ids.back());
+  // (When every id of the page was deleted meanwhile, the page's last id.)
+  if (more && last == nullptr && !ids.empty()) last = &ids.back();
+  if (more && last != nullptr) response.set_next_page_token(*last);
   return response;
 }
 
 tpr::v1::StatsResponse IndexerCore::Stats() const {
   tpr::v1::StatsResponse response;
   response.set_models(static_cast<int64_t>(table_.size()));
-  for (const auto& [label, count] : table_.Labels()) (*response.mutable_labels())[label] = count;
+  for (const auto& [label, count] : table_.TopLabels(kMaxStatsLabels)) {
+    (*response.mutable_labels())[label] = count;
+  }
   response.set_indexed(static_cast<int64_t>(index_->indexed()));
   response.set_buffered(static_cast<int64_t>(index_->buffered()));
   response.set_disk_bytes(storage_->DiskBytes());

@@ -49,7 +49,16 @@ namespace tpr::indexer {
 
 // Limits of the contract (indexer.proto).
 inline constexpr size_t kMaxIdBytes = 1024;
+inline constexpr size_t kMaxLabelBytes = 256;
 inline constexpr size_t kMaxMetadataBytes = 64 << 10;
+// Bounds of the List and Stats answers, chosen so that each stays under
+// gRPC's default 4 MiB receive limit whatever is stored. A List page ends
+// before its models reach kMaxListPageBytes; one model adds at most an id,
+// a label and the metadata (about 66 KiB), so a page is below 2.1 MiB.
+// Stats reports at most kMaxStatsLabels labels of at most kMaxLabelBytes:
+// below 0.3 MiB.
+inline constexpr size_t kMaxListPageBytes = 2 << 20;
+inline constexpr size_t kMaxStatsLabels = 1000;
 
 // CoreOptions: how IndexerCore opens its data and serves requests.
 struct CoreOptions {
@@ -105,7 +114,8 @@ class IndexerCore {
   // Upsert stores request.model and indexes it; durable on return. Returns
   // whether the id was new. INVALID_ARGUMENT for an empty or too long id or a
   // malformed signature; RESOURCE_EXHAUSTED for metadata above 64 KiB or too
-  // many features; ALREADY_EXISTS when the id exists and overwrite is false;
+  // many features; INVALID_ARGUMENT for a label above kMaxLabelBytes;
+  // ALREADY_EXISTS when the id exists and overwrite is false;
   // INTERNAL/UNAVAILABLE for a storage failure. Cost: one fsync + O(size).
   absl::StatusOr<bool> Upsert(const tpr::v1::UpsertRequest& request);
 
@@ -140,14 +150,16 @@ class IndexerCore {
   absl::StatusOr<tpr::v1::Model> Get(const std::string& id) const;
 
   // List returns one page of models in ascending id order, signatures
-  // omitted. A page size of 0 means 100; above 1000 means 1000.
-  // INVALID_ARGUMENT for a negative page size.
+  // omitted. A page size of 0 means 100; above 1000 means 1000. A page ends
+  // early, with a next page token, before its models reach
+  // kMaxListPageBytes. INVALID_ARGUMENT for a negative page size.
   // Cost: O(log n + page) in memory plus one lookup per model returned;
   // with a label filter, O(models skipped) more.
   absl::StatusOr<tpr::v1::ListResponse> List(const tpr::v1::ListRequest& request) const;
 
-  // Stats returns counts and the data directory's size. Cost: O(labels) plus
-  // a directory listing.
+  // Stats returns counts and the data directory's size; the per-label
+  // counts of the kMaxStatsLabels most populous labels (ties by label).
+  // Cost: O(labels) plus a directory listing.
   tpr::v1::StatsResponse Stats() const;
 
   // StartSearch validates `request` and starts a ranked search over the

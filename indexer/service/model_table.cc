@@ -1,5 +1,8 @@
 #include "indexer/service/model_table.h"
 
+#include <algorithm>
+#include <cstddef>
+
 namespace tpr::indexer {
 
 std::optional<int64_t> ModelTable::AddedTime(const std::string& id) const {
@@ -52,9 +55,23 @@ size_t ModelTable::size() const {
   return models_.size();
 }
 
-std::map<std::string, int64_t> ModelTable::Labels() const {
-  absl::ReaderMutexLock lock(&mu_);
-  return label_counts_;
+std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(size_t max) const {
+  std::vector<std::pair<std::string, int64_t>> out;
+  {
+    absl::ReaderMutexLock lock(&mu_);
+    out.assign(label_counts_.begin(), label_counts_.end());
+  }
+  auto more_models = [](const auto& a, const auto& b) {
+    return a.second != b.second ? a.second > b.second : a.first < b.first;
+  };
+  if (out.size() > max) {
+    std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(max), out.end(),
+                      more_models);
+    out.resize(max);
+  } else {
+    std::sort(out.begin(), out.end(), more_models);
+  }
+  return out;
 }
 
 std::vector<std::pair<std::string, std::string>> ModelTable::IdLabels() const {

@@ -56,8 +56,10 @@ class ModelTable {
   // size returns the number of models. Cost: O(1).
   size_t size() const;
 
-  // Labels returns the number of models per label. Cost: O(labels).
-  std::map<std::string, int64_t> Labels() const;
+  // TopLabels returns the number of models per label for the `max` labels
+  // holding the most models (ties: the smaller label first), most populous
+  // first. Cost: O(labels log max).
+  std::vector<std::pair<std::string, int64_t>> TopLabels(size_t max) const;
 
   // IdLabels returns every (id, label) pair, in id order. Cost: O(n).
   std::vector<std::pair<std::string, std::string>> IdLabels() const;

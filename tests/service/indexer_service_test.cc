@@ -337,6 +337,110 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
   TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[0].signature, models, 4));
 }
 
+// Issue 12 item 3: a label of tens of MiB made List and Stats fail for
+// every client. Labels are bounded (256 bytes), and List and Stats answers
+// stay under gRPC's default 4 MiB receive limit by construction, even with
+// every model at the largest id, label and metadata allowed. The stub's
+// channel keeps gRPC's default limit, as any client's would.
+TEST_F(IndexerServiceTest, LabelsAreBoundedAndListAndStatsStayUnderFourMiB) {
+  auto* stub = server_->stub();
+  const std::vector<TestModel> models = MakeModels(120, 3, 91);
+  {
+    tpr::v1::UpsertRequest u = ToRequest(models[0]);
+    u.mutable_model()->set_label(std::string(20 << 20, 'L'));
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    tpr::v1::UpsertResponse resp;
+    grpc::Status s = stub->Upsert(&c, u, &resp);
+    // Past the server's 64 MiB receive limit it is not; the label check
+    // answers, naming the length and the limit.
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+    EXPECT_NE(s.error_message().find("label"), std::string::npos) << s.error_message();
+    EXPECT_NE(s.error_message().find("256"), std::string::npos) << s.error_message();
+  }
+  {
+    tpr::v1::UpsertRequest u = ToRequest(models[0]);
+    u.mutable_model()->set_label(std::string(kMaxLabelBytes + 1, 'L'));
+    grpc::ClientContext c;
+    tpr::v1::UpsertResponse resp;
+    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  // Every model as large as List can carry: longest id, longest label,
+  // 64 KiB of metadata; each label distinct. 120 of them are ~7.9 MB.
+  std::set<std::string> ids;
+  {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    tpr::v1::BatchUpsertResponse resp;
+    auto writer = stub->BatchUpsert(&c, &resp);
+    for (size_t i = 0; i < models.size(); ++i) {
+      tpr::v1::UpsertRequest u = ToRequest(models[i]);
+      std::string id = absl::StrCat(models[i].id, "/");
+      id.resize(kMaxIdBytes, 'i');
+      u.mutable_model()->set_id(id);
+      ids.insert(id);
+      std::string label = absl::StrCat(i, "/");
+      label.resize(kMaxLabelBytes, static_cast<char>('a' + i % 26));
+      u.mutable_model()->set_label(label);
+      auto& metadata = *u.mutable_model()->mutable_metadata();
+      metadata.clear();
+      metadata["blob"] = std::string(kMaxMetadataBytes - 4, 'm');
+      ASSERT_TRUE(writer->Write(u));
+    }
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+    ASSERT_EQ(resp.written(), static_cast<int64_t>(models.size()));
+  }
+  std::set<std::string> listed;
+  std::string token;
+  int pages = 0;
+  do {
+    grpc::ClientContext c;
+    tpr::v1::ListRequest l;
+    l.set_page_size(1000);
+    l.set_page_token(token);
+    tpr::v1::ListResponse r;
+    grpc::Status s = stub->List(&c, l, &r);
+    ASSERT_TRUE(s.ok()) << s.error_message();
+    EXPECT_LE(r.ByteSizeLong(), size_t{4} << 20);
+    EXPECT_GT(r.models_size(), 0);
+    for (const auto& m : r.models()) {
+      EXPECT_TRUE(listed.insert(m.id()).second) << "listed twice";
+      EXPECT_EQ(m.metadata().at("blob").size(), kMaxMetadataBytes - 4);
+    }
+    token = r.next_page_token();
+    ASSERT_LT(++pages, 100);
+  } while (!token.empty());
+  EXPECT_EQ(listed, ids);
+  EXPECT_GT(pages, 1) << "one page would be ~7.9 MB";
+
+  // Stats: more distinct labels than it reports; the most populous first.
+  {
+    grpc::ClientContext c;
+    tpr::v1::BatchUpsertResponse resp;
+    auto writer = stub->BatchUpsert(&c, &resp);
+    const std::vector<TestModel> more = MakeModels(kMaxStatsLabels + 50, 3, 92, "s");
+    for (size_t i = 0; i < more.size(); ++i) {
+      tpr::v1::UpsertRequest u = ToRequest(more[i]);
+      std::string label = absl::StrCat("label", i, "-");
+      label.resize(kMaxLabelBytes, 'z');
+      // Labels 0..9 hold 3 models each, the rest one.
+      u.mutable_model()->set_label(i < 30 ? absl::StrCat("popular", i % 10) : label);
+      ASSERT_TRUE(writer->Write(u));
+    }
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+  }
+  grpc::ClientContext c;
+  tpr::v1::StatsResponse stats;
+  grpc::Status s = stub->Stats(&c, tpr::v1::StatsRequest(), &stats);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_LE(stats.ByteSizeLong(), size_t{4} << 20);
+  EXPECT_EQ(stats.models(), static_cast<int64_t>(models.size() + kMaxStatsLabels + 50));
+  EXPECT_EQ(stats.labels().size(), static_cast<int>(kMaxStatsLabels));
+  for (int i = 0; i < 10; ++i) EXPECT_EQ(stats.labels().at(absl::StrCat("popular", i)), 3);
+}
+
 TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
   const std::vector<TestModel> models = MakeModels(40, 2, 51);
   auto* stub = server_->stub();
