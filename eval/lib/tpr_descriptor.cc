@@ -9,6 +9,7 @@ index::Signature ToIndexSignature(const extract::Signature& signature) {
     out.features.push_back(
         {f.weight, f.integral_geodesic, f.curvature, f.area, f.distance});
   }
+  out.spectrum = signature.spectrum;
   return out;
 }
 

@@ -11,8 +11,11 @@
 
 namespace tpr::eval {
 
-// ToIndexSignature copies weights, normalized integral geodesics and band
-// vectors. O(features x bands). Thread-safe.
+// ToIndexSignature copies weights, normalized integral geodesics, band
+// vectors and the spectrum: the one extractor -> indexer converter for
+// in-process evaluation (the services convert through tpr.v1.Signature:
+// extractor/service/convert.h, indexer/service/convert.h).
+// O(features x bands + spectrum). Thread-safe.
 index::Signature ToIndexSignature(const extract::Signature& signature);
 
 }  // namespace tpr::eval

@@ -47,6 +47,10 @@ struct Signature {
   // Points first, then rings.
   std::vector<Feature> features;
   MeshStats stats;
+  // The Laplace-Beltrami spectrum: the first non-zero eigenvalues, ascending,
+  // each lambda_i * A / (4 pi) (A = total surface area), so the unit sphere
+  // gives l (l + 1). tpr.v1.Signature.spectrum documents it.
+  std::vector<double> spectrum;
 };
 
 // Explanation locates the features on the mesh, for drawing.

@@ -101,8 +101,10 @@ v1::Signature SignatureToProto(const extract::Signature& signature,
     out->mutable_area()->Add(f.area.begin(), f.area.end());
     out->mutable_distance()->Add(f.distance.begin(), f.distance.end());
   }
+  proto.mutable_spectrum()->Add(signature.spectrum.begin(), signature.spectrum.end());
   *proto.mutable_mesh() = StatsToProto(signature.stats);
   proto.set_extractor_version(kExtractorVersion);
+  proto.set_signature_version(kSignatureVersion);
   *proto.mutable_options() = OptionsToProto(options);
   return proto;
 }

@@ -21,6 +21,12 @@ namespace tpr::extractor_service {
 // (Signature.extractor_version): the project version from CMake.
 extern const char kExtractorVersion[];
 
+// kSignatureVersion is stamped into every signature
+// (Signature.signature_version): 2, TPR features plus the Laplace-Beltrami
+// spectrum. The indexer compares only this version (indexer/service/
+// convert.h holds the same number).
+inline constexpr int kSignatureVersion = 2;
+
 // OptionsFromProto returns the library options for `proto`, a zero field
 // meaning the default documented in extractor/lib/extract.h.
 // Errors: INVALID_ARGUMENT when bands is outside 1..256 or another field is
@@ -40,8 +46,9 @@ extract::MeshFormat FormatFromProto(v1::MeshFormat format);
 // StatsToProto returns `stats` in wire form.
 v1::MeshStats StatsToProto(const extract::MeshStats& stats);
 
-// SignatureToProto returns the wire signature of `signature`, with its mesh
-// statistics, kExtractorVersion and `options` (defaults filled). O(features x
+// SignatureToProto returns the wire signature of `signature` (features,
+// spectrum), with its mesh statistics, kExtractorVersion, kSignatureVersion
+// and `options` (defaults filled). O(features x
 // bands). Thread-safe.
 v1::Signature SignatureToProto(const extract::Signature& signature,
                                const extract::Options& options);

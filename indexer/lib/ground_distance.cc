@@ -56,7 +56,7 @@ absl::Status ValidateOptions(const GroundDistanceOptions& o) {
           "ground distance ", names[i], " = ", s[i], " must be finite and > 0"));
     }
   }
-  return absl::OkStatus();
+  return ValidateSpectralOptions(o.spectral);
 }
 
 absl::Status ValidateSignature(const Signature& signature) {
@@ -99,6 +99,18 @@ absl::Status ValidateSignature(const Signature& signature) {
   if (std::abs(sum - 1.0) > 1e-6) {
     return absl::InvalidArgumentError(absl::StrCat(
         "signature weights sum to ", sum, ", must sum to 1 (Eq. 6)"));
+  }
+  if (signature.spectrum.size() > static_cast<size_t>(kMaxSpectrum)) {
+    return absl::InvalidArgumentError(absl::StrCat("spectrum has ", signature.spectrum.size(),
+                                                   " values, at most ", kMaxSpectrum,
+                                                   " are supported"));
+  }
+  for (size_t i = 0; i < signature.spectrum.size(); ++i) {
+    const double x = signature.spectrum[i];
+    if (!std::isfinite(x) || x <= 0.0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("spectrum[", i, "] is ", x, "; must be finite and > 0"));
+    }
   }
   return absl::OkStatus();
 }
@@ -144,6 +156,7 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
     for (int i = 0; i < n; ++i) c += p.weights_[i] * p.coords_[r * stride + i];
     p.centroid_[r] = c;
   }
+  p.spectral_ = SpectralEmbedding(signature.spectrum, options.spectral);
   return p;
 }
 

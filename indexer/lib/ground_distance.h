@@ -42,6 +42,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "indexer/lib/signature.h"
+#include "indexer/lib/spectral.h"
 
 namespace tpr::index {
 
@@ -77,18 +78,24 @@ struct GroundDistanceOptions {
   // c_H: H holds segment thickness / sqrt(total area), already of order 1
   // or less. Must be > 0 and finite. Default 1.
   double h_scale = 1.0;
+  // The spectral term that metric.h adds to the EMD (not part of Eq. 7;
+  // weight 0 leaves the paper's distance). Prepare stores its embedding.
+  SpectralOptions spectral;
 };
 
-// ValidateOptions returns OK when `options` meets the constraints above,
-// INVALID_ARGUMENT naming the offending field otherwise. O(1); thread-safe.
+// ValidateOptions returns OK when `options` meets the constraints above
+// (spectral ones included, ValidateSpectralOptions), INVALID_ARGUMENT naming
+// the offending field otherwise. O(1); thread-safe.
 absl::Status ValidateOptions(const GroundDistanceOptions& options);
 
 // ValidateSignature returns OK when `signature` can be matched:
 // INVALID_ARGUMENT if it has no feature, more than kMaxFeatures features, a
 // weight that is negative or not finite, weights not summing to 1 within
 // 1e-6 (Eq. 6), band vectors K, A, H of unequal lengths (within a feature
-// or across the signature's features), or any non-finite coordinate. The
-// message names the feature index at fault. O(total size); thread-safe.
+// or across the signature's features), any non-finite coordinate, or a
+// spectrum longer than kMaxSpectrum or holding a value that is not finite
+// and > 0. The message names the feature index (or spectrum entry) at
+// fault. O(total size); thread-safe.
 absl::Status ValidateSignature(const Signature& signature);
 
 // kMaxFeatures: the largest signature the EMD solver accepts (the paper
@@ -116,9 +123,15 @@ class PreparedSignature {
   const double* weights() const { return weights_.data(); }
   // MemoryBytes returns the heap bytes this object holds.
   size_t MemoryBytes() const {
-    return (weights_.capacity() + coords_.capacity() + centroid_.capacity()) *
+    return (weights_.capacity() + coords_.capacity() + centroid_.capacity() +
+            spectral_.capacity()) *
            sizeof(double);
   }
+  // spectral returns the spectral embedding E(spectrum) (spectral.h) of
+  // spectral_size() values: options.spectral.eigenvalues, or 0 when the
+  // spectral weight is 0. metric.h compares it.
+  const double* spectral() const { return spectral_.data(); }
+  int spectral_size() const { return static_cast<int>(spectral_.size()); }
 
   // Layout (for emd.cc and the lower bound; not a stable interface):
   // stride() >= size() is the padded row length, a multiple of 8. Row 0 of
@@ -147,6 +160,7 @@ class PreparedSignature {
   std::vector<double> weights_;
   std::vector<double> coords_;
   std::vector<double> centroid_;
+  std::vector<double> spectral_;
 };
 
 // Prepare validates `signature` and `options` (see ValidateSignature and

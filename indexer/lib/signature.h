@@ -1,5 +1,6 @@
 // The indexer's view of a TPR signature: a weighted set of features, each a
-// point in the ground-distance space of Eq. 7 (Tam & Lau 2007, section 6).
+// point in the ground-distance space of Eq. 7 (Tam & Lau 2007, section 6),
+// plus the mesh's Laplace-Beltrami spectrum (issue 9).
 // The indexer library does not know the extractor; services convert from
 // tpr.v1.Signature.
 //
@@ -40,9 +41,15 @@ inline std::array<std::vector<double>*, 3> BandVectors(Feature& f) {
   return {&f.curvature, &f.area, &f.distance};
 }
 
-// Signature: the features of one model; weights sum to 1.
+// Signature: the features of one model (weights sum to 1) and its
+// Laplace-Beltrami spectrum.
 struct Signature {
   std::vector<Feature> features;
+  // The first non-zero eigenvalues lambda_i A / (4 pi), ascending, each
+  // finite and > 0 (tpr.v1.Signature.spectrum documents it); compared by
+  // the spectral term of the distance (spectral.h, metric.h). May be empty
+  // (the term then sees its Weyl padding, spectral.h).
+  std::vector<double> spectrum;
 };
 
 }  // namespace tpr::index

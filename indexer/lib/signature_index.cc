@@ -25,6 +25,7 @@
 #include "common/status_macros.h"
 #include "indexer/lib/byte_codec.h"
 #include "indexer/lib/centroid_table.h"
+#include "indexer/lib/metric.h"
 #include "indexer/lib/emd.h"
 
 namespace tpr::index {
@@ -43,6 +44,7 @@ uint64_t Fingerprint(const PreparedSignature& p) {
   h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
   const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
   h = Fnv1a(p.coords(), sizeof(double) * rows * static_cast<size_t>(p.stride()), h);
+  h = Fnv1a(p.spectral(), sizeof(double) * static_cast<size_t>(p.spectral_size()), h);
   return h;
 }
 
@@ -144,21 +146,28 @@ class IndexCursor : public SignatureIndex::Cursor {
     spec.distance = [this](uint32_t i) {
       const PreparedSignature* p = Item(i);
       return p == nullptr ? std::numeric_limits<double>::quiet_NaN()
-                          : Emd(query_, *p);
+                          : Distance(query_, *p);
     };
     // Tree items read the flat centroid table (one contiguous row, no
     // pointer chase); the small buffer is read directly.
     // The cascade of lower bounds (emd.h), cheapest first: the centroid
     // bound (O(bands)), then the relaxed transport bound (the ground
-    // matrix, which the EMD that may follow reuses).
-    spec.lower_bounds.push_back([this, t](uint32_t i) {
-      if (i < n_tree_) return t->centroids.LowerBound(query_, i);
-      return EmdLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
+    // matrix, which the EMD that may follow reuses). Each adds the exact
+    // O(n) spectral term of the distance (metric.h; nothing when its
+    // weight is 0), so the spectrum is checked before any EMD.
+    const bool spectral = query_.spectral_size() > 0;
+    spec.lower_bounds.push_back([this, t, spectral](uint32_t i) {
+      if (i >= n_tree_) {
+        return DistanceLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
+      }
+      const double centroid = t->centroids.LowerBound(query_, i);
+      const PreparedSignature* p = spectral ? t->prepared[i].get() : nullptr;
+      return p == nullptr ? centroid : centroid + SpectralDistance(query_, *p);
     });
     if (relaxed_bound) {
       spec.lower_bounds.push_back([this](uint32_t i) {
         const PreparedSignature* p = Item(i);
-        return p == nullptr ? 0.0 : RelaxedTransportBound(query_, *p);
+        return p == nullptr ? 0.0 : RelaxedTransportBound(query_, *p) + SpectralDistance(query_, *p);
       });
     }
     spec.accept = [this, s, t](uint32_t i) {
@@ -401,7 +410,7 @@ void SignatureIndex::Rebuild() {
   const std::vector<PreparedPtr>& items = part->prepared;
   absl::StatusOr<VpTree> tree = VpTree::Build(
       items.size(),
-      [&items](uint32_t i, uint32_t j) { return Emd(*items[i], *items[j]); },
+      [&items](uint32_t i, uint32_t j) { return Distance(*items[i], *items[j]); },
       options_.tree, &cancel_);
   std::lock_guard<std::mutex> lock(mu_);
   journal_ = nullptr;

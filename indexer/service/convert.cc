@@ -1,5 +1,6 @@
 #include "indexer/service/convert.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -35,13 +36,24 @@ absl::Status CheckBand(int i, const char* field,
 }  // namespace
 
 absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s) {
+  if (s.features_size() == 0) {
+    return absl::InvalidArgumentError("signature has no feature");
+  }
+  if (s.signature_version() < kSignatureVersion) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "signature version ", std::max(1, s.signature_version()), " is older than version ",
+        kSignatureVersion, " (which adds the Laplace-Beltrami spectrum) that this indexer "
+        "compares; re-extract the model with a current tpr-extractor: `tpr add --update`"));
+  }
+  if (s.signature_version() > kSignatureVersion) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "signature version ", s.signature_version(), " is newer than version ",
+        kSignatureVersion, " that this indexer compares; upgrade tpr-indexer"));
+  }
   if (s.features_size() > tpr::index::kMaxFeatures) {
     return absl::ResourceExhaustedError(
         absl::StrCat("signature has ", s.features_size(), " features; at most ",
                      tpr::index::kMaxFeatures, " are accepted"));
-  }
-  if (s.features_size() == 0) {
-    return absl::InvalidArgumentError("signature has no feature");
   }
   const int bands = s.options().bands();
   if (bands < 1 || bands > kMaxBands) {
@@ -86,6 +98,29 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature&
     g.distance.assign(f.distance().begin(), f.distance().end());
     out.features.push_back(std::move(g));
   }
+  // options.spectrum_eigenvalues 0 means "the default", so only the hard
+  // bound applies then.
+  const int requested = s.options().spectrum_eigenvalues();
+  const int max_spectrum =
+      requested > 0 ? std::min(requested, tpr::index::kMaxSpectrum) : tpr::index::kMaxSpectrum;
+  if (s.spectrum_size() > max_spectrum) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "signature spectrum has ", s.spectrum_size(), " values; at most ", max_spectrum,
+        " allowed (options.spectrum_eigenvalues is ", requested, ")"));
+  }
+  for (int i = 0; i < s.spectrum_size(); ++i) {
+    const double x = s.spectrum(i);
+    if (!std::isfinite(x) || x <= 0.0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("signature spectrum[", i, "] is ", x, "; must be finite and > 0"));
+    }
+    if (i > 0 && x < s.spectrum(i - 1)) {
+      return absl::InvalidArgumentError(absl::StrCat("signature spectrum[", i, "] is ", x,
+                                                     ", below spectrum[", i - 1, "] = ",
+                                                     s.spectrum(i - 1), "; must be ascending"));
+    }
+  }
+  out.spectrum.assign(s.spectrum().begin(), s.spectrum().end());
   // What is left for the library's own check: the weights' sum (Eq. 6).
   if (absl::Status valid = tpr::index::ValidateSignature(out); !valid.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("malformed signature: ", valid.message()));
@@ -109,6 +144,10 @@ tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points) {
   if (!s.features.empty()) {
     out.mutable_options()->set_bands(static_cast<int>(s.features[0].curvature.size()));
   }
+  out.mutable_spectrum()->Add(s.spectrum.begin(), s.spectrum.end());
+  out.mutable_options()->set_spectrum_eigenvalues(
+      std::max(1, static_cast<int>(s.spectrum.size())));
+  out.set_signature_version(kSignatureVersion);
   out.set_extractor_version("test");
   return out;
 }

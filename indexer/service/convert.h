@@ -21,16 +21,26 @@ namespace tpr::indexer {
 // options.bands range, 1..256).
 inline constexpr int kMaxBands = 256;
 
+// kSignatureVersion: the Signature.signature_version this indexer compares
+// (2: TPR features plus the Laplace-Beltrami spectrum). The extractor
+// stamps the same number (extractor/service/convert.h).
+inline constexpr int kSignatureVersion = 2;
+
 // ToIndexSignature validates the wire signature `s` against every range the
 // contract (proto/tpr/v1/signature.proto) documents and returns it in the
 // library's form. Errors:
+//  - FAILED_PRECONDITION: signature_version is not kSignatureVersion (an
+//    older one, 0 or 1, says to re-extract with `tpr add --update`);
 //  - RESOURCE_EXHAUSTED: more than tpr::index::kMaxFeatures features;
 //  - INVALID_ARGUMENT, naming the feature index and field at fault: no
 //    feature; options.bands outside 1..256; a feature whose kind is neither
 //    point nor ring; curvature, area or distance not of length
 //    options.bands; integral_geodesic outside [0, 1]; a weight, area or
 //    distance that is negative; an area above 1; any value not finite;
-//    weights not summing to 1 within 1e-6 (Eq. 6).
+//    weights not summing to 1 within 1e-6 (Eq. 6); a spectrum longer than
+//    tpr::index::kMaxSpectrum or than options.spectrum_eigenvalues when
+//    that is set, not
+//    ascending, or holding a value that is not finite and > 0.
 // O(features x bands); thread-safe.
 absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s);
 
@@ -38,7 +48,9 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature&
 // library signatures directly (tests, benchmarks, fuzz seeds): features
 // [0, points) become FEATURE_KIND_POINT, the rest FEATURE_KIND_RING (the
 // library form does not keep the kind; matching ignores it), options.bands
-// is the band vectors' length and extractor_version is "test".
+// is the band vectors' length, options.spectrum_eigenvalues the spectrum's
+// length (at least 1), signature_version kSignatureVersion and
+// extractor_version "test".
 // ToIndexSignature(ToWireSignature(s, p)) == s for every valid s. O(size);
 // thread-safe.
 tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points);

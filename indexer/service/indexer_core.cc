@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
+#include <set>
 #include <unordered_map>
 #include <utility>
 
@@ -67,9 +68,17 @@ absl::Status IndexerCore::LoadIndex() {
     // cheap bookkeeping is serialized.
     absl::Mutex items_mu;
     std::vector<std::pair<std::string, ModelInfo>> infos;
+    std::set<std::string> outdated;
     TPR_RETURN_IF_ERROR(storage_->ForEachModel(
         [&](uint64_t seq, tpr::v1::Model&& model) -> absl::Status {
           absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+          if (absl::IsFailedPrecondition(sig.status())) {
+            // Another signature version: kept, listed, not indexed.
+            absl::MutexLock items_lock(&items_mu);
+            infos.push_back({model.id(), {model.label(), model.added_unix_micros()}});
+            outdated.insert(model.id());
+            return absl::OkStatus();
+          }
           if (!sig.ok()) {
             return absl::DataLossError(absl::StrCat("stored model '", model.id(),
                                                     "': ", sig.status().message()));
@@ -84,6 +93,13 @@ absl::Status IndexerCore::LoadIndex() {
     // The scan must find every model the acknowledged writes left.
     TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size()));
     table_.Put(infos);
+    if (!outdated.empty()) {
+      Log(absl::StrCat(outdated.size(), " stored models (e.g. '", *outdated.begin(),
+                       "') have an older signature version; they are kept but not searched "
+                       "until re-extracted with `tpr add --update`"));
+    }
+    absl::MutexLock view(&view_mu_);
+    outdated_ = std::move(outdated);
   }
   {
     // The label map searches use, built whole (no copy-on-write needed yet).
@@ -235,6 +251,7 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
           absl::StrCat("index rejected a stored model: ", st.message()));
     }
     labels_.Apply(labels);
+    for (const auto& entry : entries) outdated_.erase(entry.first);
   }
   table_.Put(infos);
   persister_->NoteWrites(writes.size());
@@ -264,6 +281,7 @@ absl::Status IndexerCore::Delete(const std::string& id) {
     absl::MutexLock view(&view_mu_);
     index_->Remove(id);
     labels_.Apply({{id, std::nullopt}});
+    outdated_.erase(id);
   }
   table_.Erase(id);
   persister_->NoteWrites(1);
@@ -357,6 +375,10 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
       TPR_RETURN_IF_ERROR(CheckId(request.id()));
       TPR_ASSIGN_OR_RETURN(tpr::v1::Model model, storage_->GetModel(request.id()));
       absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+      if (absl::IsFailedPrecondition(sig.status())) {
+        return absl::FailedPreconditionError(
+            absl::StrCat("stored model '", request.id(), "': ", sig.status().message()));
+      }
       if (!sig.ok()) {
         return absl::DataLossError(
             absl::StrCat("stored model '", request.id(), "': ", sig.status().message()));
@@ -376,6 +398,13 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     // update both under view_mu_), so filter and results use the labels that
     // went with the ranked signatures, whatever is written meanwhile.
     absl::MutexLock view(&view_mu_);
+    if (!outdated_.empty()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          outdated_.size(), " stored models (e.g. '", *outdated_.begin(),
+          "') have an older signature version and cannot be compared with the others; "
+          "re-extract them with `tpr add --update` (nothing was lost: they are kept "
+          "and listed until replaced)"));
+    }
     labels = labels_.snapshot();
     auto filter = [labels, label, exclude, cancelled](const std::string& id) {
       if (cancelled && cancelled()) return false;

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -102,8 +103,9 @@ class IndexerCore {
   // or it cannot be used, the index is built from the models instead.
   // Returns INVALID_ARGUMENT for an empty data_dir, UNAVAILABLE when the
   // database cannot be opened (e.g. locked by another process), DATA_LOSS
-  // for corrupt data. Cost: a scan of the store, O(models) (no EMD when a
-  // tree was persisted).
+  // for corrupt data. Models stored with an older signature version are
+  // kept, not indexed (searches then fail, see StartSearch). Cost: a scan of
+  // the store, O(models) (no EMD when a tree was persisted).
   static absl::StatusOr<std::unique_ptr<IndexerCore>> Open(CoreOptions options);
 
   // The destructor calls Close().
@@ -168,7 +170,10 @@ class IndexerCore {
   // returns true the session stops doing EMDs and Next() returns nullopt.
   // INVALID_ARGUMENT for k < 1, a negative or non-finite radius, no query, a
   // malformed signature; RESOURCE_EXHAUSTED for k above options.max_k;
-  // NOT_FOUND for an unknown query id. Cost: O(1) to start; see Next.
+  // NOT_FOUND for an unknown query id; FAILED_PRECONDITION while the store
+  // holds models whose signature version is older than the indexer's (the
+  // message says to re-extract them with `tpr add --update`), or for a
+  // query signature of another version. Cost: O(1) to start; see Next.
   absl::StatusOr<std::unique_ptr<SearchSession>> StartSearch(
       const tpr::v1::SearchRequest& request, std::function<bool()> cancelled) const;
 
@@ -210,6 +215,11 @@ class IndexerCore {
   // both, a search start across taking both snapshots.
   mutable absl::Mutex view_mu_;
   LabelMap labels_ ABSL_GUARDED_BY(view_mu_);
+  // Stored models whose signature is of an older version (convert.h,
+  // kSignatureVersion): kept in the store and the table (Get, List, Delete
+  // and overwriting them work), absent from the index; while any is left,
+  // searches fail with FAILED_PRECONDITION naming `tpr add --update`.
+  std::set<std::string> outdated_ ABSL_GUARDED_BY(view_mu_);
 };
 
 }  // namespace tpr::indexer

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "indexer/lib/emd.h"
+#include "indexer/lib/metric.h"
 #include "tests/indexer/signature_testing.h"
 
 namespace tpr::index {
@@ -23,7 +24,8 @@ namespace {
 using testing::SignatureGenerator;
 using testing::SignatureGeneratorOptions;
 
-// The oracle: every live signature, prepared independently, one EMD each.
+// The oracle: every live signature, prepared independently, one distance
+// each (metric.h: the EMD, plus the spectral term when its weight is > 0).
 class Oracle {
  public:
   explicit Oracle(GroundDistanceOptions ground = {}) : ground_(ground) {}
@@ -42,7 +44,7 @@ class Oracle {
     std::vector<Neighbor> all;
     for (const auto& [id, p] : live_) {
       if (filter && !filter(id)) continue;
-      const double d = Emd(q, p);
+      const double d = Distance(q, p);
       if (radius > 0.0 && d > radius) continue;
       all.push_back({id, d});
     }
@@ -78,6 +80,18 @@ IndexOptions ManualOptions() {
   options.background_rebuild = false;
   options.tree.leaf_size = 8;
   return options;
+}
+
+// Drain returns every neighbour a search yields, in order.
+std::vector<Neighbor> Drain(const SignatureIndex& index, const Signature& query, double radius,
+                            std::function<bool(const std::string&)> filter = nullptr) {
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
+      index.Search(query, radius, std::move(filter));
+  EXPECT_TRUE(cursor.ok()) << cursor.status();
+  std::vector<Neighbor> got;
+  if (!cursor.ok()) return got;
+  while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
+  return got;
 }
 
 // Queries: members of the classes (near data) and unclustered signatures.
@@ -285,6 +299,51 @@ TEST(SignatureIndexTest, RankedRadiusAndFilteredSearchMatchBruteForce) {
     (*cursor)->Next();
     EXPECT_LT((*cursor)->stats().emd_computations,
               static_cast<int64_t>(index.size()));
+  }
+}
+
+TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
+  // The distance with the spectral term on (metric.h): k-NN, whole
+  // rankings and radius searches equal the oracle, tree and buffer, with
+  // ties: copies of one signature (distance 0) and signatures equal but
+  // for their spectra (distance = the spectral term alone).
+  for (SpectralTransform t : {SpectralTransform::kByIndex, SpectralTransform::kLog}) {
+    SignatureGeneratorOptions gopt;
+    gopt.seed = 21;
+    gopt.classes = 10;
+    gopt.spectrum = 50;
+    SignatureGenerator gen(gopt);
+    IndexOptions options = ManualOptions();
+    options.ground.spectral.weight = 0.6;
+    options.ground.spectral.transform = t;
+    SignatureIndex index(options);
+    Oracle oracle(options.ground);
+    std::vector<Signature> stored;
+    for (int i = 0; i < 240; ++i) {
+      Signature s = i % 6 == 5   ? stored[static_cast<size_t>(i - 5)]  // a copy
+                    : i % 12 == 4 ? stored[static_cast<size_t>(i - 1)]  // see below
+                                  : gen.Next();
+      if (i % 12 == 4) s.spectrum.back() *= 1.3;  // same features, other spectrum
+      stored.push_back(s);
+      ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+      oracle.Upsert(Id(i), s);
+    }
+    index.Rebuild();
+    for (int i = 240; i < 270; ++i) {  // some in the buffer too
+      const Signature s = gen.Next();
+      ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+      oracle.Upsert(Id(i), s);
+    }
+    std::vector<Signature> queries = Queries(&gen, 24);
+    for (int i = 0; i < 12; ++i) queries.push_back(stored[static_cast<size_t>(i * 17)]);
+    CheckKnn(index, oracle, queries, SpectralTransformName(t));
+    for (size_t q = 0; q < queries.size(); q += 3) {
+      const std::vector<Neighbor> all = oracle.Search(queries[q], 10000);
+      ExpectSame(Drain(index, queries[q], 0.0), all, "ranked " + std::to_string(q));
+      const double radius = all[15].distance;
+      ExpectSame(Drain(index, queries[q], radius), oracle.Search(queries[q], 10000, radius),
+                 "radius " + std::to_string(q));
+    }
   }
 }
 

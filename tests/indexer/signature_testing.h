@@ -43,13 +43,17 @@ struct SignatureGeneratorOptions {
   // Probability that a member drops a small feature, and (independently)
   // that it splits one feature in two; 0 keeps the count exact. Default 0.2.
   double feature_change = 0.2;
+  // Length of the Laplace-Beltrami spectrum (values lambda_i A / (4 pi),
+  // which grow like i by Weyl's law); 0 leaves it empty. Drawn from a
+  // separate random stream, so the features do not depend on it. Default 0.
+  int spectrum = 0;
 };
 
 // SignatureGenerator draws prototypes once, then members on demand.
 class SignatureGenerator {
  public:
   explicit SignatureGenerator(const SignatureGeneratorOptions& options)
-      : options_(options), rng_(options.seed) {
+      : options_(options), rng_(options.seed), spectrum_rng_(options.seed ^ 0x5eed5eedULL) {
     for (int c = 0; c < options_.classes; ++c) {
       prototypes_.push_back(Prototype(options_.features));
     }
@@ -60,7 +64,10 @@ class SignatureGenerator {
   // options.features are ignored.
   SignatureGenerator(const SignatureGeneratorOptions& options,
                      std::vector<Signature> prototypes)
-      : options_(options), rng_(options.seed), prototypes_(std::move(prototypes)) {
+      : options_(options),
+        rng_(options.seed),
+        spectrum_rng_(options.seed ^ 0x5eed5eedULL),
+        prototypes_(std::move(prototypes)) {
     options_.classes = static_cast<int>(prototypes_.size());
   }
 
@@ -82,6 +89,12 @@ class SignatureGenerator {
       for (double& x : f.area) x *= std::exp(noise(rng_));
       for (double& x : f.distance) x *= std::exp(noise(rng_));
       Normalize(&f.area);
+    }
+    if (!s.spectrum.empty()) {
+      // Eigenvalues move a little with pose and meshing; keep them sorted.
+      std::normal_distribution<double> spectral_noise(0.0, 0.2 * options_.jitter);
+      for (double& x : s.spectrum) x *= std::exp(spectral_noise(spectrum_rng_));
+      std::sort(s.spectrum.begin(), s.spectrum.end());
     }
     if (s.features.size() > 1 && unit(rng_) < options_.feature_change) {
       // Drop the lightest feature: a small protrusion not detected.
@@ -168,11 +181,22 @@ class SignatureGenerator {
       s.features.push_back(std::move(f));
     }
     NormalizeWeights(&s);
+    // A class's spectrum: Weyl's s_i = i times a smooth class-specific
+    // factor (clustered spectra of similar sizes, like real shapes).
+    std::uniform_real_distribution<double> spectral_unit(0.0, 1.0);
+    const double tilt = 0.6 + 0.8 * spectral_unit(spectrum_rng_);
+    const double wave = 0.2 * spectral_unit(spectrum_rng_);
+    const double phase = 6.0 * spectral_unit(spectrum_rng_);
+    for (int i = 1; i <= options_.spectrum; ++i) {
+      s.spectrum.push_back(i * tilt * (1.0 + wave * std::sin(0.3 * i + phase)));
+    }
+    std::sort(s.spectrum.begin(), s.spectrum.end());
     return s;
   }
 
   SignatureGeneratorOptions options_;
   std::mt19937_64 rng_;
+  std::mt19937_64 spectrum_rng_;
   std::vector<Signature> prototypes_;
 };
 

@@ -28,6 +28,7 @@
 #include "extractor/lib/mesh_io.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "tests/service/extsvc_test_util.h"
 
 namespace tpr {
@@ -104,7 +105,7 @@ absl::StatusOr<Matrix> InProcessDistances(const std::vector<LabelledMesh>& meshe
   const size_t n = prepared.size();
   Matrix d(n, std::vector<double>(n, 0.0));
   for (size_t i = 0; i < n; ++i) {
-    for (size_t j = i + 1; j < n; ++j) d[i][j] = d[j][i] = index::Emd(prepared[i], prepared[j]);
+    for (size_t j = i + 1; j < n; ++j) d[i][j] = d[j][i] = index::Distance(prepared[i], prepared[j]);
   }
   return d;
 }

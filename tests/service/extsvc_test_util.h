@@ -43,6 +43,7 @@
 #include "extractor/synth/synth.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "indexer/lib/signature.h"
 #include "indexer/service/convert.h"
 #include "tests/service/ops_testing.h"
@@ -275,8 +276,8 @@ struct Ranked {
 };
 
 // BruteForceRanking returns every model of `models` (id -> signature) ranked
-// by exact EMD (indexer/lib/emd.h, default ground-distance options, which
-// the indexer uses) to `query`, ascending, ties by id. The oracle the
+// by exact distance (indexer/lib/metric.h: EMD plus spectral term, default
+// options, which the indexer uses) to `query`, ascending, ties by id. The oracle the
 // services' VP-tree answers are compared with.
 inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     const v1::Signature& query, const std::vector<std::pair<std::string, v1::Signature>>& models) {
@@ -291,7 +292,7 @@ inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     if (!model_signature.ok()) return model_signature.status();
     absl::StatusOr<index::PreparedSignature> m = index::Prepare(*model_signature, options);
     if (!m.ok()) return m.status();
-    ranked.push_back({index::Emd(*q, *m), id});
+    ranked.push_back({index::Distance(*q, *m), id});
   }
   std::sort(ranked.begin(), ranked.end(), [](const Ranked& a, const Ranked& b) {
     return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;

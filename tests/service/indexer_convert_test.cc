@@ -177,5 +177,58 @@ TEST(IndexerConvertTest, CurvatureFiniteButMaySignChange) {
   EXPECT_TRUE(ToIndexSignature(s).ok());
 }
 
+TEST(IndexerConvertTest, SpectrumCarriedAndValidated) {
+  index::testing::SignatureGeneratorOptions o;
+  o.features = 6;
+  o.bands = 4;
+  o.spectrum = 50;
+  index::testing::SignatureGenerator gen(o);
+  const index::Signature s = gen.Next();
+  const v1::Signature wire = ToWireSignature(s, 3);
+  EXPECT_EQ(wire.options().spectrum_eigenvalues(), 50);
+  absl::StatusOr<index::Signature> back = ToIndexSignature(wire);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->spectrum, s.spectrum);
+
+  auto expect = [&](const std::function<void(v1::Signature*)>& edit, const std::string& name) {
+    v1::Signature bad = wire;
+    edit(&bad);
+    absl::StatusOr<index::Signature> r = ToIndexSignature(bad);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
+    EXPECT_NE(std::string(r.status().message()).find(name), std::string::npos) << r.status();
+  };
+  for (double bad : {0.0, -1.0, kNaN, kInf}) {
+    expect([bad](v1::Signature* w) { w->set_spectrum(7, bad); }, "spectrum[7]");
+  }
+  expect([](v1::Signature* w) { w->set_spectrum(9, w->spectrum(8) * 0.5); }, "ascending");
+  expect([](v1::Signature* w) { w->add_spectrum(1e9); }, "at most 50");
+  expect(
+      [](v1::Signature* w) {
+        w->mutable_options()->set_spectrum_eigenvalues(0);
+        for (int i = 0; i < 1000; ++i) w->add_spectrum(1e9);
+      },
+      "at most 1000");
+  // Unset spectrum_eigenvalues (the default) bounds only by 1000; an empty
+  // spectrum is valid (a mesh too small for any eigenvalue).
+  v1::Signature unset = wire;
+  unset.mutable_options()->set_spectrum_eigenvalues(0);
+  EXPECT_TRUE(ToIndexSignature(unset).ok());
+  unset.clear_spectrum();
+  EXPECT_TRUE(ToIndexSignature(unset).ok());
+}
+
+TEST(IndexerConvertTest, OtherSignatureVersionsAreFailedPrecondition) {
+  for (int version : {0, 1, kSignatureVersion + 1}) {
+    v1::Signature s = Valid();
+    s.set_signature_version(version);
+    absl::StatusOr<index::Signature> r = ToIndexSignature(s);
+    ASSERT_FALSE(r.ok()) << version;
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition) << r.status();
+    const std::string want = version < kSignatureVersion ? "tpr add --update" : "upgrade";
+    EXPECT_NE(std::string(r.status().message()).find(want), std::string::npos) << r.status();
+  }
+}
+
 }  // namespace
 }  // namespace tpr::indexer

@@ -1,0 +1,82 @@
+#include "indexer/lib/spectral.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace tpr::index {
+
+const char* SpectralTransformName(SpectralTransform t) {
+  switch (t) {
+    case SpectralTransform::kRaw:
+      return "raw";
+    case SpectralTransform::kByIndex:
+      return "by_index";
+    case SpectralTransform::kLog:
+      return "log";
+  }
+  return "?";
+}
+
+absl::StatusOr<SpectralTransform> ParseSpectralTransform(absl::string_view name) {
+  for (SpectralTransform t :
+       {SpectralTransform::kRaw, SpectralTransform::kByIndex, SpectralTransform::kLog}) {
+    if (name == SpectralTransformName(t)) return t;
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("spectral transform '", name, "' is not one of raw, by_index, log"));
+}
+
+absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
+  if (!std::isfinite(o.weight) || o.weight < 0.0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("spectral weight ", o.weight, " must be finite and >= 0"));
+  }
+  if (o.eigenvalues < 1 || o.eigenvalues > kMaxSpectrum) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "spectral eigenvalues ", o.eigenvalues, " must be in 1..", kMaxSpectrum));
+  }
+  switch (o.transform) {
+    case SpectralTransform::kRaw:
+    case SpectralTransform::kByIndex:
+    case SpectralTransform::kLog:
+      return absl::OkStatus();
+  }
+  return absl::InvalidArgumentError("spectral transform is not raw, by_index or log");
+}
+
+std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
+                                      const SpectralOptions& options) {
+  if (options.weight == 0.0) return {};
+  const size_t n = static_cast<size_t>(options.eigenvalues);
+  const double scale = options.weight / std::sqrt(static_cast<double>(n));
+  std::vector<double> e(n);
+  for (size_t k = 0; k < n; ++k) {
+    const double i = static_cast<double>(k + 1);
+    const double x = k < spectrum.size() ? spectrum[k] : i;  // Weyl asymptote
+    double phi = x;
+    switch (options.transform) {
+      case SpectralTransform::kRaw:
+        break;
+      case SpectralTransform::kByIndex:
+        phi = x / i;
+        break;
+      case SpectralTransform::kLog:
+        phi = std::log(x);
+        break;
+    }
+    e[k] = scale * phi;
+  }
+  return e;
+}
+
+double SpectralDistance(const double* a, const double* b, size_t n) {
+  double s = 0.0;
+  for (size_t i = 0; i < n; ++i) {
+    const double d = a[i] - b[i];
+    s += d * d;
+  }
+  return std::sqrt(s);
+}
+
+}  // namespace tpr::index

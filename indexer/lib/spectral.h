@@ -1,0 +1,82 @@
+// The spectral term of the combined distance (metric.h): a fixed embedding
+// of a signature's Laplace-Beltrami spectrum ("ShapeDNA", Reuter et al.
+// 2006; issue 9) into R^n, compared with the Euclidean norm. The spectrum
+// values are lambda_i A / (4 pi) (indexer/lib/signature.h), which Weyl's law
+// makes grow like i: lambda_i ~ 4 pi i / A for a closed surface of area A.
+//
+// Embedding. For n = options.eigenvalues and s_1 <= s_2 <= ... the stored
+// values (a spectrum shorter than n is padded with its Weyl asymptote
+// s_i = i, so every signature has an image), coordinate i is
+//   E_i(s) = weight * phi_i(s_i) / sqrt(n),        i = 1..n,
+// with phi_i one fixed per-coordinate map chosen by options.transform:
+//   kRaw      phi_i(x) = x                (ShapeDNA's plain Euclidean form)
+//   kByIndex  phi_i(x) = x / i            (normalized by index: every
+//                                          coordinate is about 1 by Weyl)
+//   kLog      phi_i(x) = log(x)           (relative differences)
+// The 1/sqrt(n) makes the term's size independent of n. The spectral
+// distance is ||E(s) - E(t)||_2. phi does not depend on the other signature
+// or on any data, which is what keeps the sum with the EMD a metric
+// (metric.h).
+//
+//   SpectralOptions o;                              // defaults, see below
+//   std::vector<double> e = SpectralEmbedding(spectrum, o);
+//   double d = SpectralDistance(e.data(), f.data(), e.size());
+#ifndef TPR_INDEXER_LIB_SPECTRAL_H_
+#define TPR_INDEXER_LIB_SPECTRAL_H_
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+
+namespace tpr::index {
+
+// SpectralTransform: the per-coordinate map phi of the file comment.
+enum class SpectralTransform { kRaw, kByIndex, kLog };
+
+// SpectralTransformName returns "raw", "by_index" or "log".
+const char* SpectralTransformName(SpectralTransform t);
+// ParseSpectralTransform is its inverse; INVALID_ARGUMENT for another name.
+absl::StatusOr<SpectralTransform> ParseSpectralTransform(absl::string_view name);
+
+// kMaxSpectrum: the longest spectrum a signature may carry and the largest
+// options.eigenvalues.
+inline constexpr int kMaxSpectrum = 1000;
+
+// SpectralOptions: the spectral term of the combined distance. Every
+// signature of one index is prepared with the same options.
+struct SpectralOptions {
+  // w_s: the term's weight relative to the EMD of Eq. 7 (whose ground
+  // distance is of order 1). 0 gives the paper's TPR distance exactly.
+  // Must be finite and >= 0. Default: chosen by cross-validation over all
+  // dev sets together, see docs/results.md.
+  double weight = 0.0;
+  // phi. Default: see weight.
+  SpectralTransform transform = SpectralTransform::kLog;
+  // n: eigenvalues compared (the first n). Range 1..kMaxSpectrum. Default
+  // 50 (the extractor's default count).
+  int eigenvalues = 50;
+};
+
+// ValidateSpectralOptions returns OK when `options` meets the constraints
+// above, INVALID_ARGUMENT naming the field otherwise. O(1); thread-safe.
+absl::Status ValidateSpectralOptions(const SpectralOptions& options);
+
+// SpectralEmbedding returns E(spectrum) of the file comment: options.
+// eigenvalues values, or an empty vector when options.weight is 0 (the
+// term is then absent). Preconditions: `options` valid and every value of
+// `spectrum` finite and > 0 (ValidateSignature checks both); values past
+// the first n are ignored. O(n); thread-safe.
+std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
+                                      const SpectralOptions& options);
+
+// SpectralDistance returns ||a - b||_2 over n coordinates (0 for n = 0).
+// O(n); thread-safe.
+double SpectralDistance(const double* a, const double* b, size_t n);
+
+}  // namespace tpr::index
+
+#endif  // TPR_INDEXER_LIB_SPECTRAL_H_
