@@ -91,7 +91,7 @@ absl::Status IndexerCore::LoadIndex() {
         },
         /*threads=*/2));
     // The scan must find every model the acknowledged writes left.
-    TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size()));
+    TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size() + outdated.size()));
     table_.Put(infos);
     if (!outdated.empty()) {
       Log(absl::StrCat(outdated.size(), " stored models (e.g. '", *outdated.begin(),
