@@ -238,6 +238,7 @@ class InProcessIndexer {
 
   tpr::v1::Indexer::Stub* stub() { return stub_.get(); }
   std::shared_ptr<grpc::Channel> channel() { return channel_; }
+  std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
   IndexerCore* core() { return core_.get(); }
   CoreOptions& core_options() { return core_options_; }
 

@@ -151,7 +151,13 @@ class BatchUpsertWriter {
   virtual absl::StatusOr<v1::BatchUpsertResponse> Finish() = 0;
 };
 
-// IndexerClient calls tpr.v1.Indexer.
+// IndexerClient calls tpr.v1.Indexer: one tpr-indexer, or a tpr-gateway in
+// front of a sharded index (same API). Several addresses in one Connect are
+// REPLICAS OF ONE INDEX: calls go to any of them in turn, so each must hold
+// the same models. Never list independent indexers (or shards) here: every
+// search would see only part of the data. Sharding is the gateway's job:
+// connect to the gateway (or several gateways of one shard map), which
+// routes ids to shards and merges their answers exactly.
 class IndexerClient {
  public:
   explicit IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});

@@ -1,0 +1,96 @@
+// tpr-gateway: the stateless front of a sharded index. Serves the unchanged
+// tpr.v1.Indexer service (with health and reflection) over S tpr-indexer
+// shards (gateway_service.h); on SIGTERM/SIGINT it stops accepting calls,
+// lets in-flight calls finish (grace period) and exits 0.
+//
+//   tpr-gateway --listen 127.0.0.1:7003 --shard 127.0.0.1:7100
+//               --shard 127.0.0.1:7110,127.0.0.1:7111   (shard 1 has a replica)
+//   tpr-gateway --listen 0.0.0.0:7003 --shard-map /etc/tpr/shards.txt
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "CLI/CLI.hpp"
+#include "absl/strings/str_cat.h"
+#include "common/server_lifecycle.h"
+#include "indexer/gateway/gateway_service.h"
+#include "indexer/gateway/shard_map.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"tpr-gateway: one tpr.v1.Indexer endpoint over sharded tpr-indexer processes"};
+  tpr::common::ServerOptions server_options;
+  server_options.listen_address = "127.0.0.1:7003";
+  server_options.log_name = "tpr-gateway";
+  tpr::gateway::GatewayOptions options;
+  std::vector<std::string> shard_flags;
+  std::string shard_map_path;
+  int threads = 0;
+  app.add_option("--listen", server_options.listen_address,
+                 "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
+      ->capture_default_str();
+  app.add_option("--shard", shard_flags,
+                 "One shard, in shard order: PRIMARY[,REPLICA...] (repeat per shard)");
+  app.add_option("--shard-map", shard_map_path,
+                 "File with one shard per line: PRIMARY [REPLICA ...] ('#' comments)");
+  app.add_option("--health-interval-ms", options.health_interval_ms,
+                 "How often every shard address is health-checked (0: never)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--health-timeout-ms", options.health_timeout_ms,
+                 "Deadline of one health check")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--threads", threads, "Upper bound on server threads (0: gRPC's default)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--shutdown-grace-ms", server_options.shutdown_grace_ms,
+                 "On SIGTERM, how long in-flight calls may finish (ms)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  if (threads > 0) server_options.max_threads = threads + 2;
+
+  const std::string name = server_options.log_name;
+  auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };
+  if (shard_flags.empty() == shard_map_path.empty()) {
+    log("give the shards either with --shard (repeated) or with --shard-map FILE");
+    return 2;
+  }
+  absl::StatusOr<tpr::gateway::ShardMap> map;
+  if (!shard_map_path.empty()) {
+    std::ifstream in(shard_map_path);
+    if (!in) {
+      log(absl::StrCat("cannot read the shard map ", shard_map_path));
+      return 2;
+    }
+    std::stringstream text;
+    text << in.rdbuf();
+    map = tpr::gateway::ParseShardMap(text.str());
+  } else {
+    map = tpr::gateway::ParseShardFlags(shard_flags);
+  }
+  if (!map.ok()) {
+    log(map.status().ToString());
+    return 2;
+  }
+  options.shards = std::move(*map);
+  options.log = log;
+  for (size_t s = 0; s < options.shards.shards.size(); ++s) {
+    const tpr::gateway::ShardAddresses& shard = options.shards.shards[s];
+    std::string replicas;
+    for (const std::string& r : shard.replicas) absl::StrAppend(&replicas, " ", r);
+    log(absl::StrCat("shard ", s, ": primary ", shard.primary,
+                     replicas.empty() ? "" : absl::StrCat(", replicas", replicas)));
+  }
+  tpr::gateway::GatewayService service(std::move(options));
+  absl::StatusOr<tpr::common::StartedServer> started =
+      tpr::common::StartServer(server_options, {&service});
+  if (!started.ok()) {
+    log(started.status().ToString());
+    return 1;
+  }
+  const int code = tpr::common::ServeUntilSignal(*started->server, server_options, started->port);
+  started->server.reset();
+  return code;
+}

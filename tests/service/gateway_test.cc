@@ -1,0 +1,386 @@
+// tpr-gateway in process: three indexer shards and one reference indexer
+// (IndexerCore + IndexerService on loopback) holding the same corpus, the
+// gateway (GatewayService) in front of the shards. Every answer through the
+// gateway must equal the reference indexer's: search rankings to the last
+// bit of every distance (ties, radius, label filter, exclude_self, k above
+// the corpus, after deletes), and both against the brute-force oracle;
+// List pages, Stats sums, Get/Upsert/Delete errors; a stopped shard fails
+// the call with UNAVAILABLE naming it.
+#include "indexer/gateway/gateway_service.h"
+
+#include <gtest/gtest.h>
+
+#include "absl/strings/str_cat.h"
+#include "tests/service/extsvc_test_util.h"
+#include "tests/service/indexer_testing.h"
+
+namespace tpr::gateway {
+namespace {
+
+using ::tpr::indexer::testing::BruteForce;
+using ::tpr::indexer::testing::InProcessIndexer;
+using ::tpr::indexer::testing::MakeModels;
+using ::tpr::indexer::testing::RunSearch;
+using ::tpr::indexer::testing::SearchResult;
+using ::tpr::indexer::testing::TestModel;
+using ::tpr::indexer::testing::ToRequest;
+using ::tpr::indexer::testing::ToWire;
+using ::tpr::testing::TempDir;
+
+constexpr int kShards = 3;
+
+grpc::Status Ingest(tpr::v1::Indexer::Stub* stub, const std::vector<TestModel>& models,
+                    tpr::v1::BatchUpsertResponse* response) {
+  grpc::ClientContext context;
+  auto writer = stub->BatchUpsert(&context, response);
+  for (const TestModel& m : models) {
+    if (!writer->Write(ToRequest(m))) break;
+  }
+  writer->WritesDone();
+  return writer->Finish();
+}
+
+std::vector<std::string> ListAll(tpr::v1::Indexer::Stub* stub, int page_size,
+                                 const std::string& label, int* pages) {
+  std::vector<std::string> ids;
+  tpr::v1::ListRequest request;
+  request.set_page_size(page_size);
+  request.set_label(label);
+  *pages = 0;
+  for (int guard = 0; guard < 10000; ++guard) {
+    grpc::ClientContext context;
+    tpr::v1::ListResponse response;
+    grpc::Status status = stub->List(&context, request, &response);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    if (!status.ok()) break;
+    ++*pages;
+    EXPECT_LE(response.models_size(), page_size);
+    for (const tpr::v1::Model& m : response.models()) {
+      EXPECT_EQ(m.signature().features_size(), 0);
+      ids.push_back(m.id());
+    }
+    if (response.next_page_token().empty()) break;
+    request.set_page_token(response.next_page_token());
+  }
+  return ids;
+}
+
+class GatewayTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    for (int s = 0; s < kShards; ++s) {
+      shards_.push_back(std::make_unique<InProcessIndexer>(absl::StrCat(dir_.path(), "/shard", s)));
+      ASSERT_TRUE(shards_.back()->Start().ok());
+    }
+    reference_ = std::make_unique<InProcessIndexer>(dir_.path() + "/single");
+    ASSERT_TRUE(reference_->Start().ok());
+    GatewayOptions options;
+    for (auto& shard : shards_) options.shards.shards.push_back({shard->address(), {}});
+    options.health_interval_ms = 0;  // tests call CheckNow
+    service_ = std::make_unique<GatewayService>(options);
+    server_options_.shutdown_grace_ms = 2000;
+    absl::StatusOr<tpr::common::StartedServer> started =
+        tpr::common::StartServer(server_options_, {service_.get()});
+    ASSERT_TRUE(started.ok()) << started.status();
+    server_ = std::move(started->server);
+    gateway_ = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
+        absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+
+    // The corpus: generated models, plus exact copies of some under other
+    // ids (ties at equal distance, spread over the shards by their ids).
+    models_ = MakeModels(240, 6, 17);
+    for (int i = 0; i < 30; i += 3) {
+      for (const char* suffix : {"_a", "_b", "_c"}) {
+        TestModel copy = models_[static_cast<size_t>(i)];
+        copy.id = absl::StrCat("dup", i, suffix);
+        models_.push_back(copy);
+      }
+    }
+    tpr::v1::BatchUpsertResponse single, sharded;
+    ASSERT_TRUE(Ingest(reference_->stub(), models_, &single).ok());
+    grpc::Status status = Ingest(gateway_.get(), models_, &sharded);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_EQ(sharded.written(), static_cast<int64_t>(models_.size()));
+    EXPECT_EQ(sharded.written(), single.written());
+  }
+
+  void TearDown() override {
+    if (server_) tpr::common::ShutdownGracefully(*server_, server_options_);
+    server_.reset();
+  }
+
+  // Runs `request` on both and expects identical answers, also equal to the
+  // brute-force oracle. Returns the number of neighbours.
+  size_t ExpectSameAnswer(const tpr::v1::SearchRequest& request) {
+    SearchResult want = RunSearch(reference_->stub(), request);
+    SearchResult got = RunSearch(gateway_.get(), request);
+    EXPECT_TRUE(want.status.ok()) << want.status.error_message();
+    EXPECT_TRUE(got.status.ok()) << got.status.error_message();
+    EXPECT_TRUE(got.got_stats);
+    EXPECT_EQ(got.neighbors.size(), want.neighbors.size()) << request.ShortDebugString();
+    for (size_t i = 0; i < std::min(got.neighbors.size(), want.neighbors.size()); ++i) {
+      EXPECT_EQ(got.neighbors[i].id(), want.neighbors[i].id()) << "rank " << i + 1;
+      // Bit-identical: the same EMD of the same pair of signatures.
+      EXPECT_EQ(got.neighbors[i].distance(), want.neighbors[i].distance()) << "rank " << i + 1;
+      EXPECT_EQ(got.neighbors[i].label(), want.neighbors[i].label());
+      EXPECT_EQ(got.neighbors[i].rank(), static_cast<int>(i + 1));
+    }
+    // The oracle, over the live corpus.
+    tpr::index::Signature query;
+    std::string exclude;
+    if (request.has_signature()) {
+      query = tpr::testing::ToIndexSignature(request.signature());
+    } else {
+      for (const TestModel& m : live()) {
+        if (m.id == request.id()) query = m.signature;
+      }
+      if (request.exclude_self()) exclude = request.id();
+    }
+    std::vector<indexer::testing::Hit> oracle =
+        BruteForce(query, live(), request.k(), request.radius(), request.label(), exclude);
+    EXPECT_EQ(got.neighbors.size(), oracle.size()) << request.ShortDebugString();
+    for (size_t i = 0; i < std::min(got.neighbors.size(), oracle.size()); ++i) {
+      EXPECT_EQ(got.neighbors[i].id(), oracle[i].id) << "rank " << i + 1;
+      EXPECT_NEAR(got.neighbors[i].distance(), oracle[i].distance, 1e-9);
+    }
+    return got.neighbors.size();
+  }
+
+  std::vector<TestModel> live() const {
+    std::vector<TestModel> out;
+    for (const TestModel& m : models_) {
+      if (!deleted_.count(m.id)) out.push_back(m);
+    }
+    return out;
+  }
+
+  TempDir dir_;
+  std::vector<std::unique_ptr<InProcessIndexer>> shards_;
+  std::unique_ptr<InProcessIndexer> reference_;
+  std::unique_ptr<GatewayService> service_;
+  tpr::common::ServerOptions server_options_;
+  std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<tpr::v1::Indexer::Stub> gateway_;
+  std::vector<TestModel> models_;
+  std::set<std::string> deleted_;
+};
+
+TEST_F(GatewayTest, ModelsLiveOnTheirOwnShard) {
+  std::vector<int64_t> expected(kShards, 0);
+  for (const TestModel& m : models_) ++expected[static_cast<size_t>(ShardOf(m.id, kShards))];
+  for (int s = 0; s < kShards; ++s) {
+    grpc::ClientContext context;
+    tpr::v1::StatsResponse stats;
+    ASSERT_TRUE(shards_[static_cast<size_t>(s)]->stub()->Stats(&context, {}, &stats).ok());
+    EXPECT_EQ(stats.models(), expected[static_cast<size_t>(s)]) << "shard " << s;
+    EXPECT_GT(stats.models(), 0);
+  }
+}
+
+TEST_F(GatewayTest, SearchEqualsOneIndexerIncludingTiesRadiusLabelsAndLargeK) {
+  const int n = static_cast<int>(models_.size());
+  size_t total = 0;
+  for (const char* id : {"m00000", "m00003", "dup9_b", "m00118", "m00239"}) {
+    for (int k : {1, 4, 12, n + 10}) {
+      for (bool exclude_self : {false, true}) {
+        tpr::v1::SearchRequest request;
+        request.set_id(id);
+        request.set_k(k);
+        request.set_exclude_self(exclude_self);
+        total += ExpectSameAnswer(request);
+        request.set_label("class3");
+        total += ExpectSameAnswer(request);
+      }
+    }
+  }
+  // Radius: about the 20th neighbour's distance of one query.
+  SearchResult probe = RunSearch(reference_->stub(), [] {
+    tpr::v1::SearchRequest r;
+    r.set_id("m00005");
+    r.set_k(20);
+    return r;
+  }());
+  ASSERT_EQ(probe.neighbors.size(), 20u);
+  tpr::v1::SearchRequest within;
+  within.set_id("m00005");
+  within.set_k(n);
+  within.set_radius(probe.neighbors.back().distance());
+  EXPECT_GE(ExpectSameAnswer(within), 20u);
+  // By signature: members of the generator's classes, not in the corpus.
+  tpr::index::testing::SignatureGeneratorOptions options;
+  options.seed = 99;
+  options.features = 12;
+  options.bands = 8;
+  options.classes = 6;
+  tpr::index::testing::SignatureGenerator gen(options);
+  for (int q = 0; q < 4; ++q) {
+    tpr::v1::SearchRequest request;
+    *request.mutable_signature() = ToWire(gen.Member(q));
+    request.set_k(q == 0 ? n + 1 : 15);
+    total += ExpectSameAnswer(request);
+  }
+  EXPECT_GT(total, 1000u);
+}
+
+TEST_F(GatewayTest, TiesAcrossShardsComeInIdOrder) {
+  // m00009 and its three copies are at distance 0 from each other; their ids
+  // lie on different shards, and the merge must order them as one indexer.
+  std::set<int> shards;
+  for (const char* id : {"m00009", "dup9_a", "dup9_b", "dup9_c"}) shards.insert(ShardOf(id, kShards));
+  EXPECT_GT(shards.size(), 1u);
+  tpr::v1::SearchRequest request;
+  request.set_id("dup9_b");
+  request.set_k(6);
+  ExpectSameAnswer(request);
+  SearchResult got = RunSearch(gateway_.get(), request);
+  ASSERT_GE(got.neighbors.size(), 4u);
+  EXPECT_EQ(got.neighbors[0].id(), "dup9_a");
+  EXPECT_EQ(got.neighbors[1].id(), "dup9_b");
+  EXPECT_EQ(got.neighbors[2].id(), "dup9_c");
+  EXPECT_EQ(got.neighbors[3].id(), "m00009");
+  EXPECT_EQ(got.neighbors[3].distance(), 0.0);
+}
+
+TEST_F(GatewayTest, SearchAfterDeletesAndOverwrites) {
+  for (const char* id : {"m00001", "m00002", "dup0_a", "m00100", "m00150"}) {
+    for (tpr::v1::Indexer::Stub* stub : {reference_->stub(), gateway_.get()}) {
+      grpc::ClientContext context;
+      tpr::v1::DeleteRequest request;
+      request.set_id(id);
+      tpr::v1::DeleteResponse response;
+      ASSERT_TRUE(stub->Delete(&context, request, &response).ok()) << id;
+    }
+    deleted_.insert(id);
+  }
+  for (const char* id : {"m00000", "dup0_b", "m00149"}) {
+    tpr::v1::SearchRequest request;
+    request.set_id(id);
+    request.set_k(static_cast<int>(models_.size()));
+    request.set_exclude_self(true);
+    ExpectSameAnswer(request);
+  }
+  // Deleting again: NOT_FOUND, as from one indexer.
+  grpc::ClientContext context;
+  tpr::v1::DeleteRequest again;
+  again.set_id("m00001");
+  tpr::v1::DeleteResponse response;
+  EXPECT_EQ(gateway_->Delete(&context, again, &response).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(GatewayTest, UnaryCallsAnswerAsOneIndexer) {
+  grpc::ClientContext get_context;
+  tpr::v1::GetRequest get;
+  get.set_id("m00042");
+  tpr::v1::Model model;
+  ASSERT_TRUE(gateway_->Get(&get_context, get, &model).ok());
+  EXPECT_EQ(model.label(), "class0");
+  EXPECT_GT(model.signature().features_size(), 0);
+
+  grpc::ClientContext missing_context;
+  get.set_id("no-such-model");
+  EXPECT_EQ(gateway_->Get(&missing_context, get, &model).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+
+  grpc::ClientContext dup_context;
+  tpr::v1::UpsertResponse upserted;
+  EXPECT_EQ(gateway_->Upsert(&dup_context, ToRequest(models_[7]), &upserted).error_code(),
+            grpc::StatusCode::ALREADY_EXISTS);
+  grpc::ClientContext over_context;
+  ASSERT_TRUE(gateway_->Upsert(&over_context, ToRequest(models_[7], true), &upserted).ok());
+  EXPECT_FALSE(upserted.created());
+
+  tpr::v1::SearchRequest bad;
+  bad.set_id("m00001");
+  bad.set_k(0);
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  bad.set_k(3);
+  bad.set_radius(-1);
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  bad.set_radius(0);
+  bad.set_id("no-such-model");
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::NOT_FOUND);
+
+  // A batch with one bad model fails; the shards keep what they acknowledged.
+  std::vector<TestModel> batch = MakeModels(20, 2, 3, "batch");
+  batch[11].signature.features.clear();
+  tpr::v1::BatchUpsertResponse counts;
+  EXPECT_EQ(Ingest(gateway_.get(), batch, &counts).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(GatewayTest, ListMergesShardsInIdOrder) {
+  int pages = 0;
+  int reference_pages = 0;
+  const std::vector<std::string> want = ListAll(reference_->stub(), 1000, "", &reference_pages);
+  ASSERT_EQ(want.size(), models_.size());
+  for (int page_size : {1, 7, 100, 1000}) {
+    EXPECT_EQ(ListAll(gateway_.get(), page_size, "", &pages), want) << page_size;
+    EXPECT_EQ(pages, (static_cast<int>(want.size()) + page_size - 1) / page_size)
+        << page_size;
+  }
+  EXPECT_EQ(ListAll(gateway_.get(), 9, "class4", &pages),
+            ListAll(reference_->stub(), 9, "class4", &reference_pages));
+  grpc::ClientContext context;
+  tpr::v1::ListRequest foreign;
+  foreign.set_page_token("m00010");  // an indexer's token is not the gateway's
+  tpr::v1::ListResponse response;
+  EXPECT_EQ(gateway_->List(&context, foreign, &response).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(GatewayTest, StatsSumsAndListsEachShard) {
+  grpc::ClientContext a, b;
+  tpr::v1::StatsResponse want, got;
+  ASSERT_TRUE(reference_->stub()->Stats(&a, {}, &want).ok());
+  ASSERT_TRUE(gateway_->Stats(&b, {}, &got).ok());
+  EXPECT_EQ(got.models(), want.models());
+  EXPECT_EQ(got.indexed() + got.buffered(), want.models());
+  using Labels = std::map<std::string, int64_t>;
+  EXPECT_EQ(Labels(got.labels().begin(), got.labels().end()),
+            Labels(want.labels().begin(), want.labels().end()));
+  ASSERT_EQ(got.shards_size(), kShards);
+  int64_t sum = 0;
+  for (int s = 0; s < kShards; ++s) {
+    EXPECT_EQ(got.shards(s).shard(), s);
+    EXPECT_EQ(got.shards(s).address(), shards_[static_cast<size_t>(s)]->address());
+    sum += got.shards(s).stats().models();
+  }
+  EXPECT_EQ(sum, got.models());
+}
+
+TEST_F(GatewayTest, AStoppedShardFailsTheCallNamingIt) {
+  shards_[1]->Stop();
+  tpr::v1::SearchRequest request;
+  *request.mutable_signature() = ToWire(models_[0].signature);
+  request.set_k(5);
+  SearchResult got = RunSearch(gateway_.get(), request);
+  EXPECT_EQ(got.status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(got.status.error_message().find("shard 1"), std::string::npos)
+      << got.status.error_message();
+  EXPECT_TRUE(got.neighbors.empty());
+  // After a health check too (the address is then known down up front).
+  service_->shards().CheckNow();
+  got = RunSearch(gateway_.get(), request);
+  EXPECT_EQ(got.status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(got.status.error_message().find("shard 1"), std::string::npos);
+  // Ids on the other shards still read; ids on shard 1 fail naming it.
+  for (const TestModel& m : models_) {
+    grpc::ClientContext context;
+    tpr::v1::GetRequest get;
+    get.set_id(m.id);
+    tpr::v1::Model model;
+    grpc::Status status = gateway_->Get(&context, get, &model);
+    if (ShardOf(m.id, kShards) == 1) {
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
+    } else {
+      EXPECT_TRUE(status.ok()) << status.error_message();
+    }
+  }
+  grpc::ClientContext stats_context;
+  tpr::v1::StatsResponse stats;
+  EXPECT_EQ(gateway_->Stats(&stats_context, {}, &stats).error_code(), grpc::StatusCode::UNAVAILABLE);
+}
+
+}  // namespace
+}  // namespace tpr::gateway
