@@ -132,7 +132,10 @@ void Shards::Check(Endpoint* endpoint) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() +
                        std::chrono::milliseconds(options_.health_timeout_ms));
-  grpc::health::v1::HealthCheckRequest request;  // "": the whole server
+  // Readiness, not liveness (common/health.h): a loading indexer or a
+  // follower still catching up is alive but must not be read from.
+  grpc::health::v1::HealthCheckRequest request;
+  request.set_service("tpr.v1.Indexer");
   grpc::health::v1::HealthCheckResponse response;
   const grpc::Status status =
       grpc::health::v1::Health::NewStub(endpoint->channel)->Check(&context, request, &response);

@@ -37,7 +37,8 @@
 // cancellation propagate to the shards.
 //
 // Health: a background thread asks every address's grpc.health.v1 service
-// every health_interval_ms; a read goes only to addresses whose last answer
+// for the readiness of "tpr.v1.Indexer" (common/health.h) every
+// health_interval_ms; a read goes only to addresses whose last answer
 // was SERVING (a call failing with UNAVAILABLE marks its address down until
 // the next check), or, when none is, to the primary as a last try. Primaries
 // start as serving, replicas as not serving until their first check (a

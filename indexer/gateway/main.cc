@@ -7,12 +7,15 @@
 //               --shard 127.0.0.1:7110,127.0.0.1:7111   (shard 1 has a replica)
 //   tpr-gateway --listen 0.0.0.0:7003 --shard-map /etc/tpr/shards.txt
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
+#include "common/config.h"
+#include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
@@ -48,7 +51,18 @@ int main(int argc, char** argv) {
                  "On SIGTERM, how long in-flight calls may finish (ms)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  tpr::common::ServerFlags ops_flags;
+  tpr::common::AddServerFlags(app, &ops_flags);
+  tpr::common::ConfigSupport config = tpr::common::AddConfigSupport(app, "TPR_GATEWAY_");
   CLI11_PARSE(app, argc, argv);
+  if (std::optional<int> exit_code =
+          tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
+    return *exit_code;
+  }
+  // Readiness (the health status of "tpr.v1.Indexer") stays SERVING until
+  // draining: a gateway can always answer, if need be with UNAVAILABLE
+  // naming the shard that cannot.
+  server_options.readiness_service = "tpr.v1.Indexer";
   if (threads > 0) server_options.max_threads = threads + 2;
 
   const std::string name = server_options.log_name;
@@ -90,7 +104,5 @@ int main(int argc, char** argv) {
     log(started.status().ToString());
     return 1;
   }
-  const int code = tpr::common::ServeUntilSignal(*started->server, server_options, started->port);
-  started->server.reset();
-  return code;
+  return tpr::common::ServeUntilSignal(*started, server_options);
 }

@@ -282,7 +282,8 @@ TEST_F(ClusterTest, AKilledShardFailsQueriesNeverShortensThem) {
   std::vector<v1::UpsertRequest> requests;
   for (const TestModel& m : MakeModels(90, 3, 4)) requests.push_back(ToRequest(m));
   v1::BatchUpsertResponse response;
-  ASSERT_TRUE(Batch(gateway_stub_.get(), requests, &response).ok());
+  grpc::Status ingested = Batch(gateway_stub_.get(), requests, &response);
+  ASSERT_TRUE(ingested.ok()) << ingested.error_message();
   EXPECT_EQ(shards_[2].Stop(SIGKILL), 128 + SIGKILL);
   // Right after the kill and after the health checker noticed: both fail.
   for (int round = 0; round < 2; ++round) {
@@ -370,7 +371,8 @@ TEST_F(ClusterTest, SigtermDrainsEveryService) {
   std::vector<v1::UpsertRequest> requests;
   for (const TestModel& m : MakeModels(600, 6, 9)) requests.push_back(ToRequest(m));
   v1::BatchUpsertResponse response;
-  ASSERT_TRUE(Batch(gateway_stub_.get(), requests, &response).ok());
+  grpc::Status ingested = Batch(gateway_stub_.get(), requests, &response);
+  ASSERT_TRUE(ingested.ok()) << ingested.error_message();
   // A search through the gateway in flight when the gateway gets SIGTERM:
   // it runs to its end.
   grpc::ClientContext context;

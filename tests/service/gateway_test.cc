@@ -129,7 +129,7 @@ class GatewayTest : public ::testing::Test {
     tpr::index::Signature query;
     std::string exclude;
     if (request.has_signature()) {
-      query = tpr::testing::ToIndexSignature(request.signature());
+      query = *indexer::ToIndexSignature(request.signature());
     } else {
       for (const TestModel& m : live()) {
         if (m.id == request.id()) query = m.signature;
