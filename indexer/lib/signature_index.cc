@@ -135,7 +135,7 @@ class IndexCursor : public SignatureIndex::Cursor {
   IndexCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
               PreparedSignature query, double radius,
               std::function<bool(const std::string&)> filter,
-              bool relaxed_bound)
+              bool relaxed_bound, std::function<bool()> stop)
       : snapshot_(std::move(snapshot)),
         query_(std::move(query)),
         filter_(std::move(filter)) {
@@ -179,6 +179,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       spec.extra_items.push_back(n_tree_ + static_cast<uint32_t>(j));
     }
     if (radius > 0.0) spec.radius = radius;
+    spec.stop = std::move(stop);
     inner_ = t->tree.Search(std::move(spec));
   }
 
@@ -343,7 +344,8 @@ size_t SignatureIndex::buffered() const { return snapshot()->buffer.size(); }
 
 absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
     const Signature& query, double radius,
-    std::function<bool(const std::string& id)> filter) const {
+    std::function<bool(const std::string& id)> filter,
+    std::function<bool()> stop) const {
   absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
   if (!prepared.ok()) {
     return absl::Status(prepared.status().code(),
@@ -353,7 +355,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
   if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
       snapshot(), *std::move(prepared), radius, std::move(filter),
-      options_.relaxed_bound));
+      options_.relaxed_bound, std::move(stop)));
 }
 
 std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,

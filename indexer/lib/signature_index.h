@@ -121,10 +121,14 @@ class SignatureIndex {
   // order with distance <= radius (radius <= 0: unlimited) and, when
   // `filter` is set, filter(id) true. filter is called at most once per
   // candidate, from the thread calling Next(), and must stay valid while the
-  // cursor lives. Returns INVALID_ARGUMENT for a malformed query.
+  // cursor lives. `stop`, when set, is polled from the same thread before
+  // each step that may compute an EMD; once it returns true the cursor ends
+  // (Next() returns nullopt), so a cancelled search stops within one EMD
+  // (QuerySpec::stop). Returns INVALID_ARGUMENT for a malformed query.
   absl::StatusOr<std::unique_ptr<Cursor>> Search(
       const Signature& query, double radius,
-      std::function<bool(const std::string& id)> filter) const;
+      std::function<bool(const std::string& id)> filter,
+      std::function<bool()> stop = nullptr) const;
   // Knn returns the min(k, size()) nearest neighbours in ascending
   // (distance, id) order; empty for k == 0 or a malformed query. `stats`,
   // when set, receives the work done.

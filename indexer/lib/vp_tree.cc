@@ -316,6 +316,12 @@ class VpCursor : public NeighborCursor {
 
   std::optional<ItemNeighbor> Next() override {
     while (!queue_.empty()) {
+      // Polled before anything that may compute a distance (an exact item
+      // is returned as found); sticky once true.
+      if (queue_.top().kind != kItemExact && spec_.stop &&
+          (stopped_ || (stopped_ = spec_.stop()))) {
+        return std::nullopt;
+      }
       Entry e = queue_.top();
       queue_.pop();
       if (e.kind == kRun) {
@@ -498,6 +504,7 @@ class VpCursor : public NeighborCursor {
 
   const VpTree::Data* data_;
   QuerySpec spec_;
+  bool stopped_ = false;  // spec_.stop returned true
   SearchStats stats_;
   std::vector<double> dq_;    // per node: d(query, vantage point)
   std::vector<double> path_;  // scratch

@@ -105,6 +105,10 @@ struct QuerySpec {
   std::vector<uint32_t> extra_items;
   // Only items with distance <= radius are returned. Default: unlimited.
   double radius = std::numeric_limits<double>::infinity();
+  // Optional: polled before each step that may compute a distance; once it
+  // returns true the search ends (Next() returns nullopt from then on), so a
+  // cancelled or late caller stops within one distance. Default: none.
+  std::function<bool()> stop;
 };
 
 // NeighborCursor yields results in ascending (distance, tie_less) order.

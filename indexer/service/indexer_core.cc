@@ -406,14 +406,17 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
           "and listed until replaced)"));
     }
     labels = labels_.snapshot();
-    auto filter = [labels, label, exclude, cancelled](const std::string& id) {
-      if (cancelled && cancelled()) return false;
+    auto filter = [labels, label, exclude](const std::string& id) {
       if (!exclude.empty() && id == exclude) return false;
       if (label.empty()) return true;
       const std::string* found = labels->Find(id);
       return found != nullptr && *found == label;
     };
-    TPR_ASSIGN_OR_RETURN(cursor, index_->Search(query, request.radius(), filter));
+    // Cancellation is polled between EMDs inside the ranked search: one
+    // cursor step may otherwise run many EMDs (a filtered or far-reaching
+    // search), which kept the server busy after the client's deadline.
+    TPR_ASSIGN_OR_RETURN(cursor,
+                         index_->Search(query, request.radius(), filter, cancelled));
   }
   return MakeSearchSession(std::move(cursor), request.k(), std::move(cancelled),
                            std::move(labels));

@@ -112,12 +112,15 @@ grpc::Status IndexerService::Search(grpc::ServerContext* context,
     ~Release() { n->fetch_sub(1); }
   } release{&searches_};
 
-  // The core polls this once per candidate. On the sync API IsCancelled()
-  // polls the call's completion queue (a system call), which per candidate
-  // cost more than the search itself; so it is asked at most every 2 ms and
-  // the answer cached in between (cancellation then stops work within ~2 ms).
+  // The core polls this between EMDs. On the sync API IsCancelled() polls
+  // the call's completion queue (a system call), which per EMD cost more
+  // than the search itself; so it is asked at most every 2 ms and the answer
+  // cached in between (cancellation then stops work within ~2 ms plus one
+  // EMD). The deadline is also compared directly, so the search stops at it
+  // even before gRPC has processed the cancellation.
   struct Probe {
     grpc::ServerContext* context;
+    std::chrono::system_clock::time_point deadline;
     std::chrono::steady_clock::time_point next;
     bool cancelled = false;
     bool operator()() {
@@ -125,24 +128,34 @@ grpc::Status IndexerService::Search(grpc::ServerContext* context,
       const auto now = std::chrono::steady_clock::now();
       if (now < next) return false;
       next = now + std::chrono::milliseconds(2);
-      cancelled = context->IsCancelled();
+      cancelled = context->IsCancelled() || std::chrono::system_clock::now() >= deadline;
       return cancelled;
     }
   };
-  auto probe = std::make_shared<Probe>(Probe{context, std::chrono::steady_clock::now()});
+  auto probe = std::make_shared<Probe>(
+      Probe{context, context->deadline(), std::chrono::steady_clock::now()});
   absl::StatusOr<std::unique_ptr<SearchSession>> session =
       core_->StartSearch(*request, [probe] { return (*probe)(); });
   if (!session.ok()) return Finish("Search", session.status());
+  const grpc::Status status = Stream(context, **session, writer);
+  emd_computations_ += (*session)->Stats().emd_computations();
+  return status;
+}
+
+grpc::Status IndexerService::Stream(grpc::ServerContext* context, SearchSession& session,
+                                    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
   tpr::v1::SearchResponse response;
-  while (std::optional<tpr::v1::Neighbor> n = (*session)->Next()) {
+  while (std::optional<tpr::v1::Neighbor> n = session.Next()) {
     *response.mutable_neighbor() = std::move(*n);
     // Write fails once the client has gone: stop working for it.
     if (!writer->Write(response)) {
       return Finish("Search", absl::CancelledError("client stopped reading the stream"));
     }
   }
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Search", c);
-  *response.mutable_stats() = (*session)->Stats();
+  if (context->IsCancelled() || std::chrono::system_clock::now() >= context->deadline()) {
+    return Finish("Search", absl::CancelledError("call cancelled or deadline exceeded"));
+  }
+  *response.mutable_stats() = session.Stats();
   writer->Write(response);
   return grpc::Status::OK;
 }

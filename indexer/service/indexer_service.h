@@ -14,6 +14,7 @@
 #define TPR_INDEXER_SERVICE_INDEXER_SERVICE_H_
 
 #include <atomic>
+#include <cstdint>
 #include <string>
 
 #include "indexer/service/indexer_core.h"
@@ -51,13 +52,28 @@ class IndexerService final : public tpr::v1::Indexer::Service {
   grpc::Status Search(grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
                       grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
 
+  // SearchCounters: the work of the searches this service ran, for health
+  // and metrics. Read at any time from any thread.
+  struct SearchCounters {
+    // Searches running now.
+    int running = 0;
+    // EMDs computed by searches that have ended (completed, cancelled or
+    // past their deadline).
+    int64_t emd_computations = 0;
+  };
+  SearchCounters search_counters() const { return {searches_.load(), emd_computations_.load()}; }
+
  private:
   // Logs failures that are the server's fault (not the caller's input).
   grpc::Status Finish(const char* method, const absl::Status& status) const;
+  // Streams `session`'s neighbours and then its stats.
+  grpc::Status Stream(grpc::ServerContext* context, SearchSession& session,
+                      grpc::ServerWriter<tpr::v1::SearchResponse>* writer);
 
   IndexerCore* core_;
   const ServiceOptions options_;
   std::atomic<int> searches_{0};
+  std::atomic<int64_t> emd_computations_{0};
 };
 
 }  // namespace tpr::indexer

@@ -636,5 +636,79 @@ TEST_F(IndexerServiceTest, ClientCancellationEndsTheStreamAndServerKeepsServing)
   TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[5].signature, models, 3));
 }
 
+// Issue 12 item 4 (search side): a slow search (k = every model, large
+// signatures) with a short deadline. The server stops between EMDs at the
+// deadline: the call ends with DEADLINE_EXCEEDED, the search leaves the
+// server soon after, having computed a small part of the full search's EMDs
+// (the service's counters, independent of the client).
+TEST_F(IndexerServiceTest, SearchStopsComputingAtTheClientsDeadline) {
+  tpr::index::testing::SignatureGeneratorOptions options;
+  options.seed = 93;
+  options.features = 150;
+  options.bands = 8;
+  options.classes = 5;
+  tpr::index::testing::SignatureGenerator gen(options);
+  std::vector<TestModel> models;
+  for (int i = 0; i < 300; ++i) {
+    models.push_back({absl::StrCat("big", i), absl::StrCat("class", i % 5), gen.Member(i % 5)});
+  }
+  {
+    grpc::ClientContext c;
+    tpr::v1::BatchUpsertResponse resp;
+    auto writer = server_->stub()->BatchUpsert(&c, &resp);
+    for (const TestModel& m : models) ASSERT_TRUE(writer->Write(ToRequest(m)));
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+  }
+  server_->core()->WaitForRebuild();
+  const tpr::index::Signature query = gen.Member(2);
+  tpr::v1::SearchRequest request = BySignature(query, static_cast<int>(models.size()));
+
+  // The full search, in process, for its time and work.
+  const auto full_start = std::chrono::steady_clock::now();
+  auto full = server_->core()->StartSearch(request, nullptr);
+  ASSERT_TRUE(full.ok()) << full.status();
+  size_t returned = 0;
+  while ((*full)->Next().has_value()) ++returned;
+  const double full_ms = std::chrono::duration<double, std::milli>(
+                             std::chrono::steady_clock::now() - full_start)
+                             .count();
+  const int64_t full_emds = (*full)->Stats().emd_computations();
+  ASSERT_EQ(returned, models.size());
+  ASSERT_GE(full_emds, static_cast<int64_t>(models.size()));
+  ASSERT_GT(full_ms, 100.0) << "the search is too quick to be cut by a deadline";
+
+  const IndexerService::SearchCounters before = server_->service()->search_counters();
+  const auto deadline_after = std::chrono::microseconds(static_cast<int64_t>(full_ms * 100));
+  grpc::ClientContext context;
+  const auto deadline = std::chrono::system_clock::now() + deadline_after;  // 10% of it
+  context.set_deadline(deadline);
+  auto reader = server_->stub()->Search(&context, request);
+  tpr::v1::SearchResponse response;
+  while (reader->Read(&response)) {
+  }
+  EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  // Wait for the server's handler to end (it may finish its current EMD).
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (server_->service()->search_counters().running > 0 &&
+         std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  const double stopped_after_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::system_clock::now() - deadline)
+          .count();
+  const IndexerService::SearchCounters after = server_->service()->search_counters();
+  EXPECT_EQ(after.running, 0);
+  const int64_t emds = after.emd_computations - before.emd_computations;
+  // At 10% of the time, about 10% of the EMDs; half leaves room for a
+  // loaded machine while still failing a search that runs on.
+  EXPECT_LT(emds, full_emds / 2) << "of " << full_emds << " in " << full_ms << " ms";
+  EXPECT_LT(stopped_after_ms, full_ms / 2) << "full search: " << full_ms << " ms";
+  std::printf("full search %.0f ms, %lld EMDs; deadline at %.0f ms: %lld EMDs, stopped %.1f ms "
+              "after the deadline\n",
+              full_ms, static_cast<long long>(full_emds), full_ms / 10,
+              static_cast<long long>(emds), stopped_after_ms);
+}
+
 }  // namespace
 }  // namespace tpr::indexer::testing

@@ -240,6 +240,7 @@ class InProcessIndexer {
   std::shared_ptr<grpc::Channel> channel() { return channel_; }
   std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
   IndexerCore* core() { return core_.get(); }
+  IndexerService* service() { return service_.get(); }
   CoreOptions& core_options() { return core_options_; }
 
  private:
