@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
 
 namespace tpr::common {
 namespace {
@@ -46,8 +47,24 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
         md->emplace(grpc::string_ref(kRequestIdHeader), grpc::string_ref(record_.request_id));
       }
     }
+    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_MESSAGE) &&
+        methods->GetRecvMessage() == nullptr) {
+      // No message: the end of a client stream, or bytes that did not parse.
+      recv_failed_ = true;
+    }
     if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
-      const grpc::Status status = methods->GetSendStatus();
+      grpc::Status status = methods->GetSendStatus();
+      if (recv_failed_ && status.error_code() == grpc::StatusCode::INTERNAL &&
+          status.error_message().empty()) {
+        // gRPC answers a request that does not parse with INTERNAL and no
+        // message (proto_utils.h); it is the caller's input at fault.
+        status = grpc::Status(
+            grpc::StatusCode::INVALID_ARGUMENT,
+            absl::StrCat("the request does not parse as ", record_.method,
+                         "'s message: malformed protobuf bytes, or a string field "
+                         "(such as an id or label) that is not valid UTF-8"));
+        methods->ModifySendStatus(status);
+      }
       record_.code = static_cast<int>(status.error_code());
       record_.status_message = status.error_message();
       if (!record_.request_id.empty()) {
@@ -76,6 +93,7 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
   std::chrono::steady_clock::time_point start_;
   CallRecord record_;
   bool finished_ = false;
+  bool recv_failed_ = false;  // a POST_RECV_MESSAGE without a message
 };
 
 class CallInterceptorFactory final

@@ -5,6 +5,8 @@
 //     ServerContext::client_metadata(), and returns it in the trailing
 //     metadata;
 //   - times the call from its metadata to its status;
+//   - turns gRPC's answer to a request that does not parse (INTERNAL, no
+//     message) into INVALID_ARGUMENT saying so;
 //   - at the end, hands a CallRecord to the observers (metrics) and, unless
 //     the call is a health check or reflection, logs one line (LogCall).
 // Calls refused by the API-key check (common/auth.h) never reach the

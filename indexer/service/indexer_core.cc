@@ -8,6 +8,8 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/string_view.h"
 #include "common/status_macros.h"
 #include "indexer/lib/ground_distance.h"
 #include "indexer/service/convert.h"
@@ -19,6 +21,56 @@ int64_t NowMicros() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
              std::chrono::system_clock::now().time_since_epoch())
       .count();
+}
+
+// The id and label alphabet (indexer.proto): valid UTF-8 without control
+// characters (U+0000..U+001F, U+007F..U+009F), so that every id prints on
+// one line of `tpr list` and in logs. Returns the problem, naming `what`
+// and the byte offset, or OK. Written by hand: the check needs the code
+// points (for the C1 controls), which no Debian 12 library exposes
+// publicly short of ICU. O(size).
+absl::Status CheckText(absl::string_view text, absl::string_view what) {
+  const auto* p = reinterpret_cast<const unsigned char*>(text.data());
+  const size_t n = text.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned char c = p[i];
+    size_t len = 0;
+    uint32_t cp = 0;
+    if (c < 0x80) {
+      len = 1;
+      cp = c;
+    } else if (c >= 0xc2 && c <= 0xdf) {
+      len = 2;
+      cp = c & 0x1f;
+    } else if (c >= 0xe0 && c <= 0xef) {
+      len = 3;
+      cp = c & 0x0f;
+    } else if (c >= 0xf0 && c <= 0xf4) {
+      len = 4;
+      cp = c & 0x07;
+    }
+    bool valid = len > 0 && i + len <= n;
+    for (size_t k = 1; valid && k < len; ++k) {
+      valid = (p[i + k] & 0xc0) == 0x80;
+      cp = (cp << 6) | (p[i + k] & 0x3f);
+    }
+    // Overlong forms, surrogates and code points above U+10FFFF.
+    if (valid && ((len == 3 && cp < 0x800) || (len == 4 && cp < 0x10000) ||
+                  (cp >= 0xd800 && cp <= 0xdfff) || cp > 0x10ffff)) {
+      valid = false;
+    }
+    if (!valid) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, " is not valid UTF-8 (byte ", i, ")"));
+    }
+    if (cp < 0x20 || (cp >= 0x7f && cp <= 0x9f)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          what, " holds control character ", absl::StrFormat("U+%04X", cp), " (byte ", i,
+          "); ids and labels are printable UTF-8"));
+    }
+    i += len;
+  }
+  return absl::OkStatus();
 }
 
 absl::Status CheckId(const std::string& id) {
@@ -171,6 +223,13 @@ void IndexerCore::Close() {
 absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
                                      tpr::index::Signature* signature) const {
   TPR_RETURN_IF_ERROR(CheckId(model.id()));
+  // Ids and labels are checked against the alphabet when written; reads,
+  // deletes and searches by id accept any id already stored.
+  TPR_RETURN_IF_ERROR(CheckText(model.id(), "model id"));
+  if (absl::Status label = CheckText(model.label(), "label"); !label.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("model '", model.id(), "': ", label.message()));
+  }
   if (model.label().size() > kMaxLabelBytes) {
     return absl::InvalidArgumentError(
         absl::StrCat("model '", model.id(), "' has a label of ", model.label().size(),

@@ -116,7 +116,9 @@ class IndexerCore {
   // Upsert stores request.model and indexes it; durable on return. Returns
   // whether the id was new. INVALID_ARGUMENT for an empty or too long id or a
   // malformed signature; RESOURCE_EXHAUSTED for metadata above 64 KiB or too
-  // many features; INVALID_ARGUMENT for a label above kMaxLabelBytes;
+  // many features; INVALID_ARGUMENT for a label above kMaxLabelBytes, and
+  // for an id or label outside the alphabet (valid UTF-8 without control
+  // characters), naming the byte;
   // ALREADY_EXISTS when the id exists and overwrite is false;
   // INTERNAL/UNAVAILABLE for a storage failure. Cost: one fsync + O(size).
   absl::StatusOr<bool> Upsert(const tpr::v1::UpsertRequest& request);
