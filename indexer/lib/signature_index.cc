@@ -22,6 +22,9 @@
 #include <unordered_map>
 
 #include "absl/strings/str_cat.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+#include "tbb/task_arena.h"
 #include "common/status_macros.h"
 #include "indexer/lib/byte_codec.h"
 #include "indexer/lib/centroid_table.h"
@@ -126,6 +129,24 @@ struct SignatureIndex::JournalEntry {
   uint64_t fingerprint = 0;
 };
 
+// A oneTBB task arena of IndexOptions::search_threads threads. Why oneTBB:
+// a search step hands out 2 to 8 EMDs of about 20 us each, so a pool must
+// dispatch in a few microseconds and let the calling thread take part;
+// task_arena does both, is safe to enter from many threads at once, and
+// keeps its workers for the index's lifetime.
+struct SignatureIndex::SearchPool {
+  explicit SearchPool(int threads) : arena(threads) {}
+  void ParallelFor(size_t n, const std::function<void(size_t)>& body) {
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1),
+                        [&](const tbb::blocked_range<size_t>& r) {
+                          for (size_t i = r.begin(); i != r.end(); ++i) body(i);
+                        });
+    });
+  }
+  tbb::task_arena arena;
+};
+
 namespace {
 
 std::shared_ptr<TreePart> EmptyTree() { return std::make_shared<TreePart>(); }
@@ -135,8 +156,10 @@ class IndexCursor : public SignatureIndex::Cursor {
   IndexCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
               PreparedSignature query, double radius,
               std::function<bool(const std::string&)> filter,
-              bool relaxed_bound, std::function<bool()> stop)
-      : snapshot_(std::move(snapshot)),
+              bool relaxed_bound, std::function<bool()> stop,
+              std::shared_ptr<SignatureIndex::SearchPool> pool, size_t batch)
+      : pool_(std::move(pool)),
+        snapshot_(std::move(snapshot)),
         query_(std::move(query)),
         filter_(std::move(filter)) {
     const SignatureIndex::Snapshot* s = snapshot_.get();
@@ -180,6 +203,14 @@ class IndexCursor : public SignatureIndex::Cursor {
     }
     if (radius > 0.0) spec.radius = radius;
     spec.stop = std::move(stop);
+    if (pool_ != nullptr) {
+      spec.parallel_batch = batch;
+      SignatureIndex::SearchPool* pool = pool_.get();
+      spec.parallel_for = [pool](size_t n,
+                                 const std::function<void(size_t)>& body) {
+        pool->ParallelFor(n, body);
+      };
+    }
     inner_ = t->tree.Search(std::move(spec));
   }
 
@@ -200,6 +231,7 @@ class IndexCursor : public SignatureIndex::Cursor {
     return snapshot_->buffer[i - n_tree_].id;
   }
 
+  std::shared_ptr<SignatureIndex::SearchPool> pool_;
   std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
   PreparedSignature query_;
   std::function<bool(const std::string&)> filter_;
@@ -212,6 +244,9 @@ class IndexCursor : public SignatureIndex::Cursor {
 
 SignatureIndex::SignatureIndex(IndexOptions options)
     : options_(std::move(options)) {
+  if (options_.search_threads > 1) {
+    pool_ = std::make_shared<SearchPool>(options_.search_threads);
+  }
   auto s = std::make_shared<Snapshot>();
   s->tree = EmptyTree();
   snapshot_ = std::move(s);
@@ -355,7 +390,10 @@ absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
   if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
       snapshot(), *std::move(prepared), radius, std::move(filter),
-      options_.relaxed_bound, std::move(stop)));
+      options_.relaxed_bound, std::move(stop), pool_,
+      options_.search_batch > 0
+          ? options_.search_batch
+          : 2 * static_cast<size_t>(std::max(options_.search_threads, 1))));
 }
 
 std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,

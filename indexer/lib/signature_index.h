@@ -63,6 +63,15 @@ struct IndexOptions {
   // bound (emd.h) before computing an EMD. Results are identical either
   // way; off only to measure what it saves (bench_match). Default: true.
   bool relaxed_bound = true;
+  // Threads one search may use for its bounds and EMDs (intra-query
+  // parallelism, see QuerySpec::parallel_for): the index keeps a task arena
+  // of this many threads shared by all its searches (the calling thread
+  // takes part). Answers and their order do not depend on it. 1 = every
+  // search runs on its calling thread. Default: 1.
+  int search_threads = 1;
+  // Items one parallel step refines at once (QuerySpec::parallel_batch);
+  // 0 = 2 x search_threads. Default: 0.
+  size_t search_batch = 0;
 };
 
 // SignatureIndex maps ids to signatures and answers exact EMD searches.
@@ -158,7 +167,8 @@ class SignatureIndex {
       const std::vector<std::pair<std::string, Signature>>& items,
       IndexOptions options);
 
-  struct Snapshot;  // implementation detail, defined in signature_index.cc
+  struct Snapshot;    // implementation detail, defined in signature_index.cc
+  struct SearchPool;  // likewise
 
  private:
   std::shared_ptr<const Snapshot> snapshot() const;
@@ -167,6 +177,9 @@ class SignatureIndex {
   void StartBackgroundRebuildLocked();
 
   const IndexOptions options_;
+  // The task arena of intra-query parallelism (null when search_threads is
+  // 1), shared with the cursors, which may outlive the index.
+  std::shared_ptr<SearchPool> pool_;
   mutable std::mutex mu_;
   std::shared_ptr<const Snapshot> snapshot_;  // guarded by mu_
   // Writes made while a rebuild runs, replayed onto its new tree: (id,

@@ -322,25 +322,18 @@ class VpCursor : public NeighborCursor {
           (stopped_ || (stopped_ = spec_.stop()))) {
         return std::nullopt;
       }
-      Entry e = queue_.top();
-      queue_.pop();
-      if (e.kind == kRun) {
-        // The run's smallest bound is the smallest key left: take that item
-        // out of the run and treat it as a popped item entry.
-        std::vector<std::pair<double, uint32_t>>& run = runs_[e.index];
-        std::pop_heap(run.begin(), run.end(), std::greater<>());
-        const std::pair<double, uint32_t> next = run.back();
-        run.pop_back();
-        if (!run.empty()) queue_.push({run.front().first, e.index, kRun, 0});
-        e = Entry{next.first, next.second, kItemBound, 0};
-      }
+      Entry e = PopItemOrNode();
       switch (e.kind) {
         case kNode:
           Expand(e);
           break;
         case kRun:
-          break;  // handled above
+          break;  // PopItemOrNode never returns a run
         case kItemBound: {
+          if (spec_.parallel_for && spec_.parallel_batch > 1) {
+            RefineBatch(e);
+            break;
+          }
           // e.level bounds of the cascade have been applied; apply the next
           // ones, then the metric. While the refined key stays strictly
           // below every other key the item would be popped next anyway, so
@@ -381,6 +374,20 @@ class VpCursor : public NeighborCursor {
   const SearchStats& stats() const override { return stats_; }
 
  private:
+  // Pops the smallest entry; a run gives up its smallest item (the run's
+  // smallest bound is the smallest key left) as an item entry.
+  struct Entry;
+  Entry PopItemOrNode();
+  // The parallel form of one kItemBound step: takes `e` and the next
+  // entries while they are items (up to spec_.parallel_batch), then, through
+  // spec_.parallel_for, refines each through its remaining bounds and
+  // computes its distance when its key stays strictly below every entry
+  // left in the queue (cutoff). Those items are exactly the ones the serial
+  // loop would evaluate next, in some order, unless the caller stops first;
+  // so answers and their order are unchanged and the extra work is at most
+  // one batch at the end of a search.
+  void RefineBatch(const Entry& e);
+
   // kRun: a bucket's items still keyed by their stored-distance bounds,
   // kept in a heap of their own (runs_) so that the main queue holds one
   // entry per bucket instead of one per item (buckets are large).
@@ -414,6 +421,16 @@ class VpCursor : public NeighborCursor {
       return a.index > b.index;
     }
   };
+
+  struct Slot {
+    Entry entry;
+    double distance = 0.0;
+    int64_t bounds = 0;
+    bool dead = false;   // beyond the radius
+    bool exact = false;  // distance computed
+  };
+  std::vector<Entry> batch_;  // scratch of RefineBatch
+  std::vector<Slot> slots_;   // scratch of RefineBatch
 
   // Adds an item to run_ (scratch) unless rejected or beyond the radius.
   void AddToRun(uint32_t item, double bound) {
@@ -512,6 +529,64 @@ class VpCursor : public NeighborCursor {
   std::vector<std::vector<std::pair<double, uint32_t>>> runs_;
   std::priority_queue<Entry, std::vector<Entry>, Later> queue_;
 };
+
+VpCursor::Entry VpCursor::PopItemOrNode() {
+  Entry e = queue_.top();
+  queue_.pop();
+  if (e.kind != kRun) return e;
+  std::vector<std::pair<double, uint32_t>>& run = runs_[e.index];
+  std::pop_heap(run.begin(), run.end(), std::greater<>());
+  const std::pair<double, uint32_t> next = run.back();
+  run.pop_back();
+  if (!run.empty()) queue_.push({run.front().first, e.index, kRun, 0});
+  return Entry{next.first, next.second, kItemBound, 0};
+}
+
+void VpCursor::RefineBatch(const Entry& e) {
+  batch_.clear();
+  batch_.push_back(e);
+  while (batch_.size() < spec_.parallel_batch && !queue_.empty() &&
+         (queue_.top().kind == kItemBound || queue_.top().kind == kRun)) {
+    batch_.push_back(PopItemOrNode());
+  }
+  const double cutoff = queue_.empty()
+                            ? std::numeric_limits<double>::infinity()
+                            : queue_.top().key;
+  const size_t levels = spec_.lower_bounds.size();
+  slots_.assign(batch_.size(), Slot{});
+  spec_.parallel_for(batch_.size(), [&](size_t i) {
+    Slot& slot = slots_[i];
+    Entry x = batch_[i];
+    while (x.level < levels) {
+      ++slot.bounds;
+      const double lb = spec_.lower_bounds[x.level](x.index);
+      x.key = std::max(x.key, Deflate(lb, lb));
+      ++x.level;
+      if (!(x.key <= spec_.radius)) {
+        slot.dead = true;
+        break;
+      }
+      if (!(x.key < cutoff)) break;
+    }
+    slot.entry = x;
+    if (!slot.dead && x.level == levels && x.key < cutoff) {
+      slot.distance = spec_.distance(x.index);
+      slot.exact = true;
+    }
+  });
+  for (const Slot& slot : slots_) {
+    stats_.lower_bounds += slot.bounds;
+    if (slot.dead) continue;
+    if (!slot.exact) {
+      queue_.push(slot.entry);
+      continue;
+    }
+    ++stats_.emd_computations;
+    if (slot.distance <= spec_.radius) {
+      queue_.push({slot.distance, slot.entry.index, kItemExact, 0});
+    }
+  }
+}
 
 std::unique_ptr<NeighborCursor> VpTree::Search(QuerySpec spec) const {
   return std::make_unique<VpCursor>(data_.get(), std::move(spec));

@@ -101,13 +101,24 @@ struct QuerySpec {
   // Optional: strict order among items at equal distance. Default: item
   // number.
   std::function<bool(uint32_t, uint32_t)> tie_less;
+  // Optional: intra-query parallelism. parallel_for(n, body) runs body(i)
+  // for every i in [0, n), possibly concurrently, and returns when all are
+  // done. When set and parallel_batch > 1, the search takes up to
+  // parallel_batch items from the front of its queue at a time and refines
+  // and evaluates them through it; distance and lower_bounds must then be
+  // thread-safe. Answers and their order are unchanged; the search may
+  // compute up to parallel_batch - 1 distances more than it needs at its
+  // end. Default: unset (one thread).
+  std::function<void(size_t, const std::function<void(size_t)>&)> parallel_for;
+  size_t parallel_batch = 0;
   // Items outside the tree (an unindexed buffer), searched linearly.
   std::vector<uint32_t> extra_items;
   // Only items with distance <= radius are returned. Default: unlimited.
   double radius = std::numeric_limits<double>::infinity();
   // Optional: polled before each step that may compute a distance; once it
   // returns true the search ends (Next() returns nullopt from then on), so a
-  // cancelled or late caller stops within one distance. Default: none.
+  // cancelled or late caller stops within one distance (one batch of
+  // parallel_batch distances with parallel_for). Default: none.
   std::function<bool()> stop;
 };
 

@@ -10,6 +10,8 @@
 // Each iteration compares the next pair of a fixed pool of 64 signatures
 // (8 classes), so same-class and cross-class pairs are both timed.
 #include <benchmark/benchmark.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -273,14 +275,25 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 }
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
-             int bounds = 2) {
+             int bounds = 2, int threads = 1) {
   Db& db = GetDb(key);
   SearchStats total;
   int64_t queries = 0;
+  tbb::task_arena arena(std::max(threads, 1));
   for (auto _ : state) {
     SearchStats stats;
-    std::vector<ItemNeighbor> result = db.tree.Knn(
-        Spec(db, db.queries[queries % db.queries.size()], bounds), k, &stats);
+    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], bounds);
+    if (threads > 1) {
+      // As SignatureIndex does with IndexOptions::search_threads.
+      spec.parallel_batch = 2 * static_cast<size_t>(threads);
+      spec.parallel_for = [&arena](size_t n,
+                                   const std::function<void(size_t)>& body) {
+        arena.execute([&] {
+          tbb::parallel_for(size_t{0}, n, [&](size_t i) { body(i); });
+        });
+      };
+    }
+    std::vector<ItemNeighbor> result = db.tree.Knn(std::move(spec), k, &stats);
     benchmark::DoNotOptimize(result);
     total.emd_computations += stats.emd_computations;
     total.lower_bounds += stats.lower_bounds;
@@ -317,6 +330,23 @@ BENCHMARK(BM_KnnVpTreeExtracted)
     ->Args({1000, 10})
     ->Args({10000, 10})
     ->Args({100000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedThreads/<n>/<k>/<threads>: intra-query parallelism
+// (QuerySpec::parallel_for over a oneTBB arena, batches of 2 x threads),
+// wall time.
+void BM_KnnVpTreeExtractedThreads(benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.extracted = true;
+  RunTree(state, key, static_cast<size_t>(state.range(1)), /*bounds=*/2,
+          static_cast<int>(state.range(2)));
+}
+BENCHMARK(BM_KnnVpTreeExtractedThreads)
+    ->Args({10000, 10, 1})
+    ->Args({10000, 10, 2})
+    ->Args({100000, 10, 1})
+    ->Args({100000, 10, 2})
+    ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedCentroid/<n>/<k>: the same with the centroid bound
