@@ -377,6 +377,40 @@ size_t SignatureIndex::indexed() const {
 
 size_t SignatureIndex::buffered() const { return snapshot()->buffer.size(); }
 
+size_t SignatureIndex::MemoryBytes() const {
+  const std::shared_ptr<const Snapshot> s = snapshot();
+  const TreePart& t = *s->tree;
+  // A shared_ptr'd object with make_shared costs its control block (two
+  // counters and a vtable pointer) beside it; a std::string its heap
+  // buffer when longer than the small-string capacity; an unordered_map
+  // node its key, value, hash and next pointer, plus a bucket pointer.
+  constexpr size_t kControlBlock = 3 * sizeof(void*);
+  auto string_bytes = [](const std::string& id) {
+    return id.capacity() > 15 ? id.capacity() + 1 : 0;
+  };
+  size_t bytes = t.tree.MemoryBytes() + t.centroids.MemoryBytes() +
+                 t.ids.capacity() * sizeof(std::string) +
+                 t.prepared.capacity() * sizeof(PreparedPtr) +
+                 t.fingerprints.capacity() * sizeof(uint64_t) +
+                 t.item_of.bucket_count() * sizeof(void*);
+  for (size_t i = 0; i < t.ids.size(); ++i) {
+    bytes += 2 * string_bytes(t.ids[i]);  // the id and its item_of key
+    bytes += sizeof(std::string) + sizeof(uint32_t) + 2 * sizeof(void*);
+    if (t.prepared[i] != nullptr) {
+      bytes += sizeof(PreparedSignature) + kControlBlock +
+               t.prepared[i]->MemoryBytes();
+    }
+  }
+  for (const BufferEntry& e : s->buffer) {
+    bytes += sizeof(BufferEntry) + string_bytes(e.id);
+    if (e.prepared != nullptr) {
+      bytes += sizeof(PreparedSignature) + kControlBlock +
+               e.prepared->MemoryBytes();
+    }
+  }
+  return bytes + s->tombstones.capacity() * sizeof(uint32_t);
+}
+
 absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
     const Signature& query, double radius,
     std::function<bool(const std::string& id)> filter,

@@ -125,6 +125,10 @@ class SignatureIndex {
   size_t size() const;
   size_t indexed() const;
   size_t buffered() const;
+  // MemoryBytes returns the heap bytes of the current snapshot: prepared
+  // signatures, centroid table, VP-tree, ids and id map (an estimate for
+  // the containers' node overheads). O(size()); thread-safe.
+  size_t MemoryBytes() const;
 
   // Search starts a ranked search: neighbours in ascending (distance, id)
   // order with distance <= radius (radius <= 0: unlimited) and, when

@@ -83,6 +83,16 @@ struct VpTree::Data {
 };
 
 VpTree::VpTree() : data_(std::make_unique<Data>()) {}
+
+size_t VpTree::MemoryBytes() const {
+  const Data& d = *data_;
+  return sizeof(Data) + d.nodes.capacity() * sizeof(Node) +
+         d.leaf_items.capacity() * sizeof(uint32_t) +
+         d.ranges.capacity() * sizeof(double) +
+         d.item_holder.capacity() * sizeof(uint32_t) +
+         d.item_row.capacity() * sizeof(uint64_t) +
+         d.item_dists.capacity() * sizeof(double);
+}
 VpTree::~VpTree() = default;
 VpTree::VpTree(VpTree&&) noexcept = default;
 VpTree& VpTree::operator=(VpTree&&) noexcept = default;

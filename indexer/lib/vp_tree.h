@@ -157,6 +157,9 @@ class VpTree {
   size_t height() const;
   // node_count returns the number of nodes.
   size_t node_count() const;
+  // MemoryBytes returns the heap bytes the tree holds (nodes, stored
+  // distances, item tables; not the items' points). O(1).
+  size_t MemoryBytes() const;
 
   // Search starts a ranked search (best-first over node lower bounds, with
   // lazily refined item bounds: stored distance, then the cheap bound, then

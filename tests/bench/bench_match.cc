@@ -412,8 +412,7 @@ BENCHMARK(BM_KnnBruteForce)
 
 // BM_KnnIndex/<n>/<k>: the service-facing SignatureIndex (string ids,
 // snapshots, buffer merge) on the same data as BM_KnnVpTree.
-void BM_KnnIndex(benchmark::State& state) {
-  const DbKey key{state.range(0), kClasses, kJitterPermille};
+void RunIndex(benchmark::State& state, const DbKey& key) {
   std::vector<std::pair<std::string, tpr::index::Signature>> items;
   std::vector<tpr::index::Signature> queries;
   Generate(key, [&](tpr::index::Signature s) {
@@ -446,13 +445,31 @@ void BM_KnnIndex(benchmark::State& state) {
     ++n_queries;
   }
   const double per = 1.0 / static_cast<double>(std::max<int64_t>(n_queries, 1));
+  state.counters["bytes_per_model"] = static_cast<double>(index.MemoryBytes()) /
+                                      static_cast<double>(index.size());
   state.counters["emds"] = static_cast<double>(total.emd_computations) * per;
   state.counters["emd_share"] = static_cast<double>(total.emd_computations) *
                                 per / static_cast<double>(key.n);
 }
+void BM_KnnIndex(benchmark::State& state) {
+  RunIndex(state, {state.range(0), kClasses, kJitterPermille});
+}
 BENCHMARK(BM_KnnIndex)
     ->Args({1000, 10})
     ->Args({10000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnIndexExtracted/<n>/<k>: SignatureIndex over the extracted-prototype
+// data of BM_KnnVpTreeExtracted; its bytes_per_model counter is the memory
+// figure of the matching issue (index plus tree, 20 bands).
+void BM_KnnIndexExtracted(benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.extracted = true;
+  RunIndex(state, key);
+}
+BENCHMARK(BM_KnnIndexExtracted)
+    ->Args({10000, 10})
+    ->Args({100000, 10})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnSpread/<n>/<jitter per mille>/<classes>, k = 10: what the data's

@@ -233,6 +233,28 @@ TEST(SignatureIndexTest, ParallelSearchEqualsBruteForce) {
   }
 }
 
+// MemoryBytes counts at least every prepared signature's own bytes and
+// grows linearly with the model count.
+TEST(SignatureIndexTest, MemoryBytesCountsSignaturesAndGrowsLinearly) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  SignatureIndex index(ManualOptions());
+  const size_t empty = index.MemoryBytes();
+  size_t prepared = 0;
+  for (int i = 0; i < 400; ++i) {
+    const Signature s = gen.Next();
+    prepared += Prepare(s, GroundDistanceOptions{})->MemoryBytes();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    if (i == 199) {
+      index.Rebuild();
+      EXPECT_GT(index.MemoryBytes(), empty + prepared);
+    }
+  }
+  index.Rebuild();
+  const size_t full = index.MemoryBytes();
+  EXPECT_GT(full, empty + prepared);
+  EXPECT_LT(full, empty + 3 * prepared);  // overheads stay a fraction
+}
+
 TEST(SignatureIndexTest, DuplicateSignaturesTieByIdAndQueryHitsItself) {
   SignatureGenerator gen(SignatureGeneratorOptions{});
   SignatureIndex index(ManualOptions());
