@@ -307,6 +307,7 @@ grpc::Status GatewayService::Stats(grpc::ServerContext* context, const tpr::v1::
     response->set_models(response->models() + one.models());
     response->set_indexed(response->indexed() + one.indexed());
     response->set_buffered(response->buffered() + one.buffered());
+    response->set_memory_bytes(response->memory_bytes() + one.memory_bytes());
     response->set_disk_bytes(response->disk_bytes() + one.disk_bytes());
     for (const auto& [label, count] : one.labels()) labels[label] += count;
   }

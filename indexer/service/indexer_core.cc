@@ -403,6 +403,7 @@ tpr::v1::StatsResponse IndexerCore::Stats() const {
   }
   response.set_indexed(static_cast<int64_t>(index_->indexed()));
   response.set_buffered(static_cast<int64_t>(index_->buffered()));
+  response.set_memory_bytes(static_cast<int64_t>(index_->MemoryBytes()));
   response.set_disk_bytes(storage_->DiskBytes());
   return response;
 }

@@ -165,6 +165,9 @@ TEST_F(IndexerServiceTest, UpsertGetListDeleteStatsRoundTrip) {
     EXPECT_EQ(s.labels().at("class0"), 4);
     EXPECT_EQ(s.labels().at("class1"), 5);
     EXPECT_GT(s.disk_bytes(), 0);
+    // At least the 9 prepared signatures' coordinates: MakeModels gives 12
+    // features x 8 bands, so 1 + 3 x 8 rows of 16 (padded) doubles each.
+    EXPECT_GE(s.memory_bytes(), 9 * 25 * 16 * 8);
   }
 }
 
