@@ -1,5 +1,6 @@
 #include "indexer/gateway/gateway_service.h"
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <map>
@@ -13,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "common/call_interceptor.h"
 #include "common/grpc_status.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
@@ -55,10 +57,19 @@ absl::Status CancelledStatus(grpc::ServerContext* context) {
                                 : absl::OkStatus();
 }
 
-// A shard context that inherits the caller's deadline and cancellation.
+// A shard context that inherits the caller's deadline and cancellation and
+// carries its request id, so one call can be followed through every log.
 std::unique_ptr<grpc::ClientContext> ShardContext(grpc::ServerContext* context) {
-  return grpc::ClientContext::FromServerContext(*context);
+  std::unique_ptr<grpc::ClientContext> shard = grpc::ClientContext::FromServerContext(*context);
+  const std::string request_id = tpr::common::RequestIdOf(*context);
+  if (!request_id.empty()) shard->AddMetadata("x-request-id", request_id);
+  return shard;
 }
+
+// Bounds that keep the gateway's answers as small as one indexer's, far
+// below gRPC's default 4 MiB (indexer/service/indexer_core.h has the same).
+constexpr size_t kMaxListPageBytes = 2 << 20;
+constexpr size_t kMaxStatsLabels = 1000;
 
 void AddStats(const tpr::v1::SearchStats& from, tpr::v1::SearchStats* to) {
   to->set_emd_computations(to->emd_computations() + from.emd_computations());
@@ -310,8 +321,23 @@ grpc::Status GatewayService::Stats(grpc::ServerContext* context, const tpr::v1::
     response->set_memory_bytes(response->memory_bytes() + one.memory_bytes());
     response->set_disk_bytes(response->disk_bytes() + one.disk_bytes());
     for (const auto& [label, count] : one.labels()) labels[label] += count;
+    // The sums carry the labels; per shard only the counts, so the answer
+    // stays bounded whatever the number of shards.
+    shard->mutable_stats()->clear_labels();
   }
-  for (const auto& [label, count] : labels) (*response->mutable_labels())[label] = count;
+  // Like one indexer: the kMaxStatsLabels most populous labels, ties by
+  // label. (Each shard reports its own top labels, so a label outside every
+  // shard's top list is missing from the sums.)
+  std::vector<std::pair<std::string, int64_t>> top(labels.begin(), labels.end());
+  auto more_models = [](const auto& a, const auto& b) {
+    return a.second != b.second ? a.second > b.second : a.first < b.first;
+  };
+  if (top.size() > kMaxStatsLabels) {
+    std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(kMaxStatsLabels),
+                      top.end(), more_models);
+    top.resize(kMaxStatsLabels);
+  }
+  for (const auto& [label, count] : top) (*response->mutable_labels())[label] = count;
   return grpc::Status::OK;
 }
 
@@ -344,6 +370,18 @@ grpc::Status GatewayService::List(grpc::ServerContext* context,
     pages[s].next_token = shard_pages[s].next_page_token();
   }
   ListMerge merge = MergeListPages(*positions, pages, static_cast<size_t>(page_size));
+  // The page ends before kMaxListPageBytes of models (at least one), as one
+  // indexer's does; the merge is greedy, so merging again with the shorter
+  // size takes the same first models and gives the positions after them.
+  size_t bytes = 0;
+  for (size_t i = 0; i < merge.taken.size(); ++i) {
+    const auto& [shard, index] = merge.taken[i];
+    bytes += shard_pages[static_cast<size_t>(shard)].models(index).ByteSizeLong() + 6;
+    if (bytes > kMaxListPageBytes && i > 0) {
+      merge = MergeListPages(*positions, pages, i);
+      break;
+    }
+  }
   for (const auto& [shard, index] : merge.taken) {
     *response->add_models() = std::move(*shard_pages[static_cast<size_t>(shard)].mutable_models(index));
   }

@@ -14,8 +14,11 @@
 //   other shards acknowledged is durable, as are the failing shard's models
 //   before its failing one.
 // - List merges the shards' pages in id order; the page token carries every
-//   shard's position (EncodeListToken).
-// - Stats sums the shards and lists each (StatsResponse.shards).
+//   shard's position (EncodeListToken). A page ends before 2 MiB of models,
+//   as one indexer's.
+// - Stats sums the shards and lists each (StatsResponse.shards: counts and
+//   sizes; the labels only in the sums, the 1000 most populous as one
+//   indexer reports them).
 // - Search is exact k-NN: every shard gets the full k, radius and label
 //   filter; the shards' ascending streams are merged lazily in (distance, id)
 //   order, as one indexer orders them (RanksBefore), ranks renumbered; once k
@@ -34,7 +37,8 @@
 // NOT_FOUND, ALREADY_EXISTS, RESOURCE_EXHAUSTED) pass through unchanged;
 // other shard errors are prefixed with the shard. Each shard call is made
 // with grpc::ClientContext::FromServerContext, so the caller's deadline and
-// cancellation propagate to the shards.
+// cancellation propagate to the shards, and carries the call's request id
+// (x-request-id, common/call_interceptor.h) into the shards' logs.
 //
 // Health: a background thread asks every address's grpc.health.v1 service
 // for the readiness of "tpr.v1.Indexer" (common/health.h) every

@@ -222,6 +222,18 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
   ASSERT_TRUE(status.ok()) << status.error_message();
   ASSERT_EQ(sharded.written(), static_cast<int64_t>(requests.size()));
 
+  // The caller's request id reaches the shard's log through the gateway.
+  {
+    grpc::ClientContext context;
+    context.AddMetadata("x-request-id", "scale-gw-req-7");
+    v1::GetRequest get;
+    get.set_id("m00007");
+    v1::Model model;
+    ASSERT_TRUE(gateway_stub_->Get(&context, get, &model).ok());
+    std::ifstream in(shards_[gateway::ShardOf("m00007", kShards)].log_path());
+    const std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(log.find("scale-gw-req-7"), std::string::npos) << log;
+  }
   const int n = static_cast<int>(requests.size());
   auto run_all = [&] {
     for (const char* id : {"m00000", "m00004-y", "m00133", "m00399", "biped_adult/pose_1.off"}) {

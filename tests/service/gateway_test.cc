@@ -329,6 +329,38 @@ TEST_F(GatewayTest, ListMergesShardsInIdOrder) {
             grpc::StatusCode::INVALID_ARGUMENT);
 }
 
+TEST_F(GatewayTest, ListPagesStayUnderTwoMebibytes) {
+  // 90 models of ~60 KiB metadata each: ~5.4 MB in all, so pages must end
+  // early (as one indexer's do) and the paging must still list every id.
+  std::vector<TestModel> big = MakeModels(90, 3, 41, "big");
+  for (const TestModel& m : big) {
+    tpr::v1::UpsertRequest request = ToRequest(m);
+    (*request.mutable_model()->mutable_metadata())["blob"] = std::string(60 << 10, 'x');
+    grpc::ClientContext context;
+    tpr::v1::UpsertResponse response;
+    ASSERT_TRUE(gateway_->Upsert(&context, request, &response).ok());
+  }
+  tpr::v1::ListRequest request;
+  request.set_page_size(1000);
+  std::vector<std::string> ids;
+  int pages = 0;
+  for (; pages < 100; ++pages) {
+    grpc::ClientContext context;
+    tpr::v1::ListResponse response;
+    ASSERT_TRUE(gateway_->List(&context, request, &response).ok());
+    EXPECT_LE(response.ByteSizeLong(), size_t{2} << 20) << "page " << pages;
+    for (const tpr::v1::Model& m : response.models()) ids.push_back(m.id());
+    if (response.next_page_token().empty()) break;
+    request.set_page_token(response.next_page_token());
+  }
+  EXPECT_GE(pages, 2);
+  int reference_pages = 0;
+  std::vector<std::string> want = ListAll(reference_->stub(), 1000, "", &reference_pages);
+  for (const TestModel& m : big) want.push_back(m.id);
+  std::sort(want.begin(), want.end());
+  EXPECT_EQ(ids, want);
+}
+
 TEST_F(GatewayTest, StatsSumsAndListsEachShard) {
   grpc::ClientContext a, b;
   tpr::v1::StatsResponse want, got;
