@@ -5,8 +5,10 @@
 #include "extractor/lib/mesh_clean.h"
 
 #include <algorithm>
+#include <cassert>
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -30,7 +32,7 @@ constexpr double kDegenerateRatio = 1e-12;
 // One triangle side, keyed by its undirected edge.
 struct HalfEdge {
   uint64_t key;  // (min << 32) | max
-  int64_t face;
+  int32_t face;  // < 2^31 (ValidatePolygonSoup); 16 bytes in all
   bool forward;  // traversed min -> max
   bool operator<(const HalfEdge& o) const {
     return key != o.key ? key < o.key : face < o.face;
@@ -48,7 +50,7 @@ std::vector<HalfEdge> SortedHalfEdges(const Triangles& triangles) {
       const uint32_t b = static_cast<uint32_t>(triangles[f][(k + 1) % 3]);
       const uint64_t key = a < b ? (static_cast<uint64_t>(a) << 32) | b
                                  : (static_cast<uint64_t>(b) << 32) | a;
-      halfedges.push_back({key, static_cast<int64_t>(f), a < b});
+      halfedges.push_back({key, static_cast<int32_t>(f), a < b});
     }
   }
   std::sort(halfedges.begin(), halfedges.end());
@@ -57,6 +59,191 @@ std::vector<HalfEdge> SortedHalfEdges(const Triangles& triangles) {
 
 std::string EdgeName(uint64_t key) {
   return absl::StrCat("(", key >> 32, ", ", key & 0xffffffffu, ")");
+}
+
+// Link joins the two triangles of an edge that has exactly two.
+struct Link {
+  int64_t f, g;
+  bool flip;  // g must be flipped relative to f
+  uint64_t key;
+};
+
+// BuildLinks returns one Link per edge of exactly two triangles, in edge
+// order, and counts the edges of three or more in *non_manifold_edges
+// (when not null). Such an edge links nothing: each of its triangles has
+// it as a border, which is how it is cut into sheets.
+std::vector<Link> BuildLinks(const Triangles& triangles,
+                             int64_t* non_manifold_edges) {
+  const std::vector<HalfEdge> halfedges = SortedHalfEdges(triangles);
+  std::vector<Link> links;
+  links.reserve(halfedges.size() / 2);
+  for (size_t i = 0; i < halfedges.size();) {
+    size_t j = i + 1;
+    while (j < halfedges.size() && halfedges[j].key == halfedges[i].key) ++j;
+    if (j - i == 2) {
+      // Consistently oriented neighbours traverse their shared edge in
+      // opposite directions.
+      links.push_back({halfedges[i].face, halfedges[i + 1].face,
+                       halfedges[i].forward == halfedges[i + 1].forward,
+                       halfedges[i].key});
+    } else if (j - i > 2 && non_manifold_edges != nullptr) {
+      ++*non_manifold_edges;
+    }
+    i = j;
+  }
+  return links;
+}
+
+// Orient flips triangles so that every kept link is consistent, and returns
+// how many it flipped. Breadth-first over faces, flipping to agree with the
+// first face; then per component the majority's orientation is kept, and a
+// closed component (three kept links per face, none cut) is turned to a
+// positive signed volume (outward normals). A link that contradicts the
+// orientation already given is INVALID_ARGUMENT when `cut` is null, else
+// marked in *cut and ignored (the surface is cut open there).
+absl::StatusOr<int64_t> Orient(const std::vector<Eigen::Vector3d>& positions,
+                               const std::vector<Link>& links,
+                               std::vector<char>* cut, Triangles* triangles) {
+  const int64_t nf = static_cast<int64_t>(triangles->size());
+  std::vector<int64_t> offsets(nf + 1, 0);
+  for (const Link& l : links) {
+    ++offsets[l.f + 1];
+    ++offsets[l.g + 1];
+  }
+  for (int64_t f = 0; f < nf; ++f) offsets[f + 1] += offsets[f];
+  std::vector<std::pair<int64_t, size_t>> adjacency(offsets[nf]);
+  {
+    std::vector<int64_t> fill(offsets.begin(), offsets.end() - 1);
+    for (size_t i = 0; i < links.size(); ++i) {
+      adjacency[fill[links[i].f]++] = {links[i].g, i};
+      adjacency[fill[links[i].g]++] = {links[i].f, i};
+    }
+  }
+  std::vector<int8_t> flip(nf, -1);
+  std::vector<int64_t> queue;
+  std::vector<int64_t> component;
+  int64_t reoriented = 0;
+  for (int64_t seed = 0; seed < nf; ++seed) {
+    if (flip[seed] >= 0) continue;
+    flip[seed] = 0;
+    queue.assign(1, seed);
+    component.clear();
+    bool closed = true;
+    for (size_t q = 0; q < queue.size(); ++q) {
+      const int64_t f = queue[q];
+      component.push_back(f);
+      if (offsets[f + 1] - offsets[f] != 3) closed = false;
+      for (int64_t a = offsets[f]; a < offsets[f + 1]; ++a) {
+        const auto [g, link] = adjacency[a];
+        if (cut != nullptr && (*cut)[link]) continue;
+        const int8_t want = flip[f] ^ (links[link].flip ? 1 : 0);
+        if (flip[g] < 0) {
+          flip[g] = want;
+          queue.push_back(g);
+        } else if (flip[g] != want) {
+          if (cut == nullptr) {
+            return absl::InvalidArgumentError(absl::StrCat(
+                "non-orientable surface: triangles around edge ",
+                EdgeName(links[link].key),
+                " cannot be oriented consistently"));
+          }
+          (*cut)[link] = 1;
+          closed = false;
+        }
+      }
+    }
+    int64_t flipped = 0;
+    for (int64_t f : component) flipped += flip[f];
+    bool invert = 2 * flipped > static_cast<int64_t>(component.size());
+    if (closed) {
+      double volume = 0.0;
+      for (int64_t f : component) {
+        const auto& t = (*triangles)[f];
+        const double v6 =
+            positions[t[0]].dot(positions[t[1]].cross(positions[t[2]]));
+        volume += flip[f] ? -v6 : v6;
+      }
+      invert = volume < 0;
+    }
+    for (int64_t f : component) {
+      if ((flip[f] != 0) != invert) {
+        std::swap((*triangles)[f][1], (*triangles)[f][2]);
+        ++reoriented;
+      }
+    }
+  }
+  return reoriented;
+}
+
+// CornerOf returns the corner id 3f + k of vertex v in triangle f.
+int64_t CornerOf(const Triangles& triangles, int64_t f, uint32_t v) {
+  for (int k = 0; k < 3; ++k) {
+    if (static_cast<uint32_t>(triangles[f][k]) == v) return 3 * f + k;
+  }
+  return -1;
+}
+
+// SplitFans gives each fan of a vertex its own vertex: corners of triangles
+// meeting at a vertex are joined across each kept (not cut) link; the fan
+// of the vertex's first corner keeps its id, every other fan gets a copy of
+// the position appended to *positions. Counts split vertices and copies in
+// *repair.
+void SplitFans(const std::vector<Link>& links, const std::vector<char>& cut,
+               std::vector<Eigen::Vector3d>* positions, Triangles* triangles,
+               ManifoldRepair* repair) {
+  const int64_t nf = static_cast<int64_t>(triangles->size());
+  const int64_t nv = static_cast<int64_t>(positions->size());
+  DisjointSets corners(3 * nf);
+  for (size_t i = 0; i < links.size(); ++i) {
+    if (cut[i]) continue;
+    const uint32_t a = static_cast<uint32_t>(links[i].key >> 32);
+    const uint32_t b = static_cast<uint32_t>(links[i].key & 0xffffffffu);
+    corners.Union(CornerOf(*triangles, links[i].f, a),
+                  CornerOf(*triangles, links[i].g, a));
+    corners.Union(CornerOf(*triangles, links[i].f, b),
+                  CornerOf(*triangles, links[i].g, b));
+  }
+  std::vector<int32_t> fan_vertex(3 * nf, -1);  // by root corner
+  std::vector<char> has_fan(nv, 0), split(nv, 0);
+  for (int64_t c = 0; c < 3 * nf; ++c) {
+    int32_t& v = (*triangles)[c / 3][c % 3];
+    const int64_t root = corners.Find(c);
+    if (fan_vertex[root] < 0) {
+      if (!has_fan[v]) {
+        has_fan[v] = 1;
+        fan_vertex[root] = v;
+      } else {
+        if (!split[v]) {
+          split[v] = 1;
+          ++repair->split_vertices;
+        }
+        fan_vertex[root] = static_cast<int32_t>(positions->size());
+        positions->push_back((*positions)[v]);
+        ++repair->added_vertices;
+      }
+    }
+    v = fan_vertex[root];
+  }
+}
+
+// FacesOnFaultyEdges returns, for every edge of three or more triangles or
+// of two triangles traversing it in the same direction, all its triangles
+// but the first (ascending, without repeats).
+std::vector<int64_t> FacesOnFaultyEdges(const Triangles& triangles) {
+  const std::vector<HalfEdge> halfedges = SortedHalfEdges(triangles);
+  std::vector<int64_t> bad;
+  for (size_t i = 0; i < halfedges.size();) {
+    size_t j = i + 1;
+    while (j < halfedges.size() && halfedges[j].key == halfedges[i].key) ++j;
+    if (j - i > 2 ||
+        (j - i == 2 && halfedges[i].forward == halfedges[i + 1].forward)) {
+      for (size_t k = i + 1; k < j; ++k) bad.push_back(halfedges[k].face);
+    }
+    i = j;
+  }
+  std::sort(bad.begin(), bad.end());
+  bad.erase(std::unique(bad.begin(), bad.end()), bad.end());
+  return bad;
 }
 
 }  // namespace
@@ -98,7 +285,8 @@ absl::Status ValidatePolygonSoup(const PolygonSoup& soup,
     }
     triangle_count += static_cast<int64_t>(polygon.size()) - 2;
   }
-  if (triangle_count > options.max_faces) {
+  if (triangle_count > options.max_faces ||
+      triangle_count > std::numeric_limits<int32_t>::max()) {
     return mesh_io::TooManyFaces(triangle_count, options);
   }
   return absl::OkStatus();
@@ -179,20 +367,11 @@ absl::Status CheckManifold(int64_t num_vertices, const Triangles& triangles) {
   // are linked across each interior edge they share; a manifold vertex's
   // corners then form one set (its single fan), a pinch vertex several.
   DisjointSets corners(3 * nf);
-  auto corner_of = [&](int64_t f, uint32_t v) -> int64_t {
-    for (int k = 0; k < 3; ++k) {
-      if (static_cast<uint32_t>(triangles[f][k]) == v) return 3 * f + k;
-    }
-    return -1;
-  };
-  for (size_t i = 0; i + 1 < halfedges.size(); ++i) {
-    if (halfedges[i].key != halfedges[i + 1].key) continue;
-    const uint32_t a = static_cast<uint32_t>(halfedges[i].key >> 32);
-    const uint32_t b = static_cast<uint32_t>(halfedges[i].key & 0xffffffffu);
-    const int64_t f = halfedges[i].face, g = halfedges[i + 1].face;
-    corners.Union(corner_of(f, a), corner_of(g, a));
-    corners.Union(corner_of(f, b), corner_of(g, b));
-    ++i;
+  for (const Link& l : BuildLinks(triangles, nullptr)) {
+    const uint32_t a = static_cast<uint32_t>(l.key >> 32);
+    const uint32_t b = static_cast<uint32_t>(l.key & 0xffffffffu);
+    corners.Union(CornerOf(triangles, l.f, a), CornerOf(triangles, l.g, a));
+    corners.Union(CornerOf(triangles, l.f, b), CornerOf(triangles, l.g, b));
   }
   std::vector<int64_t> fan(num_vertices, -1);
   int64_t worst = -1;
@@ -221,97 +400,46 @@ absl::Status CheckManifold(int64_t num_vertices, const Triangles& triangles) {
 
 absl::StatusOr<int64_t> OrientConsistently(
     const std::vector<Eigen::Vector3d>& positions, Triangles* triangles) {
-  const int64_t nf = static_cast<int64_t>(triangles->size());
-  const std::vector<HalfEdge> halfedges = SortedHalfEdges(*triangles);
-  // Links between the two triangles of each interior edge.
-  struct Link {
-    int64_t f, g;
-    bool flip;  // g must be flipped relative to f
-    uint64_t key;
-  };
-  std::vector<Link> links;
-  links.reserve(halfedges.size() / 2);
-  for (size_t i = 0; i + 1 < halfedges.size(); ++i) {
-    if (halfedges[i].key != halfedges[i + 1].key) continue;
-    const HalfEdge& h0 = halfedges[i];
-    const HalfEdge& h1 = halfedges[i + 1];
-    // Consistently oriented neighbours traverse their shared edge in
-    // opposite directions.
-    links.push_back({h0.face, h1.face, h0.forward == h1.forward, h0.key});
-    ++i;
-  }
-  std::vector<int64_t> offsets(nf + 1, 0);
-  for (const Link& l : links) {
-    ++offsets[l.f + 1];
-    ++offsets[l.g + 1];
-  }
-  for (int64_t f = 0; f < nf; ++f) offsets[f + 1] += offsets[f];
-  std::vector<std::pair<int64_t, size_t>> adjacency(offsets[nf]);
-  {
-    std::vector<int64_t> fill(offsets.begin(), offsets.end() - 1);
-    for (size_t i = 0; i < links.size(); ++i) {
-      adjacency[fill[links[i].f]++] = {links[i].g, i};
-      adjacency[fill[links[i].g]++] = {links[i].f, i};
+  const std::vector<Link> links = BuildLinks(*triangles, nullptr);
+  return Orient(positions, links, nullptr, triangles);
+}
+
+ManifoldRepair RepairNonManifold(std::vector<Eigen::Vector3d>* positions,
+                                 Triangles* triangles) {
+  ManifoldRepair repair;
+  // Round 0 does the work; a later round runs only when a cut edge was
+  // glued back by the vertex split (its faces still share both ends), after
+  // detaching the faces of every such edge but the first. Detaching never
+  // creates a new fault, so the third round finds none.
+  for (int round = 0;; ++round) {
+    int64_t non_manifold_edges = 0;
+    const std::vector<Link> links = BuildLinks(*triangles, &non_manifold_edges);
+    std::vector<char> cut(links.size(), 0);
+    // Cannot fail: conflicts become cuts.
+    const int64_t flipped = *Orient(*positions, links, &cut, triangles);
+    repair.reoriented += flipped;
+    int64_t cuts = 0;
+    for (char c : cut) cuts += c;
+    if (round == 0) {
+      repair.non_manifold_edges = non_manifold_edges;
+      repair.orientation_cuts = cuts;
     }
-  }
-  // Breadth-first over faces, flipping to agree with the first face; then
-  // per component keep the majority's orientation, and for a closed
-  // component make the signed volume positive (outward normals).
-  std::vector<int8_t> flip(nf, -1);
-  std::vector<int64_t> queue;
-  std::vector<int64_t> component;
-  int64_t reoriented = 0;
-  for (int64_t seed = 0; seed < nf; ++seed) {
-    if (flip[seed] >= 0) continue;
-    flip[seed] = 0;
-    queue.assign(1, seed);
-    component.clear();
-    for (size_t q = 0; q < queue.size(); ++q) {
-      const int64_t f = queue[q];
-      component.push_back(f);
-      for (int64_t a = offsets[f]; a < offsets[f + 1]; ++a) {
-        const auto [g, link] = adjacency[a];
-        const int8_t want = flip[f] ^ (links[link].flip ? 1 : 0);
-        if (flip[g] < 0) {
-          flip[g] = want;
-          queue.push_back(g);
-        } else if (flip[g] != want) {
-          return absl::InvalidArgumentError(absl::StrCat(
-              "non-orientable surface: triangles around edge ",
-              EdgeName(links[link].key), " cannot be oriented consistently"));
-        }
+    SplitFans(links, cut, positions, triangles, &repair);
+    const std::vector<int64_t> bad = FacesOnFaultyEdges(*triangles);
+    if (bad.empty() || round >= 3) {
+      assert(bad.empty());
+      break;
+    }
+    for (int64_t f : bad) {
+      for (int32_t& v : (*triangles)[f]) {
+        positions->push_back((*positions)[v]);
+        v = static_cast<int32_t>(positions->size() - 1);
       }
     }
-    int64_t flipped = 0;
-    for (int64_t f : component) flipped += flip[f];
-    bool invert = 2 * flipped > static_cast<int64_t>(component.size());
-    // A closed component (every triangle has three neighbours) decides by
-    // signed volume.
-    bool closed = true;
-    for (int64_t f : component) {
-      if (offsets[f + 1] - offsets[f] != 3) {
-        closed = false;
-        break;
-      }
-    }
-    if (closed) {
-      double volume = 0.0;
-      for (int64_t f : component) {
-        const auto& t = (*triangles)[f];
-        const double v6 =
-            positions[t[0]].dot(positions[t[1]].cross(positions[t[2]]));
-        volume += flip[f] ? -v6 : v6;
-      }
-      invert = volume < 0;
-    }
-    for (int64_t f : component) {
-      if ((flip[f] != 0) != invert) {
-        std::swap((*triangles)[f][1], (*triangles)[f][2]);
-        ++reoriented;
-      }
-    }
+    repair.detached_triangles += static_cast<int64_t>(bad.size());
+    repair.added_vertices += 3 * static_cast<int64_t>(bad.size());
   }
-  return reoriented;
+  return repair;
 }
 
 int64_t CompactVertices(std::vector<Eigen::Vector3d>* positions,
@@ -354,17 +482,49 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
         absl::StrCat("dropped ", duplicates, " duplicate triangles"));
   }
   if (triangles.empty()) {
+    // Far from the origin, float precision (what files are read with)
+    // merges nearby vertices: say so rather than only "degenerate".
+    Eigen::Vector3d lo = soup.positions[0], hi = soup.positions[0];
+    double magnitude = 0.0;
+    for (const Eigen::Vector3d& p : soup.positions) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+      magnitude = std::max(magnitude, p.cwiseAbs().maxCoeff());
+    }
+    const double span = (hi - lo).maxCoeff();
+    const std::string hint =
+        degenerate > 0 && magnitude > 1e6 * span
+            ? absl::StrCat("; the coordinates reach ", magnitude,
+                           " but span only ", span,
+                           ": at float precision (24 bits, how files are "
+                           "read) detail below ",
+                           magnitude * 6e-8, " is lost, so move the mesh "
+                           "near the origin")
+            : "";
     return absl::InvalidArgumentError(absl::StrCat(
         "mesh has no faces left after dropping ", degenerate,
-        " degenerate and ", duplicates, " duplicate triangles"));
+        " degenerate and ", duplicates, " duplicate triangles", hint));
   }
-  TPR_RETURN_IF_ERROR(CheckManifold(
-      static_cast<int64_t>(soup.positions.size()), triangles));
-  TPR_ASSIGN_OR_RETURN(const int64_t reoriented,
-                       OrientConsistently(soup.positions, &triangles));
-  if (reoriented > 0) {
+  const ManifoldRepair repair = RepairNonManifold(&soup.positions, &triangles);
+  if (repair.non_manifold_edges > 0 || repair.split_vertices > 0 ||
+      repair.orientation_cuts > 0 || repair.detached_triangles > 0) {
     warnings.push_back(absl::StrCat(
-        "reoriented ", reoriented, " triangles for a consistent orientation"));
+        "repaired non-manifold input by splitting it into manifold sheets: ",
+        repair.non_manifold_edges, " edges shared by 3 or more triangles, ",
+        repair.split_vertices, " vertices whose triangles form 2 or more fans (",
+        repair.added_vertices, " vertex copies added)",
+        repair.orientation_cuts > 0
+            ? absl::StrCat(", ", repair.orientation_cuts,
+                           " edges cut open to orient a non-orientable surface")
+            : "",
+        repair.detached_triangles > 0
+            ? absl::StrCat(", ", repair.detached_triangles,
+                           " triangles detached")
+            : ""));
+  }
+  if (repair.reoriented > 0) {
+    warnings.push_back(absl::StrCat("reoriented ", repair.reoriented,
+                                    " triangles for a consistent orientation"));
   }
   const int64_t unreferenced = CompactVertices(&soup.positions, &triangles);
   if (unreferenced > 0) {
@@ -378,6 +538,9 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
   loaded.stats.dropped_degenerate_faces = degenerate;
   loaded.stats.dropped_duplicate_faces = duplicates;
   loaded.stats.unreferenced_vertices = unreferenced;
+  loaded.stats.non_manifold_edges = repair.non_manifold_edges;
+  loaded.stats.non_manifold_vertices = repair.split_vertices;
+  loaded.stats.orientation_cuts = repair.orientation_cuts;
   loaded.warnings = std::move(warnings);
   return loaded;
 }

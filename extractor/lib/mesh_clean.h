@@ -9,11 +9,13 @@
 //   2. FanTriangulate: each polygon from its first corner;
 //   3. DropDegenerateTriangles: repeated vertex, or zero area up to rounding;
 //   4. DropDuplicateTriangles: same three vertices in any order;
-//   5. CheckManifold: an edge of 3+ triangles or a vertex of 2+ fans is
-//      INVALID_ARGUMENT naming it;
-//   6. OrientConsistently: per component, agree with the majority; closed
-//      components face outward;
-//   7. CompactVertices: unreferenced vertices removed, ids compacted.
+//   5. RepairNonManifold: an edge of 3+ triangles is cut, a non-orientable
+//      surface is cut open where its orientation conflicts, and a vertex
+//      whose triangles form 2+ fans is split into one vertex per fan, so
+//      the result is manifold sheets; orientation as OrientConsistently;
+//   6. CompactVertices: unreferenced vertices removed, ids compacted.
+// CheckManifold and OrientConsistently are the strict forms of step 5 (an
+// error instead of a repair), for callers that must not change topology.
 //
 //   PolygonSoup soup;
 //   soup.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
@@ -136,9 +138,51 @@ absl::Status CheckManifold(int64_t num_vertices, const Triangles& triangles);
 // positive signed volume (counter-clockwise seen from outside). Returns the
 // number of triangles flipped. Errors: INVALID_ARGUMENT "non-orientable
 // surface: triangles around edge (a, b) cannot be oriented consistently".
-// Precondition: CheckManifold passed. O(F log F). Thread-safe.
+// Edges of 3+ triangles join nothing. O(F log F). Thread-safe.
 absl::StatusOr<int64_t> OrientConsistently(
     const std::vector<Eigen::Vector3d>& positions, Triangles* triangles);
+
+// ManifoldRepair counts what RepairNonManifold changed.
+struct ManifoldRepair {
+  // Edges of the input shared by 3 or more triangles.
+  int64_t non_manifold_edges = 0;
+  // Vertices split because their triangles formed 2 or more fans (pinch
+  // vertices, and the ends of cut edges whose sides fall apart).
+  int64_t split_vertices = 0;
+  // Copies of vertices appended to the positions (fans after the first,
+  // and detached triangles' corners).
+  int64_t added_vertices = 0;
+  // Edges of two triangles cut open because the surface is not orientable
+  // (a Moebius strip needs one).
+  int64_t orientation_cuts = 0;
+  // Triangles given their own three vertices because a cut edge would
+  // otherwise close again (not seen outside constructed cases).
+  int64_t detached_triangles = 0;
+  // Triangles flipped for a consistent orientation.
+  int64_t reoriented = 0;
+};
+
+// RepairNonManifold makes `triangles` an oriented 2-manifold with boundary,
+// changing connectivity only where it is not one, and never dropping a
+// triangle:
+//   - an edge of 3 or more triangles joins none of them: each has it as a
+//     border (the sheets meeting there fall apart along it, then rejoin
+//     wherever their vertices' fans still connect them);
+//   - orientation as OrientConsistently, except that a link contradicting
+//     the orientation already given is cut instead of refused;
+//   - each vertex gets one id per fan of its triangles (joined across the
+//     edges kept above); the fan of its first corner keeps the id, others
+//     get copies appended to *positions;
+//   - should a cut edge rejoin because both its ends stayed single fans,
+//     the faces along it but the first are detached (own vertex copies)
+//     and the steps run again.
+// The sheets meeting at a non-manifold edge are not paired by angle: the
+// edge is cut, so two closed surfaces sharing an edge stay two closed
+// surfaces, and a fin comes off the surface it stands on. Returns the
+// counts. Precondition: ids in range, no degenerate or duplicate triangle.
+// Positions of copies equal the original's. O(F log F). Thread-safe.
+ManifoldRepair RepairNonManifold(std::vector<Eigen::Vector3d>* positions,
+                                 Triangles* triangles);
 
 // CompactVertices removes the vertices no triangle references, renumbers
 // the rest in their original order, and returns how many it removed.
@@ -149,8 +193,8 @@ int64_t CompactVertices(std::vector<Eigen::Vector3d>* positions,
 // CleanPolygonSoup runs the steps at the top of this header and returns the
 // mesh, its ComputeMeshStats figures with the dropped/unreferenced counters
 // filled in, and one warning per step that changed something (after the
-// soup's own warnings). Errors: those of ValidatePolygonSoup, CheckManifold
-// and OrientConsistently; INVALID_ARGUMENT "mesh has no faces left after
+// soup's own warnings; a repair names its counts). Errors: those of
+// ValidatePolygonSoup; INVALID_ARGUMENT "mesh has no faces left after
 // dropping ..." when cleaning leaves nothing. O(F log F). Thread-safe.
 absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
                                             const IntakeOptions& options);

@@ -8,11 +8,13 @@
 // Every reader parses the bytes exactly once and checks what it reads as it
 // goes: declared counts against the bytes left (a lying header never
 // allocates), counts against IntakeOptions before storing anything (a
-// polygon's triangles are counted while its line is read), every token and
-// index, naming the format and the line or element at fault. Memory: the
-// soup holds 24 bytes per vertex and 4 per corner (plus 8 per polygon),
-// each record of which takes at least 2 input bytes, so a reader never
-// holds more than about 16 times its input (below the IntakeOptions limits).
+// polygon's corners are counted before they are stored, so a face over the
+// limit is refused holding nothing), every token and index, naming the
+// format and the line or element at fault. Memory: the soup holds 24 bytes
+// per vertex and 4 per corner (plus 8 per polygon), each of which takes
+// several input bytes; reading and cleaning together peak at 7-9 times the
+// input for the tersest valid OBJ, and tests/extractor/mesh_memory_test.cc
+// holds intake to at most 12 times its input plus 1 MiB.
 // Coordinates are rounded to float precision (what the readers have always
 // kept; see ParseCoordinate in mesh_io_text.h).
 //
