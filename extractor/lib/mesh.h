@@ -41,11 +41,17 @@ struct MeshStats {
   int64_t dropped_degenerate_faces = 0;
   int64_t dropped_duplicate_faces = 0;
   int64_t unreferenced_vertices = 0;
+  // Intake's repairs (mesh_clean.h RepairNonManifold): input edges shared
+  // by 3+ triangles, vertices split because their triangles formed 2+
+  // fans, and edges cut open to orient a non-orientable surface.
+  int64_t non_manifold_edges = 0;
+  int64_t non_manifold_vertices = 0;
+  int64_t orientation_cuts = 0;
 };
 
 // ComputeMeshStats returns the vertex, face, area, boundary-edge, component
-// and genus figures of `mesh`; the dropped_* and unreferenced_vertices
-// counters are left 0 (intake fills them in).
+// and genus figures of `mesh`; the dropped_*, unreferenced_vertices and
+// repair counters are left 0 (intake fills them in).
 //
 // Components are connected components of faces (two faces are connected when
 // they share an edge). Vertices count only when a face references them. The

@@ -1,19 +1,22 @@
 // Mesh intake: read OFF, OBJ, PLY (ASCII and binary) and STL from a file or a
-// byte buffer, triangulate, validate, and compute MeshStats.
+// byte buffer, triangulate, validate and clean, and compute MeshStats.
 //
-// Parsing goes through OpenMesh's IO readers (OpenMesh::IO::IOManager) into a
-// recording importer, so OpenMesh never drops a face behind our back: every
-// check below is ours. Before OpenMesh sees the bytes, a structural scan
-// checks counts, tokens and sizes (OpenMesh's readers trust headers and loop
-// on failed streams), so garbage and lying headers fail fast with a line or
-// element number. Coordinates pass through OpenMesh as float (its readers'
-// type), so file coordinates carry float precision.
+// Two layers, each in its own files:
+//   - one reader per format (mesh_io_readers.h; mesh_io_{off,obj,ply,stl}.cc
+//     over the shared text scanner mesh_io_text.h) parses the bytes once
+//     into a PolygonSoup, checking counts, tokens and indices as it reads
+//     and naming the line or element at fault;
+//   - the cleaning steps (mesh_clean.h) turn the soup into a Mesh: limits,
+//     finiteness, ranges, fan triangulation, degenerate and duplicate
+//     dropping, manifold check, orientation, compaction.
+// File coordinates carry float precision (mesh_io_readers.h).
 //
 // What intake does to a mesh, in order (files and BuildMesh alike):
 //   1. limits: more than max_vertices vertices or max_faces triangles is
 //      RESOURCE_EXHAUSTED;
-//   2. every coordinate finite, every polygon >= 3 indices, all in range,
-//      else INVALID_ARGUMENT naming the vertex or face (and line in files);
+//   2. every coordinate finite and at most kMaxCoordinate in magnitude,
+//      every polygon >= 3 indices, all in range, else INVALID_ARGUMENT
+//      naming the vertex or face (and line in files);
 //   3. polygons are fan-triangulated from their first corner (exact for
 //      convex polygons, which is what mesh files hold in practice);
 //   4. degenerate triangles (repeated vertex, or area <= 1e-12 x the square
@@ -41,28 +44,12 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "extractor/lib/mesh.h"
+#include "extractor/lib/mesh_clean.h"
 
 namespace tpr::extract {
 
 // MeshFormat of a file; kUnknown guesses from the name, then the bytes.
 enum class MeshFormat { kUnknown, kOff, kObj, kPly, kStl };
-
-// IntakeOptions bounds what intake accepts.
-struct IntakeOptions {
-  // Meshes with more vertices are RESOURCE_EXHAUSTED. Default 2,000,000.
-  int64_t max_vertices = 2'000'000;
-  // Meshes with more faces (after triangulation) are RESOURCE_EXHAUSTED.
-  // Default 4,000,000.
-  int64_t max_faces = 4'000'000;
-};
-
-// LoadedMesh is a validated mesh with its statistics.
-struct LoadedMesh {
-  Mesh mesh;
-  MeshStats stats;
-  // Dropped faces and similar, one sentence each.
-  std::vector<std::string> warnings;
-};
 
 // LoadMeshFromBuffer parses `bytes` as `format` (guessing from `file_name`
 // and the bytes when kUnknown) and validates the result.
@@ -70,12 +57,10 @@ struct LoadedMesh {
 // names the format and the line, face or vertex at fault), or when the format
 // cannot be guessed; RESOURCE_EXHAUSTED above the limits (a header whose
 // counts the bytes cannot hold is INVALID_ARGUMENT, checked first, so a lying
-// header never allocates); INTERNAL if OpenMesh's reader disagrees with the
-// scan (not seen on any input so far). Binary OFF and OFF header variants
-// (COFF, NOFF, ...) are INVALID_ARGUMENT. Thread-safe: the OpenMesh step is
-// serialized by a process-wide mutex (its readers are stateful singletons).
-// O(n log n) in the number of faces; about 0.15-0.35 s of CPU for 100k
-// vertices / 200k triangles.
+// header never allocates). Binary OFF and OFF header variants (COFF, NOFF,
+// ...) are INVALID_ARGUMENT. Thread-safe (no shared state). O(n log n) in the
+// number of faces; memory a small multiple of the input bytes (see
+// mesh_io_readers.h). Timings: bench_extract BM_ReadMesh.
 absl::StatusOr<LoadedMesh> LoadMeshFromBuffer(absl::string_view bytes,
                                               MeshFormat format,
                                               absl::string_view file_name,

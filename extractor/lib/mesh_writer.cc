@@ -6,7 +6,9 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <fstream>
+#include <cerrno>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include "absl/strings/str_cat.h"
 
@@ -102,6 +104,30 @@ std::string PlyHeader(const Mesh& mesh, bool binary, bool colors,
   return out;
 }
 
+// FileError maps an errno from writing `path` to a code a caller need not
+// retry (the same call fails the same way until someone changes the file
+// system): NOT_FOUND for a missing directory, PERMISSION_DENIED, 
+// RESOURCE_EXHAUSTED for a full disk or quota, FAILED_PRECONDITION for
+// anything else about the path (a directory, a read-only file system).
+absl::Status FileError(int error, const char* what, const std::string& path) {
+  const std::string message =
+      absl::StrCat(what, " '", path, "': ", std::strerror(error));
+  switch (error) {
+    case ENOENT:
+    case ENOTDIR:
+      return absl::NotFoundError(absl::StrCat(message, " (a directory on the path is missing)"));
+    case EACCES:
+    case EPERM:
+      return absl::PermissionDeniedError(message);
+    case ENOSPC:
+    case EDQUOT:
+    case EFBIG:
+      return absl::ResourceExhaustedError(message);
+    default:
+      return absl::FailedPreconditionError(message);
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<std::string> WriteMeshToString(
@@ -166,15 +192,20 @@ absl::Status WriteMeshToFile(const Mesh& mesh, const MeshWriteOptions& options,
                              const std::string& path) {
   absl::StatusOr<std::string> bytes = WriteMeshToString(mesh, options);
   if (!bytes.ok()) return bytes.status();
-  std::ofstream file(path, std::ios::binary | std::ios::trunc);
-  if (!file) {
-    return absl::UnavailableError(absl::StrCat("cannot open ", path, " for writing"));
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return FileError(errno, "cannot open", path);
+  size_t written = 0;
+  while (written < bytes->size()) {
+    const ssize_t n = ::write(fd, bytes->data() + written, bytes->size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int error = n < 0 ? errno : EIO;
+      ::close(fd);
+      return FileError(error, "cannot write", path);
+    }
+    written += static_cast<size_t>(n);
   }
-  file.write(bytes->data(), static_cast<std::streamsize>(bytes->size()));
-  file.close();
-  if (!file) {
-    return absl::UnavailableError(absl::StrCat("cannot write ", path));
-  }
+  if (::close(fd) != 0) return FileError(errno, "cannot write", path);
   return absl::OkStatus();
 }
 

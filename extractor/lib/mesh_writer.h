@@ -50,8 +50,12 @@ absl::StatusOr<std::string> WriteMeshToString(const Mesh& mesh,
                                               const MeshWriteOptions& options);
 
 // WriteMeshToFile writes WriteMeshToString's bytes to `path` (replacing it).
-// Errors: as WriteMeshToString; UNAVAILABLE when the file cannot be written
-// (the message names the path: callers pass their own paths only).
+// Errors: as WriteMeshToString; when the file cannot be written, a code
+// that retrying does not change, with the path and the system's reason in
+// the message (callers pass their own paths only): NOT_FOUND (a directory
+// on the path is missing), PERMISSION_DENIED, RESOURCE_EXHAUSTED (disk full
+// or quota), FAILED_PRECONDITION (anything else: a directory, a read-only
+// file system). A failed write may leave a partial file.
 // Thread-safe for distinct paths. O(V + F).
 absl::Status WriteMeshToFile(const Mesh& mesh, const MeshWriteOptions& options,
                              const std::string& path);

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "extractor/lib/disjoint_sets.h"
 #include "extractor/lib/wavefront_heap.h"
 
 namespace tpr::extract {
@@ -23,21 +24,6 @@ std::vector<double> RingStartTimes(const std::vector<double>& point_g, double g_
   }
   return start;
 }
-
-namespace {
-
-
-// Find with path halving over the "merged into" links: the root of a
-// front's set is the live front that now carries its wavefront.
-int32_t Find(std::vector<int32_t>& up, int32_t f) {
-  while (up[f] != f) {
-    up[f] = up[up[f]];
-    f = up[f];
-  }
-  return f;
-}
-
-}  // namespace
 
 absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     const MeshGraph& graph, const std::vector<int32_t>& point_vertices,
@@ -72,12 +58,13 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
   out.level.assign(n, kUnreachable);
   std::vector<Front>& fronts = out.fronts;
   fronts.resize(num_points);
-  std::vector<int32_t> up(num_points);
+  // Fronts merged so far: the root of a front's set is the live front that
+  // now carries its wavefront.
+  DisjointSets up(num_points);
   for (int32_t i = 0; i < num_points; ++i) {
     fronts[i].point = i;
     fronts[i].birth = start_times[i];
     fronts[i].points = {i};
-    up[i] = i;
   }
   const int32_t component =
       num_points > 0 ? graph.component()[point_vertices[0]] : graph.largest_component();
@@ -129,10 +116,10 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     // unfolded shortcut is found one edge later, and the 1-ring scan costs
     // half as much.
     roots.clear();
-    roots.push_back(Find(up, reached_by[v]));
+    roots.push_back(static_cast<int32_t>(up.Find(reached_by[v])));
     for (int32_t w : graph.one_ring(v)) {
       if (!settled[w] || out.owner[w] < 0) continue;
-      const int32_t r = Find(up, out.owner[w]);
+      const int32_t r = static_cast<int32_t>(up.Find(out.owner[w]));
       if (std::find(roots.begin(), roots.end(), r) == roots.end()) roots.push_back(r);
     }
     int32_t owner = roots.front();
@@ -142,16 +129,16 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
       merged.birth = level[v];
       merged.children = roots;
       owner = static_cast<int32_t>(fronts.size());
+      up.Add();  // == owner
       for (int32_t r : roots) {
         fronts[r].parent = owner;
         fronts[r].death = level[v];
-        up[r] = owner;
+        up.Link(r, owner);
         merged.points.insert(merged.points.end(), fronts[r].points.begin(),
                              fronts[r].points.end());
       }
       std::sort(merged.points.begin(), merged.points.end());
       fronts.push_back(std::move(merged));
-      up.push_back(owner);
       live -= static_cast<int>(roots.size()) - 1;
     }
     out.owner[v] = owner;

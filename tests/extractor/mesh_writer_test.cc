@@ -15,6 +15,7 @@
 #include <string>
 
 #include "extractor/lib/mesh_io.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 
 namespace tpr::extract {
@@ -207,7 +208,20 @@ TEST(MeshWriterTest, WritesFilesAndReportsUnwritablePaths) {
   EXPECT_EQ(content.str(), *WriteMeshToString(Tetrahedron(), options));
   const absl::Status missing = WriteMeshToFile(
       Tetrahedron(), options, (dir / "no_such_dir" / "t.off").string());
-  EXPECT_EQ(missing.code(), absl::StatusCode::kUnavailable);
+  // Not retryable (UNAVAILABLE would be), and the message names the path
+  // and the reason.
+  EXPECT_EQ(missing.code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(std::string(missing.message()), ::testing::HasSubstr("no_such_dir/t.off"));
+  EXPECT_THAT(std::string(missing.message()), ::testing::HasSubstr("No such file or directory"));
+  const absl::Status is_dir = WriteMeshToFile(Tetrahedron(), options, dir.string());
+  EXPECT_EQ(is_dir.code(), absl::StatusCode::kFailedPrecondition) << is_dir;
+  EXPECT_THAT(std::string(is_dir.message()), ::testing::HasSubstr("Is a directory"));
+  // /dev/full fails every write with ENOSPC: a full disk.
+  if (std::filesystem::exists("/dev/full")) {
+    const absl::Status full = WriteMeshToFile(Tetrahedron(), options, "/dev/full");
+    EXPECT_EQ(full.code(), absl::StatusCode::kResourceExhausted) << full;
+    EXPECT_THAT(std::string(full.message()), ::testing::HasSubstr("No space left"));
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -159,13 +159,14 @@ def main():
     write(os.path.join(BAD, "nan.off"), "".join(nan_lines))
     write(os.path.join(BAD, "index_out_of_range.obj"),
           obj(TETRA_V, TETRA_F[:3]) + "f 2 3 9\n")
-    # Three triangles on edge (0, 1).
-    write(os.path.join(BAD, "nonmanifold_edge.off"),
+    # Three triangles on edge (0, 1): intake repairs it (three sheets).
+    write(os.path.join(GOOD, "nonmanifold_edge.off"),
           off([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1)],
               [(0, 1, 2), (1, 0, 3), (0, 1, 4)]))
-    # Two cones (closed tetrahedra) touching at their tip, vertex 0.
+    # Two cones (closed tetrahedra) touching at their tip, vertex 0: intake
+    # repairs it (vertex 0 split in two).
     cone2 = [(0, 0, 0), (-1, 0, 0), (0, -1, 0), (0, 0, -1)]
-    write(os.path.join(BAD, "nonmanifold_vertex.off"),
+    write(os.path.join(GOOD, "nonmanifold_vertex.off"),
           off(TETRA_V + cone2[1:],
               TETRA_F + [(0, 5, 4), (0, 4, 6), (0, 6, 5), (4, 5, 6)]))
     write(os.path.join(BAD, "empty.off"), "")
