@@ -82,6 +82,9 @@ absl::Status ValidateOptions(const Options& o) {
   if (!(o.ring_length_threshold >= 0.0 && o.ring_length_threshold <= 1.0)) {
     return absl::InvalidArgumentError("options: ring_length_threshold not in [0, 1]");
   }
+  if (!(o.point_min_prominence >= 0.0 && o.point_min_prominence <= 1.0)) {
+    return absl::InvalidArgumentError("options: point_min_prominence not in [0, 1]");
+  }
   if (o.spectrum_eigenvalues < 0 || o.spectrum_eigenvalues > 1000) {
     return absl::InvalidArgumentError(absl::StrCat(
         "options: spectrum_eigenvalues ", o.spectrum_eigenvalues, " not in [0, 1000]"));
@@ -178,7 +181,10 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   timer.Finish("critical_points");
 
   // Stage: Topological Point Selection (4.4).
-  std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph, solver, sets);
+  TopologicalPointOptions point_options;
+  point_options.min_persistence = options.point_min_prominence * std::sqrt(area);
+  std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph, solver, sets, /*stats=*/nullptr, point_options);
   int num_points = static_cast<int>(points.size());
   timer.Finish("topological_points");
 

@@ -36,6 +36,11 @@ struct Options {
   // CriticalPointOptions::search_hops). Must exceed cycle_min_vertices.
   // Default 6.
   int cycle_search_hops = 6;
+  // Topological Point Selection: the shortest protrusion whose maxima vote,
+  // as the maxima's persistence in their source's distance field /
+  // sqrt(total area); see TopologicalPointOptions::min_persistence. Not in
+  // the paper (0 is the paper's 4.3-4.4). In [0, 1]. Default 0.
+  double point_min_prominence = 0.0;
   // Topological Ring Extraction: a front's wavefront is a ring when its
   // region length (Eq. 3) exceeds this fraction of MAX g_o (the paper gives
   // no number, 4.6.2). Chosen by measurement on the synthetic classes (see

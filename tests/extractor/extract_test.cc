@@ -260,6 +260,40 @@ TEST(ExtractTest, PointCountStableAcrossPoses) {
   EXPECT_LE(off, 1);
 }
 
+// Options::point_min_prominence: a ball with four long arms and one short
+// stub. The paper's selection (0) may give the stub a point; a threshold
+// between the stub's length and the arms' drops the stub and keeps every
+// arm.
+TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
+  synth::Skeleton sk;
+  synth::Bone ball;
+  ball.start_radius = ball.end_radius = 0.35;
+  sk.bones.push_back(ball);
+  for (const Eigen::Vector3d& d : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(-1, 0, 0),
+                                   Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, -1),
+                                   Eigen::Vector3d(0, 1, 0)}) {
+    synth::Bone arm;
+    arm.parent = 0;
+    arm.end = (d.y() > 0 ? 0.55 : 1.3) * d;
+    arm.start_radius = arm.end_radius = 0.1;
+    sk.bones.push_back(arm);
+  }
+  absl::StatusOr<Mesh> mesh = synth::MeshFromSkeleton(sk, 5000);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  Options paper;
+  paper.spectrum_eigenvalues = 0;
+  Options stable = paper;
+  stable.point_min_prominence = 0.2;
+  const ExtractResult a = Extract(*mesh, paper);
+  const ExtractResult b = Extract(*mesh, stable);
+  EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), 5);
+  EXPECT_EQ(Count(b.signature, FeatureKind::kPoint), 4);
+  Options bad;
+  bad.point_min_prominence = -0.1;
+  EXPECT_EQ(ExtractSignature(*mesh, ComputeMeshStats(*mesh), bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(ExtractTest, ThreadsGiveIdenticalResults) {
   const Mesh m = Shape("ant", 0, 5000);
   Options one, two;
