@@ -46,14 +46,12 @@ struct Feature {
 struct Signature {
   // Points first, then rings.
   std::vector<Feature> features;
-  // The Laplace-Beltrami spectrum (spectrum.h): the first N non-zero
-  // eigenvalues lambda_i * A / (4 pi), ascending (the unit sphere gives
-  // 2, 2, 2, 6, ...); N = Options::spectrum_eigenvalues, empty when 0.
-  std::vector<double> spectrum;
   MeshStats stats;
   // The Laplace-Beltrami spectrum: the first non-zero eigenvalues, ascending,
   // each lambda_i * A / (4 pi) (A = total surface area), so the unit sphere
-  // gives l (l + 1). tpr.v1.Signature.spectrum documents it.
+  // gives l (l + 1). tpr.v1.Signature.spectrum documents it. Computed by
+  // LaplaceBeltramiSpectrum (spectrum.h); N = Options::spectrum_eigenvalues,
+  // empty when 0.
   std::vector<double> spectrum;
 };
 
