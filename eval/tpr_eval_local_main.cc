@@ -8,6 +8,7 @@
 //   tpr-eval-local --out results/ --invariance
 //       --manifest ../shared/data/shrec07-watertight/MANIFEST.txt
 //   tpr-eval-local --synthetic 8x10 --out /tmp/eval
+//   tpr-eval-local --synthetic identity:10x10   # bodies x poses, synth.h
 #include <CLI/CLI.hpp>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -61,6 +62,7 @@ struct Model {
   std::string label;
   std::string path;  // empty for synthetic models
   int synthetic_pose = -1;
+  int identity_body = -1;  // identity mode (synth.h): label is the body
   int copy = 0;  // 0 original; 1..3 the paper's invariance copies
 };
 
@@ -113,17 +115,27 @@ absl::StatusOr<std::vector<Model>> ManifestModels(const std::string& manifest) {
 
 absl::StatusOr<std::vector<Model>> SyntheticModels(const std::string& spec) {
   int classes = 8, poses = 10;
-  if (std::sscanf(spec.c_str(), "%dx%d", &classes, &poses) != 2 ||
-      classes < 1 || poses < 1) {
+  const bool identity = spec.rfind("identity:", 0) == 0;
+  const std::string dims = identity ? spec.substr(9) : spec;
+  if (std::sscanf(dims.c_str(), "%dx%d", &classes, &poses) != 2 ||
+      classes < 1 || poses < 1 ||
+      (identity && classes > synth::kMaxIdentityBodies)) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "--synthetic takes CLASSESxPOSES, e.g. 8x10; got '", spec, "'"));
+        "--synthetic takes CLASSESxPOSES (e.g. 8x10) or identity:BODIESxPOSES; got '", spec,
+        "'"));
   }
-  std::vector<std::string> names = synth::ClassNames();
+  std::vector<std::string> names;
+  if (identity) {
+    for (int b = 0; b < classes; ++b) names.push_back(synth::IdentityBodyName(b));
+  } else {
+    names = synth::ClassNames();
+  }
   classes = std::min<int>(classes, names.size());
   std::vector<Model> models;
   for (int c = 0; c < classes; ++c) {
     for (int p = 0; p < poses; ++p) {
-      models.push_back({names[c] + "/" + std::to_string(p), names[c], "", p});
+      models.push_back({names[c] + "/" + std::to_string(p), names[c], "", p,
+                        identity ? c : -1});
     }
   }
   return models;
@@ -160,7 +172,7 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   const extract::Options& e = config.extract;
   key << " bands=" << e.bands << (e.bands_per_feature_extent ? "" : "/diameter")
       << " cycle=" << e.cycle_min_vertices << "/" << e.cycle_search_hops
-      << " ring=" << e.ring_length_threshold
+      << " ring=" << e.ring_length_threshold << " prominence=" << e.point_min_prominence
       << " stop=" << e.ring_stop_at_centre_saddles << " d2=" << config.d2.pairs
       << "/" << config.d2.bins << "/" << config.d2.range << "/"
       << config.d2.seed;
@@ -216,7 +228,9 @@ Described Describe(const Model& model, const Config& config, size_t index) {
     shape.target_vertices = config.synthetic_vertices;
     shape.seed = config.seed;
     absl::StatusOr<extract::Mesh> mesh =
-        synth::GenerateShape(model.label, model.synthetic_pose, shape);
+        model.identity_body >= 0
+            ? synth::GenerateIdentity(model.identity_body, model.synthetic_pose, shape)
+            : synth::GenerateShape(model.label, model.synthetic_pose, shape);
     if (!mesh.ok()) {
       out.error = std::string(mesh.status().message());
       return out;
@@ -290,7 +304,8 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--manifest", f->manifest,
                   "MANIFEST.txt: '<relative path> <class>' per line");
   app->add_option("--synthetic", f->synthetic,
-                  "generate CLASSESxPOSES synthetic models instead");
+                  "generate CLASSESxPOSES synthetic models instead, or "
+                  "identity:BODIESxPOSES (bodies of one skeleton, class = body)");
   app->add_option("--synthetic-vertices", c.synthetic_vertices,
                   "vertices per synthetic model");
   app->add_option("--out", f->out_dir,
@@ -311,6 +326,8 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "geodesic diameter (0)");
   app->add_option("--ring-threshold", c.extract.ring_length_threshold,
                   "ring length threshold (4.6.2)");
+  app->add_option("--point-prominence", c.extract.point_min_prominence,
+                  "smallest protrusion holding a topological point, / sqrt(area) (0 = paper)");
   app->add_option("--w1", c.ground.w1, "Eq. 7 weight of G'");
   app->add_option("--w2", c.ground.w2, "Eq. 7 weight of curvature");
   app->add_option("--w3", c.ground.w3, "Eq. 7 weight of area");
@@ -691,6 +708,29 @@ std::string Tune(const std::vector<Model>& models,
   return json + "]";
 }
 
+// WithinBetween returns "mean distance within classes W, between B, ratio
+// W / B" over all pairs of distinct models (issue 9's measure of how well a
+// descriptor separates similar-skeleton classes: lower is better).
+std::string WithinBetween(const std::vector<std::string>& labels, const DistanceMatrix& d) {
+  double within = 0.0, between = 0.0;
+  int64_t nw = 0, nb = 0;
+  for (size_t i = 0; i < d.size(); ++i) {
+    for (size_t j = i + 1; j < d.size(); ++j) {
+      if (labels[i] == labels[j]) {
+        within += d(i, j);
+        ++nw;
+      } else {
+        between += d(i, j);
+        ++nb;
+      }
+    }
+  }
+  within /= std::max<int64_t>(nw, 1);
+  between /= std::max<int64_t>(nb, 1);
+  return absl::StrFormat("mean distance within classes %.4g, between %.4g, ratio %.4f", within,
+                         between, between > 0 ? within / between : 0.0);
+}
+
 // Everything a run measured, for the files of --out.
 struct Results {
   Scores tpr, d2;
@@ -856,6 +896,7 @@ int Run(int argc, char** argv) {
   r.d2 = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.d2));
   std::printf("\nTPR (EMD, Eq. 7)\n%s",
               ScoresTable(r.tpr, r.summary.models_per_class).c_str());
+  std::printf("%s\n", WithinBetween(r.summary.labels, r.matching.tpr).c_str());
   std::printf("\nD2 (Osada et al. 2001, L1)\n%s",
               ScoresTable(r.d2, r.summary.models_per_class).c_str());
   if (flags.tune)

@@ -82,6 +82,13 @@ absl::Status ValidateOptions(const Options& o) {
   if (!(o.ring_length_threshold >= 0.0 && o.ring_length_threshold <= 1.0)) {
     return absl::InvalidArgumentError("options: ring_length_threshold not in [0, 1]");
   }
+  if (!(o.point_min_prominence >= 0.0 && o.point_min_prominence <= 1.0)) {
+    return absl::InvalidArgumentError("options: point_min_prominence not in [0, 1]");
+  }
+  if (o.spectrum_eigenvalues < 0 || o.spectrum_eigenvalues > 1000) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options: spectrum_eigenvalues ", o.spectrum_eigenvalues, " not in [0, 1000]"));
+  }
   if (o.threads < 0 || o.threads > 256) {
     return absl::InvalidArgumentError("options: threads not in [0, 256]");
   }
@@ -174,7 +181,10 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   timer.Finish("critical_points");
 
   // Stage: Topological Point Selection (4.4).
-  std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph, solver, sets);
+  TopologicalPointOptions point_options;
+  point_options.min_persistence = options.point_min_prominence * std::sqrt(area);
+  std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph, solver, sets, /*stats=*/nullptr, point_options);
   int num_points = static_cast<int>(points.size());
   timer.Finish("topological_points");
 
@@ -305,6 +315,22 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     result.explanation = std::move(e);
   }
   timer.Finish("signature");
+
+  // Stage: the Laplace-Beltrami spectrum of the whole mesh (issue 9).
+  if (options.spectrum_eigenvalues > 0) {
+    SpectrumOptions spectrum_options = options.spectrum;
+    spectrum_options.eigenvalues = options.spectrum_eigenvalues;
+    spectrum_options.allow_fewer = true;  // a small mesh still gets a signature
+    TPR_ASSIGN_OR_RETURN(Spectrum spectrum, LaplaceBeltramiSpectrum(mesh, spectrum_options));
+    if (static_cast<int>(spectrum.eigenvalues.size()) < options.spectrum_eigenvalues) {
+      result.warnings.push_back(absl::StrCat(
+          "mesh has ", spectrum.vertices, " vertices in ", spectrum.components,
+          " components: the spectrum has ", spectrum.eigenvalues.size(), " eigenvalues, not ",
+          options.spectrum_eigenvalues));
+    }
+    sig.spectrum = std::move(spectrum.eigenvalues);
+    timer.Finish("spectrum");
+  }
   return result;
 }
 

@@ -1,7 +1,8 @@
-// TPR extraction (Tam & Lau 2007, sections 4 and 5): mesh -> signature.
+// TPR extraction (Tam & Lau 2007, sections 4 and 5): mesh -> signature,
+// plus the Laplace-Beltrami spectrum (spectrum.h).
 //
 //   Options options;                          // the paper's defaults
-//   absl::StatusOr<ExtractResult> r = ExtractSignature(loaded.mesh, options);
+//   absl::StatusOr<ExtractResult> r = ExtractSignature(mesh, ComputeMeshStats(mesh), options);
 //   if (r.ok()) Store(r->signature);
 #ifndef TPR_EXTRACTOR_LIB_EXTRACT_H_
 #define TPR_EXTRACTOR_LIB_EXTRACT_H_
@@ -11,6 +12,7 @@
 #include "extractor/lib/integral_geodesic.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/lib/signature.h"
+#include "extractor/lib/spectrum.h"
 
 namespace tpr::extract {
 
@@ -34,6 +36,11 @@ struct Options {
   // CriticalPointOptions::search_hops). Must exceed cycle_min_vertices.
   // Default 6.
   int cycle_search_hops = 6;
+  // Topological Point Selection: the shortest protrusion whose maxima vote,
+  // as the maxima's persistence in their source's distance field /
+  // sqrt(total area); see TopologicalPointOptions::min_persistence. Not in
+  // the paper (0 is the paper's 4.3-4.4). In [0, 1]. Default 0.
+  double point_min_prominence = 0.0;
   // Topological Ring Extraction: a front's wavefront is a ring when its
   // region length (Eq. 3) exceeds this fraction of MAX g_o (the paper gives
   // no number, 4.6.2). Chosen by measurement on the synthetic classes (see
@@ -50,6 +57,14 @@ struct Options {
   IntegralGeodesicOptions integral_geodesic;
   // How the mesh graph approximates geodesics, see geodesic.h.
   GeodesicOptions geodesic;
+  // Laplace-Beltrami eigenvalues stored in Signature::spectrum (not part
+  // of the paper; issue 9's spectral term); 0 skips the stage. In
+  // [0, 1000]. Default 50.
+  int spectrum_eigenvalues = 50;
+  // The rest of the spectrum's parameters (simplification bound, solver);
+  // its `eigenvalues` is ignored in favour of spectrum_eigenvalues.
+  // Defaults there.
+  SpectrumOptions spectrum;
   // Threads for independent Dijkstra sweeps; <= 1 runs on the caller's
   // thread. The result does not depend on it. Default 1.
   int threads = 1;
@@ -71,14 +86,19 @@ struct Options {
 // region and would carry no effective area (see extract.cc).
 // Timings: stages "graph", "source_points", "critical_points",
 // "topological_points", "point_features", "topological_rings",
-// "ring_features", "signature", in that order. Explanation region ids: 0 is
+// "ring_features", "signature", "spectrum", in that order ("spectrum" only
+// when Options::spectrum_eigenvalues > 0). The spectrum describes the whole
+// mesh (every component), unlike the TPR features. Explanation region ids: 0 is
 // FR, then one per ring (TopologicalRings' regions).
 // Errors: INVALID_ARGUMENT for options out of range, or a mesh with no
-// vertex, out-of-range indices, non-finite coordinates, or zero area (the
-// message says which). Thread-safe (no shared state). Cost: about
+// vertex, out-of-range indices, non-finite coordinates, zero area, or too
+// few vertices for spectrum_eigenvalues (the message says which);
+// INTERNAL when the spectrum's eigensolver does not converge. Thread-safe (no shared state). Cost: about
 // (7 + R + psi + mu + gamma) Dijkstra sweeps (Table 4); with threads > 1
 // the independent sweeps (the three analyses, the per-feature geodesics)
-// run in parallel, with identical results.
+// run in parallel, with identical results. The spectrum adds one
+// simplification and one sparse eigensolve (see LaplaceBeltramiSpectrum),
+// on the caller's thread.
 absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
                                                const MeshStats& stats,
                                                const Options& options);

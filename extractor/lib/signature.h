@@ -49,7 +49,9 @@ struct Signature {
   MeshStats stats;
   // The Laplace-Beltrami spectrum: the first non-zero eigenvalues, ascending,
   // each lambda_i * A / (4 pi) (A = total surface area), so the unit sphere
-  // gives l (l + 1). tpr.v1.Signature.spectrum documents it.
+  // gives l (l + 1). tpr.v1.Signature.spectrum documents it. Computed by
+  // LaplaceBeltramiSpectrum (spectrum.h); N = Options::spectrum_eigenvalues,
+  // empty when 0.
   std::vector<double> spectrum;
 };
 

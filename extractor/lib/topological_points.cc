@@ -2,13 +2,75 @@
 #include "extractor/lib/topological_points.h"
 
 #include <algorithm>
+#include <numeric>
 #include <tuple>
+
+#include "extractor/lib/disjoint_sets.h"
 
 namespace tpr::extract {
 
+std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector<double>& field) {
+  const int32_t n = graph.num_vertices();
+  std::vector<int32_t> order;
+  order.reserve(n);
+  for (int32_t v = 0; v < n; ++v) {
+    if (field[v] != kUnreachable) order.push_back(v);
+  }
+  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+    return std::tie(field[b], a) < std::tie(field[a], b);  // decreasing, ties by id
+  });
+  DisjointSets sets(n);
+  std::vector<int32_t> top(n, -1);          // per root: the component's maximum
+  std::vector<int32_t> joined(n, -1);       // per vertex: the maximum it joined
+  std::vector<double> persistence(n, 0.0);  // per maximum
+  std::vector<char> added(n, 0);
+  double lowest = 0.0;
+  for (int32_t v : order) {
+    added[v] = 1;
+    lowest = field[v];
+    int64_t root = -1;
+    for (int32_t w : graph.neighbors(v)) {
+      if (!added[w] || w == v) continue;
+      const int64_t r = sets.Find(w);
+      if (root < 0) {
+        root = r;
+      } else if (r != root) {
+        // Two components meet at v: the lower maximum dies here.
+        int64_t hi = root, lo = r;
+        if (std::tie(field[top[lo]], top[hi]) > std::tie(field[top[hi]], top[lo])) {
+          std::swap(hi, lo);
+        }
+        persistence[top[lo]] = field[top[lo]] - field[v];
+        const int32_t keep = top[hi];
+        sets.Union(hi, lo);
+        root = sets.Find(hi);
+        top[root] = keep;
+      }
+    }
+    if (root < 0) {
+      top[v] = v;  // a new maximum
+      joined[v] = v;
+    } else {
+      sets.Union(root, v);
+      const int32_t keep = top[root];
+      root = sets.Find(root);
+      top[root] = keep;
+      joined[v] = keep;
+    }
+  }
+  // Maxima that never died: the highest of each component.
+  for (int32_t v : order) {
+    if (top[sets.Find(v)] == v) persistence[v] = field[v] - lowest;
+  }
+  std::vector<double> out(n, 0.0);
+  for (int32_t v : order) out[v] = persistence[joined[v]];
+  return out;
+}
+
 std::vector<TopologicalPoint> SelectTopologicalPoints(
     const MeshGraph& graph, DijkstraSolver& solver,
-    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats) {
+    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats,
+    const TopologicalPointOptions& options) {
   TopologicalPointStats local;
   const int32_t n = graph.num_vertices();
   const int num_sources = static_cast<int>(sets.size());
@@ -37,7 +99,12 @@ std::vector<TopologicalPoint> SelectTopologicalPoints(
   };
   std::vector<Candidate> candidates;
   for (int i = 0; i < num_sources && i < 32; ++i) {
+    std::vector<double> persistence;
+    if (options.min_persistence > 0.0) {
+      persistence = MaximumPersistence(graph, sets[i].distances);
+    }
     for (int32_t m : sets[i].maxima) {
+      if (!persistence.empty() && persistence[m] < options.min_persistence) continue;
       if (max_sources[m] == 0) candidates.push_back({to_saddle[m], m});
       max_sources[m] |= 1u << i;
     }

@@ -140,6 +140,10 @@ std::vector<TemplateBone> Biped(const BipedProportions& p) {
   return b.bones();
 }
 
+// The adult biped's proportions: "biped_adult", and the body identity
+// mode scales.
+constexpr BipedProportions kAdult = {0.55, 0.15, 0.11, 0.3, 0.045, 0.45, 0.075};
+
 struct QuadrupedProportions {
   double body_r;
   double body_len;
@@ -330,8 +334,7 @@ struct ShapeClass {
 
 const std::vector<ShapeClass>& Classes() {
   static const auto* classes = new std::vector<ShapeClass>{
-      {"biped_adult",
-       [] { return Biped({0.55, 0.15, 0.11, 0.3, 0.045, 0.45, 0.075}); }},
+      {"biped_adult", [] { return Biped(kAdult); }},
       {"biped_child",
        [] { return Biped({0.33, 0.13, 0.15, 0.18, 0.045, 0.27, 0.07}); }},
       {"quadruped_slender",
@@ -622,8 +625,78 @@ std::vector<TemplateBone> Star(int arms) {
   return b.bones();
 }
 
-// Shape ids for the seed stream: classes use their index, stars 1000 + arms.
+// Shape ids for the seed stream: classes use their index, stars 1000 +
+// arms, identity bodies 2000 + body (posing) and 3000 (proportions).
 constexpr uint64_t kStarIdBase = 1000;
+constexpr uint64_t kIdentityIdBase = 2000;
+constexpr uint64_t kIdentityProportionsId = 3000;
+
+
+std::array<double, 7> Factors(const BodyProportions& b) {
+  return {b.torso_length, b.torso_thickness, b.head_size, b.arm_length,
+          b.arm_thickness, b.leg_length, b.leg_thickness};
+}
+
+BodyProportions DrawBody(Rng& rng) {
+  BodyProportions b;
+  b.torso_length = rng.Uniform(0.8, 1.2);
+  b.torso_thickness = rng.Uniform(0.8, 1.3);
+  b.head_size = rng.Uniform(0.85, 1.15);
+  b.arm_length = rng.Uniform(0.8, 1.2);
+  b.arm_thickness = rng.Uniform(0.8, 1.3);
+  b.leg_length = rng.Uniform(0.8, 1.2);
+  b.leg_thickness = rng.Uniform(0.8, 1.3);
+  return b;
+}
+
+// Bodies 0..body drawn in order, each redrawn until it is at least
+// kMinApart (largest absolute log-factor) from every earlier one; after
+// many failed draws the last draw is kept (only with hundreds of bodies).
+std::vector<BodyProportions> DrawBodies(int count, uint64_t seed) {
+  constexpr double kMinApart = 0.1;
+  std::vector<BodyProportions> bodies;
+  for (int i = 0; i < count; ++i) {
+    Rng rng(StreamSeed(seed, kIdentityProportionsId, static_cast<uint64_t>(i), 0));
+    BodyProportions b;
+    for (int attempt = 0; attempt < 200; ++attempt) {
+      b = DrawBody(rng);
+      bool apart = true;
+      for (const BodyProportions& other : bodies) {
+        const std::array<double, 7> x = Factors(b), y = Factors(other);
+        double d = 0.0;
+        for (int k = 0; k < 7; ++k) d = std::max(d, std::abs(std::log(x[k] / y[k])));
+        if (d < kMinApart) {
+          apart = false;
+          break;
+        }
+      }
+      if (apart) break;
+    }
+    bodies.push_back(b);
+  }
+  return bodies;
+}
+
+std::vector<TemplateBone> IdentityBiped(const BodyProportions& b) {
+  BipedProportions p = kAdult;
+  p.height *= b.torso_length;
+  p.torso_r *= b.torso_thickness;
+  p.head_r *= b.head_size;
+  p.arm_len *= b.arm_length;
+  p.arm_r *= b.arm_thickness;
+  p.leg_len *= b.leg_length;
+  p.leg_r *= b.leg_thickness;
+  return Biped(p);
+}
+
+absl::StatusOr<Posed> PoseIdentity(int body, int pose_index, const ShapeOptions& options) {
+  absl::Status ok = CheckOptions(options, pose_index);
+  if (!ok.ok()) return ok;
+  absl::StatusOr<BodyProportions> proportions = IdentityProportions(body, options);
+  if (!proportions.ok()) return proportions.status();
+  return PoseTemplate(IdentityBiped(*proportions), kIdentityIdBase + body, pose_index,
+                      options);
+}
 
 absl::StatusOr<Posed> PoseStar(int arms, int pose_index,
                                const ShapeOptions& options) {
@@ -680,6 +753,34 @@ absl::StatusOr<Skeleton> StarSkeleton(int arms, int pose_index,
   absl::StatusOr<Posed> posed = PoseStar(arms, pose_index, options);
   if (!posed.ok()) return posed.status();
   return Place(*posed);
+}
+
+std::string IdentityBodyName(int body) {
+  std::string digits = absl::StrCat(body);
+  if (digits.size() < 3) digits.insert(0, 3 - digits.size(), '0');
+  return absl::StrCat("body_", digits);
+}
+
+absl::StatusOr<BodyProportions> IdentityProportions(int body, const ShapeOptions& options) {
+  if (body < 0 || body >= kMaxIdentityBodies) {
+    return absl::InvalidArgumentError(absl::StrCat("identity body ", body,
+                                                   " is outside [0, ", kMaxIdentityBodies, ")"));
+  }
+  return DrawBodies(body + 1, options.seed).back();
+}
+
+absl::StatusOr<Skeleton> IdentitySkeleton(int body, int pose_index,
+                                          const ShapeOptions& options) {
+  absl::StatusOr<Posed> posed = PoseIdentity(body, pose_index, options);
+  if (!posed.ok()) return posed.status();
+  return Place(*posed);
+}
+
+absl::StatusOr<extract::Mesh> GenerateIdentity(int body, int pose_index,
+                                               const ShapeOptions& options) {
+  absl::StatusOr<Posed> posed = PoseIdentity(body, pose_index, options);
+  if (!posed.ok()) return posed.status();
+  return MeshOf(*posed, options.target_vertices);
 }
 
 absl::StatusOr<extract::Mesh> GenerateStar(int arms,

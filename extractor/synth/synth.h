@@ -113,6 +113,56 @@ absl::StatusOr<Skeleton> StarSkeleton(int arms, int pose_index,
 absl::StatusOr<extract::Mesh> GenerateStar(int arms,
                                            const ShapeOptions& options);
 
+// Identity mode (issue 9): several bodies on one skeleton, the biped's,
+// that differ in limb lengths and thickness, each in many poses. Class =
+// body: the similar-skeleton case (Tam & Lau 2007, 5.3 and Tables 2-3) in
+// unlimited supply, like people of different build in different poses.
+//
+//   for (int body = 0; body < 10; ++body)
+//     for (int pose = 0; pose < 10; ++pose)
+//       Write(IdentityBodyName(body), GenerateIdentity(body, pose, options));
+
+// kMaxIdentityBodies bounds the body index of identity mode.
+inline constexpr int kMaxIdentityBodies = 1000;
+
+// IdentityBodyName returns "body_<body>" with the index zero-padded to 3
+// digits ("body_007"), the class label of identity mode. Thread-safe.
+std::string IdentityBodyName(int body);
+
+// BodyProportions are the numbers that tell identity bodies apart, as
+// factors of the "biped_adult" class's proportions (1 = the adult).
+struct BodyProportions {
+  double torso_length = 1.0;  // pelvis top to shoulders
+  double torso_thickness = 1.0;
+  double head_size = 1.0;
+  double arm_length = 1.0;    // upper arm, forearm and hand together
+  double arm_thickness = 1.0;
+  double leg_length = 1.0;    // thigh, shin and foot together
+  double leg_thickness = 1.0;
+};
+
+// IdentityProportions returns body `body`'s proportions for options.seed:
+// lengths drawn in [0.8, 1.2], thicknesses in [0.8, 1.3], the head in
+// [0.85, 1.15], each body at least 0.1 apart from every lower-numbered
+// body in the largest absolute log-factor (so no two bodies are near
+// twins). Deterministic in (options.seed, body); independent of poses.
+// Errors: INVALID_ARGUMENT unless 0 <= body < kMaxIdentityBodies.
+// Thread-safe. Cost O(body^2) draws (microseconds for 100 bodies).
+absl::StatusOr<BodyProportions> IdentityProportions(int body, const ShapeOptions& options);
+
+// IdentitySkeleton returns body `body` in pose `pose_index` (the posing of
+// PoseSkeleton, with a seed stream of its own per body), in the frame of
+// GenerateIdentity's mesh. Errors: as IdentityProportions and
+// PoseSkeleton. Thread-safe.
+absl::StatusOr<Skeleton> IdentitySkeleton(int body, int pose_index,
+                                          const ShapeOptions& options);
+
+// GenerateIdentity returns the mesh of IdentitySkeleton(body, pose_index,
+// options), with GenerateShape's guarantees (closed, manifold, genus 0,
+// deterministic), errors and cost.
+absl::StatusOr<extract::Mesh> GenerateIdentity(int body, int pose_index,
+                                               const ShapeOptions& options);
+
 // MeshFromSkeleton polygonizes the smooth blend of `skeleton`'s bones into a
 // closed, manifold, genus-0 mesh with about `target_vertices` vertices.
 // Preconditions: the skeleton is a tree whose non-adjacent bones do not

@@ -2,11 +2,13 @@
 //
 //   tpr-synth --out DIR [--classes N] [--poses N] [--vertices N] [--seed S]
 //             [--format off|ply|ply-ascii] [--rigid] [--pose-amount A]
-//             [--jobs J]
+//             [--jobs J] [--identity]
 //
 // Output: DIR/<class>/<class>_<pose>.<ext> and DIR/MANIFEST.txt with one line
 // "<relative path> <class>" per mesh. The same flags give byte-identical
-// files.
+// files. With --identity the classes are N bodies on the biped skeleton
+// that differ in limb lengths and thickness (body_000, body_001, ...;
+// synth.h, identity mode).
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -32,12 +34,17 @@ int main(int argc, char** argv) {
   bool rigid = false;
   double pose_amount = 1.0;
   int jobs = 1;
-  const std::vector<std::string> names = tpr::synth::ClassNames();
+  bool identity = false;
+  std::vector<std::string> names = tpr::synth::ClassNames();
   app.add_option("--out", out_dir, "output directory (created)")->required();
   app.add_option("--classes", classes,
-                 absl::StrCat("number of classes, the first N of ",
-                              names.size()))
-      ->check(CLI::Range(1, static_cast<int>(names.size())));
+                 absl::StrCat("number of classes, the first N of ", names.size(),
+                              "; with --identity the number of bodies (up to ",
+                              tpr::synth::kMaxIdentityBodies, ")"))
+      ->check(CLI::Range(1, tpr::synth::kMaxIdentityBodies));
+  app.add_flag("--identity", identity,
+               "bodies of one skeleton (biped) differing in limb lengths and "
+               "thickness, class = body");
   app.add_option("--poses", poses, "poses per class")
       ->check(CLI::Range(1, 100000));
   app.add_option("--vertices", vertices, "target vertices per mesh")
@@ -54,6 +61,14 @@ int main(int argc, char** argv) {
                  "meshes generated in parallel (output does not depend on it)")
       ->check(CLI::Range(1, 256));
   CLI11_PARSE(app, argc, argv);
+  if (identity) {
+    names.clear();
+    for (int b = 0; b < classes; ++b) names.push_back(tpr::synth::IdentityBodyName(b));
+  } else if (classes > static_cast<int>(names.size())) {
+    return app.exit(CLI::ValidationError(
+        "--classes", absl::StrCat(classes, " exceeds the ", names.size(),
+                                  " classes (use --identity for more bodies)")));
+  }
 
   tpr::extract::MeshWriteOptions write;
   std::string ext = "off";
@@ -114,7 +129,8 @@ int main(int argc, char** argv) {
       Task& t = tasks[i];
       const auto t0 = std::chrono::steady_clock::now();
       absl::StatusOr<tpr::extract::Mesh> mesh =
-          tpr::synth::GenerateShape(names[t.cls], t.pose, options);
+          identity ? tpr::synth::GenerateIdentity(t.cls, t.pose, options)
+                   : tpr::synth::GenerateShape(names[t.cls], t.pose, options);
       absl::Status status = mesh.status();
       if (status.ok()) {
         status = tpr::extract::WriteMeshToFile(

@@ -23,6 +23,7 @@
 #include "extractor/lib/mesh.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/lib/source_points.h"
+#include "extractor/lib/spectrum.h"
 #include "extractor/synth/synth.h"
 #include "tests/extractor/test_meshes.h"
 
@@ -60,6 +61,12 @@ const Mesh& BenchMesh(int64_t n) {
   const Mesh& ref = *mesh;
   cache.emplace(n, std::move(mesh));
   return ref;
+}
+
+// The issue's sizes: 5k, 10k, 20k, 50k and 100k vertices.
+void Sizes(benchmark::internal::Benchmark* b) {
+  for (int64_t n : {5000, 10000, 20000, 50000, 100000}) b->Arg(n);
+  b->Unit(benchmark::kMillisecond);
 }
 
 void SweepBench(benchmark::State& state, const GeodesicOptions& options) {
@@ -138,6 +145,37 @@ void BM_Extract(benchmark::State& state) {
   for (const StageTiming& t : last.timings) state.counters["ms_" + t.stage] = t.milliseconds;
 }
 
+// The Laplace-Beltrami spectrum (issue 9: at most 100 ms at 10k vertices on
+// one thread) with its default options: 50 eigenvalues, meshes above
+// SpectrumOptions::max_vertices simplified first. Same mesh as
+// BM_Extract/<n> and BM_Dijkstra/<n>. Counters: vertices solved, linear
+// solves of the Lanczos iteration.
+void SpectrumBench(benchmark::State& state, const SpectrumOptions& options) {
+  const Mesh& mesh = BenchMesh(state.range(0));
+  Spectrum last;
+  for (auto _ : state) {
+    absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(mesh, options);
+    if (!s.ok()) {
+      state.SkipWithError("LaplaceBeltramiSpectrum failed");
+      break;
+    }
+    last = *std::move(s);
+  }
+  state.counters["solved_vertices"] = static_cast<double>(last.vertices);
+  state.counters["solves"] = static_cast<double>(last.operations);
+}
+void BM_Spectrum(benchmark::State& state) { SpectrumBench(state, {}); }
+// The same without simplification: the cost curve behind the default
+// max_vertices.
+void BM_SpectrumFullMesh(benchmark::State& state) {
+  SpectrumOptions options;
+  options.max_vertices = 0;
+  SpectrumBench(state, options);
+}
+BENCHMARK(BM_Spectrum)->Apply(Sizes);
+BENCHMARK(BM_SpectrumFullMesh)->Arg(2000)->Arg(3000)->Arg(5000)->Arg(10000)
+    ->Unit(benchmark::kMillisecond);
+
 // The synthetic generator (foundation issue): one posed shape per
 // iteration, cycling over every class and 8 poses, at range(0) vertices.
 // Counter meshes_per_s is the generator's throughput on one thread.
@@ -194,11 +232,6 @@ void BM_ReadMesh(benchmark::State& state) {
 }
 BENCHMARK(BM_ReadMesh)->DenseRange(0, 2)->Unit(benchmark::kMillisecond);
 
-// The issue's sizes: 5k, 10k, 20k, 50k and 100k vertices.
-void Sizes(benchmark::internal::Benchmark* b) {
-  for (int64_t n : {5000, 10000, 20000, 50000, 100000}) b->Arg(n);
-  b->Unit(benchmark::kMillisecond);
-}
 BENCHMARK(BM_Dijkstra)->Apply(Sizes);
 BENCHMARK(BM_DijkstraPlainEdges)->Apply(Sizes);
 BENCHMARK(BM_SourcePoints)->Apply(Sizes);

@@ -59,26 +59,10 @@ TEST(CriticalPointsTest, CapsuleAndDumbbellHaveOneMaximumAtTheOtherPole) {
 // p disallowed, so no maximum at p. With n = 0 it is a valid cycle: LSD's
 // answer, a saddle behind p and a maximum at p.
 Mesh SpikedGrid(int32_t* spike) {
-  Mesh m;
-  const int k = 11;
-  for (int y = 0; y < k; ++y) {
-    for (int x = 0; x < k; ++x) m.positions.push_back({double(x), double(y), 0.0});
-  }
-  *spike = 5 * k + 4;
+  // Diagonals alternate so that the grid is symmetric about y = 5.
+  Mesh m = testing::Rectangle(10.0, 10.0, 10, 10);
+  *spike = 5 * 11 + 4;
   m.positions[*spike].z() = 4.0;
-  for (int y = 0; y + 1 < k; ++y) {
-    for (int x = 0; x + 1 < k; ++x) {
-      const int32_t a = y * k + x, b = a + 1, c = a + k, d = c + 1;
-      // Diagonals alternate so that the grid is symmetric about y = 5.
-      if ((x + y) % 2 == 0) {
-        m.triangles.push_back({a, b, d});
-        m.triangles.push_back({a, d, c});
-      } else {
-        m.triangles.push_back({a, b, c});
-        m.triangles.push_back({b, d, c});
-      }
-    }
-  }
   return m;
 }
 

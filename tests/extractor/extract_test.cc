@@ -78,6 +78,11 @@ void ExpectWellFormed(const ExtractResult& r) {
     }
   }
   EXPECT_NEAR(sum, 1.0, 1e-9);  // Eq. 6
+  EXPECT_FALSE(s.spectrum.empty());
+  for (double x : s.spectrum) {
+    EXPECT_TRUE(std::isfinite(x));
+    EXPECT_GE(x, 0.0);
+  }
   // Points first, then rings.
   bool seen_ring = false;
   for (const Feature& f : s.features) {
@@ -194,6 +199,11 @@ TEST(ExtractTest, InvariantUnderSimilarityTransforms) {
     const ExtractResult b = Extract(moved);
     ASSERT_EQ(a.signature.features.size(), b.signature.features.size());
     EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), Count(b.signature, FeatureKind::kPoint));
+    ASSERT_EQ(a.signature.spectrum.size(), b.signature.spectrum.size());
+    for (size_t i = 0; i < a.signature.spectrum.size(); ++i) {
+      EXPECT_NEAR(a.signature.spectrum[i], b.signature.spectrum[i],
+                  1e-6 * a.signature.spectrum[i]);
+    }
     // Feature-wise: sort by (kind, G'), compare.
     auto sorted = [](std::vector<Feature> f) {
       std::sort(f.begin(), f.end(), [](const Feature& x, const Feature& y) {
@@ -250,6 +260,40 @@ TEST(ExtractTest, PointCountStableAcrossPoses) {
   EXPECT_LE(off, 1);
 }
 
+// Options::point_min_prominence: a ball with four long arms and one short
+// stub. The paper's selection (0) may give the stub a point; a threshold
+// between the stub's length and the arms' drops the stub and keeps every
+// arm.
+TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
+  synth::Skeleton sk;
+  synth::Bone ball;
+  ball.start_radius = ball.end_radius = 0.35;
+  sk.bones.push_back(ball);
+  for (const Eigen::Vector3d& d : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(-1, 0, 0),
+                                   Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, -1),
+                                   Eigen::Vector3d(0, 1, 0)}) {
+    synth::Bone arm;
+    arm.parent = 0;
+    arm.end = (d.y() > 0 ? 0.55 : 1.3) * d;
+    arm.start_radius = arm.end_radius = 0.1;
+    sk.bones.push_back(arm);
+  }
+  absl::StatusOr<Mesh> mesh = synth::MeshFromSkeleton(sk, 5000);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  Options paper;
+  paper.spectrum_eigenvalues = 0;
+  Options stable = paper;
+  stable.point_min_prominence = 0.2;
+  const ExtractResult a = Extract(*mesh, paper);
+  const ExtractResult b = Extract(*mesh, stable);
+  EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), 5);
+  EXPECT_EQ(Count(b.signature, FeatureKind::kPoint), 4);
+  Options bad;
+  bad.point_min_prominence = -0.1;
+  EXPECT_EQ(ExtractSignature(*mesh, ComputeMeshStats(*mesh), bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(ExtractTest, ThreadsGiveIdenticalResults) {
   const Mesh m = Shape("ant", 0, 5000);
   Options one, two;
@@ -261,6 +305,7 @@ TEST(ExtractTest, ThreadsGiveIdenticalResults) {
     EXPECT_EQ(a.signature.features[i].integral_geodesic, b.signature.features[i].integral_geodesic);
     EXPECT_EQ(a.signature.features[i].curvature, b.signature.features[i].curvature);
   }
+  EXPECT_EQ(a.signature.spectrum, b.signature.spectrum);
 }
 
 TEST(ExtractTest, ReportsTimingsAndExplanation) {
@@ -275,7 +320,8 @@ TEST(ExtractTest, ReportsTimingsAndExplanation) {
   }
   EXPECT_EQ(stages, (std::vector<std::string>{"graph", "source_points", "critical_points",
                                               "topological_points", "point_features",
-                                              "topological_rings", "ring_features", "signature"}));
+                                              "topological_rings", "ring_features", "signature",
+                                              "spectrum"}));
   ASSERT_TRUE(r.explanation.has_value());
   EXPECT_EQ(r.explanation->vertex_region.size(), m.positions.size());
   ASSERT_EQ(r.explanation->feature_vertices.size(), r.signature.features.size());
@@ -288,6 +334,31 @@ TEST(ExtractTest, ReportsTimingsAndExplanation) {
   for (int32_t reg : r.explanation->vertex_region) EXPECT_GE(reg, 0);  // One component.
   EXPECT_TRUE(r.warnings.empty());
   EXPECT_FALSE(Extract(m).explanation.has_value());
+  Options no_spectrum;
+  no_spectrum.spectrum_eigenvalues = 0;
+  const ExtractResult plain = Extract(m, no_spectrum);
+  EXPECT_TRUE(plain.signature.spectrum.empty());
+  EXPECT_EQ(plain.timings.back().stage, "signature");
+}
+
+// The signature carries the mesh's Laplace-Beltrami spectrum: N values,
+// ascending, equal to LaplaceBeltramiSpectrum's with the same options.
+TEST(ExtractTest, SignatureCarriesTheSpectrum) {
+  const Mesh m = Shape("biped_adult", 2, 4000);
+  const ExtractResult r = Extract(m);
+  ASSERT_EQ(r.signature.spectrum.size(), 50u);
+  EXPECT_TRUE(std::is_sorted(r.signature.spectrum.begin(), r.signature.spectrum.end()));
+  SpectrumOptions options;
+  absl::StatusOr<Spectrum> direct = LaplaceBeltramiSpectrum(m, options);
+  ASSERT_TRUE(direct.ok()) << direct.status();
+  EXPECT_EQ(r.signature.spectrum, direct->eigenvalues);
+  Options twelve;
+  twelve.spectrum_eigenvalues = 12;
+  EXPECT_EQ(Extract(m, twelve).signature.spectrum.size(), 12u);
+  Options bad;
+  bad.spectrum_eigenvalues = -1;
+  EXPECT_EQ(ExtractSignature(m, ComputeMeshStats(m), bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 // A UV sphere: no protrusion at all.
@@ -388,7 +459,10 @@ TEST(ExtractTest, TinyAndFlatMeshesStillAnswer) {
   Mesh tri;
   tri.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
   tri.triangles = {{0, 1, 2}};
-  ExpectWellFormed(Extract(tri));
+  const ExtractResult one = Extract(tri);
+  ExpectWellFormed(one);
+  EXPECT_EQ(one.signature.spectrum.size(), 2u);  // 3 vertices: 2 non-zero values
+  EXPECT_FALSE(one.warnings.empty());
 
   Mesh grid;
   const int k = 30;

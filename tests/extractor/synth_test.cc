@@ -265,6 +265,113 @@ TEST(SynthTest, DifferentPosesGiveDifferentGeometry) {
   }
 }
 
+// Identity mode: every body is closed, manifold, genus 0 in every pose
+// tried, at the dev-set resolution and a small one.
+TEST(SynthTest, IdentityBodiesAreClosedManifoldGenusZero) {
+  for (int body = 0; body < 10; ++body) {
+    for (int pose : {0, 7}) {
+      ShapeOptions options;
+      options.target_vertices = body % 2 == 0 ? 3000 : 1000;
+      absl::StatusOr<Mesh> mesh = GenerateIdentity(body, pose, options);
+      ASSERT_TRUE(mesh.ok()) << body << " " << pose << ": " << mesh.status();
+      const std::string what = IdentityBodyName(body) + " pose " + std::to_string(pose);
+      ExpectClosedGenusZero(*mesh, what);
+      EXPECT_NEAR(static_cast<double>(mesh->positions.size()), options.target_vertices,
+                  0.2 * options.target_vertices)
+          << what;
+    }
+  }
+}
+
+// Bodies share the biped's bone tree (similar skeletons) but really differ:
+// at rest, each pair of bodies differs by more than 8% in some bone length
+// or radius, while the tree and the tip count are the adult biped's.
+TEST(SynthTest, IdentityBodiesShareTheSkeletonButDiffer) {
+  ShapeOptions rest;
+  rest.pose_amount = 0.0;
+  absl::StatusOr<Skeleton> adult = PoseSkeleton("biped_adult", 0, rest);
+  ASSERT_TRUE(adult.ok());
+  std::vector<Skeleton> bodies;
+  for (int body = 0; body < 12; ++body) {
+    absl::StatusOr<Skeleton> s = IdentitySkeleton(body, 0, rest);
+    ASSERT_TRUE(s.ok()) << s.status();
+    ASSERT_EQ(s->bones.size(), adult->bones.size());
+    for (size_t i = 0; i < s->bones.size(); ++i) {
+      EXPECT_EQ(s->bones[i].parent, adult->bones[i].parent);
+    }
+    EXPECT_EQ(TipCount(*s), TipCount(*adult));
+    bodies.push_back(*s);
+  }
+  for (size_t a = 0; a < bodies.size(); ++a) {
+    for (size_t b = a + 1; b < bodies.size(); ++b) {
+      double largest = 0.0;
+      for (size_t i = 0; i < bodies[a].bones.size(); ++i) {
+        const Bone& x = bodies[a].bones[i];
+        const Bone& y = bodies[b].bones[i];
+        const double lx = (x.end - x.start).norm(), ly = (y.end - y.start).norm();
+        if (lx > 0 && ly > 0) largest = std::max(largest, std::abs(std::log(lx / ly)));
+        largest = std::max(largest, std::abs(std::log(x.start_radius / y.start_radius)));
+      }
+      EXPECT_GT(largest, 0.08) << IdentityBodyName(a) << " vs " << IdentityBodyName(b);
+    }
+  }
+  // The proportions are what the header says: factors within their ranges.
+  for (int body = 0; body < 12; ++body) {
+    absl::StatusOr<BodyProportions> p = IdentityProportions(body, rest);
+    ASSERT_TRUE(p.ok());
+    for (double f : {p->torso_length, p->arm_length, p->leg_length}) {
+      EXPECT_GE(f, 0.8);
+      EXPECT_LE(f, 1.2);
+    }
+    for (double f : {p->torso_thickness, p->arm_thickness, p->leg_thickness}) {
+      EXPECT_GE(f, 0.8);
+      EXPECT_LE(f, 1.3);
+    }
+  }
+}
+
+// Poses of one body differ; the body's proportions do not change with the
+// pose; the same seed gives the same bytes, another seed other bodies.
+TEST(SynthTest, IdentityPosesDifferAndAreDeterministic) {
+  ShapeOptions options;
+  options.target_vertices = 1500;
+  options.seed = 5;
+  absl::StatusOr<Mesh> a = GenerateIdentity(3, 0, options);
+  absl::StatusOr<Mesh> b = GenerateIdentity(3, 1, options);
+  absl::StatusOr<Mesh> a2 = GenerateIdentity(3, 0, options);
+  ASSERT_TRUE(a.ok() && b.ok() && a2.ok());
+  EXPECT_EQ(a->positions, a2->positions);
+  EXPECT_EQ(a->triangles, a2->triangles);
+  absl::StatusOr<Skeleton> s0 = IdentitySkeleton(3, 0, options);
+  absl::StatusOr<Skeleton> s1 = IdentitySkeleton(3, 1, options);
+  ASSERT_TRUE(s0.ok() && s1.ok());
+  double extent = 0.0, moved = 0.0;
+  for (size_t i = 0; i < s0->bones.size(); ++i) {
+    const Bone& x = s0->bones[i];
+    const Bone& y = s1->bones[i];
+    extent = std::max(extent, (x.end - s0->bones[0].start).norm());
+    moved = std::max(moved, (x.end - y.end).norm());
+    // A pose moves bones; it never stretches or thickens them.
+    EXPECT_NEAR((x.end - x.start).norm(), (y.end - y.start).norm(), 1e-9);
+    EXPECT_EQ(x.start_radius, y.start_radius);
+  }
+  EXPECT_GT(moved, 0.05 * extent);
+  EXPECT_GT(std::max(DirectedHausdorff(*a, *b), DirectedHausdorff(*b, *a)), 0.05 * extent);
+  ShapeOptions other = options;
+  other.seed = 6;
+  absl::StatusOr<BodyProportions> p5 = IdentityProportions(3, options);
+  absl::StatusOr<BodyProportions> p6 = IdentityProportions(3, other);
+  ASSERT_TRUE(p5.ok() && p6.ok());
+  EXPECT_NE(p5->leg_length, p6->leg_length);
+  EXPECT_EQ(IdentityBodyName(7), "body_007");
+  EXPECT_EQ(IdentityProportions(-1, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(GenerateIdentity(kMaxIdentityBodies, 0, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(GenerateIdentity(0, -1, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(SynthTest, RestPoseIgnoresPoseIndex) {
   ShapeOptions options;
   options.target_vertices = 1500;

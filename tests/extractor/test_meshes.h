@@ -210,6 +210,31 @@ inline Mesh Tube(double radius, double length, int rings, int around) {
       around);
 }
 
+// Rectangle returns the flat rectangle [0, a] x [0, b] in the z = 0 plane
+// as an nx by ny grid of cells, each split into two triangles along
+// alternating diagonals (so the mesh has no preferred direction); the
+// outline is its boundary.
+inline Mesh Rectangle(double a, double b, int nx, int ny) {
+  Mesh m;
+  for (int j = 0; j <= ny; ++j) {
+    for (int i = 0; i <= nx; ++i) m.positions.emplace_back(a * i / nx, b * j / ny, 0.0);
+  }
+  auto id = [nx](int i, int j) { return static_cast<int32_t>(j * (nx + 1) + i); };
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      const int32_t p = id(i, j), q = id(i + 1, j), r = id(i + 1, j + 1), s = id(i, j + 1);
+      if ((i + j) % 2 == 0) {
+        m.triangles.push_back({p, q, r});
+        m.triangles.push_back({p, r, s});
+      } else {
+        m.triangles.push_back({p, q, s});
+        m.triangles.push_back({q, r, s});
+      }
+    }
+  }
+  return m;
+}
+
 // Union returns a and b as one mesh of two components (b's ids shifted).
 inline Mesh Union(const Mesh& a, const Mesh& b) {
   Mesh m = a;

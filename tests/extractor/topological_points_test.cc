@@ -3,6 +3,8 @@
 #include "extractor/lib/topological_points.h"
 
 #include <algorithm>
+#include <queue>
+#include <utility>
 #include <vector>
 
 #include "extractor/lib/critical_points.h"
@@ -119,6 +121,57 @@ TEST(TopologicalPointsTest, StarGivesOnePointPerArm) {
   for (size_t i = 0; i < p1.size(); ++i) {
     EXPECT_EQ(p1[i].vertex, p2[i].vertex);
     EXPECT_GE(p1[i].votes, 2);
+  }
+}
+
+// Oracle for MaximumPersistence, by another algorithm: for a local maximum
+// m, the saddle is the highest "lowest point" over all paths from m to a
+// vertex above m (a widest-path search), and the persistence is
+// field(m) minus it.
+double PersistenceByWidestPath(const MeshGraph& graph, const std::vector<double>& field,
+                               int32_t m) {
+  std::vector<double> best(graph.num_vertices(), -1e300);
+  std::priority_queue<std::pair<double, int32_t>> heap;
+  best[m] = field[m];
+  heap.push({field[m], m});
+  while (!heap.empty()) {
+    const auto [bottleneck, v] = heap.top();
+    heap.pop();
+    if (bottleneck < best[v]) continue;
+    if (field[v] > field[m]) return field[m] - bottleneck;
+    for (int32_t w : graph.neighbors(v)) {
+      const double b = std::min(bottleneck, field[w]);
+      if (b > best[w]) {
+        best[w] = b;
+        heap.push({b, w});
+      }
+    }
+  }
+  double lowest = field[m];
+  for (double f : field) lowest = std::min(lowest, f);
+  return field[m] - lowest;  // the highest maximum
+}
+
+TEST(MaximumPersistenceTest, MatchesWidestPathOracle) {
+  synth::ShapeOptions options;
+  options.target_vertices = 1500;
+  for (const char* name : {"hand", "octopus", "biped_adult"}) {
+    absl::StatusOr<Mesh> mesh = synth::GenerateShape(name, 1, options);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    const MeshGraph graph = MeshGraph::Build(*mesh);
+    DijkstraSolver solver(graph);
+    const std::vector<double> field = solver.Run(0);
+    const std::vector<double> persistence = MaximumPersistence(graph, field);
+    int maxima = 0;
+    for (int32_t v = 0; v < graph.num_vertices(); ++v) {
+      bool is_max = true;
+      for (int32_t w : graph.neighbors(v)) is_max &= field[w] < field[v];
+      if (!is_max) continue;
+      ++maxima;
+      EXPECT_NEAR(persistence[v], PersistenceByWidestPath(graph, field, v), 1e-12)
+          << name << " vertex " << v;
+    }
+    EXPECT_GE(maxima, 3) << name;
   }
 }
 
