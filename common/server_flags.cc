@@ -16,6 +16,10 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
   app.add_flag("--log-calls,!--no-log-calls", flags->log_calls,
                "log one line per call (health checks and reflection excepted)")
       ->default_str(flags->log_calls ? "true" : "false");
+  app.add_option("--api-keys", flags->api_keys,
+                 "file of hashed API keys with roles (tpr key new); when given, every call but "
+                 "health and reflection needs 'authorization: Bearer KEY'; reloaded on SIGHUP "
+                 "and when the file changes");
 }
 
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
@@ -23,6 +27,15 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
+  if (!flags.api_keys.empty()) {
+    absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> keys =
+        ApiKeyAuthenticator::Open(flags.api_keys, options->log_name);
+    if (!keys.ok()) {
+      return absl::Status(keys.status().code(),
+                          absl::StrCat("--api-keys: ", keys.status().message()));
+    }
+    options->api_keys = *std::move(keys);
+  }
   return absl::OkStatus();
 }
 

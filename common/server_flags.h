@@ -33,6 +33,9 @@ struct ServerFlags {
   std::string log_format = "text";
   // --log-calls: one log line per call. Default true.
   bool log_calls = true;
+  // --api-keys: keys file (common/auth.h); empty: no keys, every call open.
+  // Default empty.
+  std::string api_keys;
 };
 
 // AddServerFlags adds the shared flags to `app`, storing into `*flags`
@@ -41,7 +44,8 @@ struct ServerFlags {
 void AddServerFlags(CLI::App& app, ServerFlags* flags);
 
 // ApplyServerFlags sets the process-wide log format and fills the matching
-// fields of `*options`. Returns INVALID_ARGUMENT naming the flag at fault.
+// fields of `*options` (opening the keys file). Returns INVALID_ARGUMENT or
+// NOT_FOUND naming the flag and the file or line at fault.
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
 
 // FinishServerFlags runs after parsing: with --print-config it prints the
