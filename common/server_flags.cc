@@ -20,6 +20,15 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
                  "file of hashed API keys with roles (tpr key new); when given, every call but "
                  "health and reflection needs 'authorization: Bearer KEY'; reloaded on SIGHUP "
                  "and when the file changes");
+  app.add_option("--tls-cert", flags->tls.cert_file,
+                 "PEM certificate chain: serve TLS (with --tls-key); re-read when it changes");
+  app.add_option("--tls-key", flags->tls.key_file, "PEM private key of --tls-cert");
+  app.add_option("--tls-client-ca", flags->tls.client_ca_file,
+                 "PEM authority: require client certificates it signed (mutual TLS)");
+  app.add_option("--tls-refresh-s", flags->tls.refresh_interval_s,
+                 "how often the TLS files are checked for changes (seconds)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 86400));
 }
 
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
@@ -27,6 +36,13 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
+  const TlsServerOptions& tls = flags.tls;
+  if (!tls.cert_file.empty() || !tls.key_file.empty() || !tls.client_ca_file.empty()) {
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+        MakeTlsServerCredentials(tls);
+    if (!credentials.ok()) return credentials.status();
+    options->credentials = *std::move(credentials);
+  }
   if (!flags.api_keys.empty()) {
     absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> keys =
         ApiKeyAuthenticator::Open(flags.api_keys, options->log_name);

@@ -23,6 +23,7 @@
 #include "absl/status/status.h"
 #include "common/config.h"
 #include "common/server_lifecycle.h"
+#include "common/tls.h"
 
 namespace tpr::common {
 
@@ -36,6 +37,9 @@ struct ServerFlags {
   // --api-keys: keys file (common/auth.h); empty: no keys, every call open.
   // Default empty.
   std::string api_keys;
+  // --tls-cert, --tls-key, --tls-client-ca, --tls-refresh-s (common/tls.h);
+  // no cert: plaintext.
+  TlsServerOptions tls;
 };
 
 // AddServerFlags adds the shared flags to `app`, storing into `*flags`
