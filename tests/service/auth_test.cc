@@ -289,6 +289,46 @@ TEST_F(AuthTest, BadKeysFileRefusedAtStartNamingTheLine) {
   EXPECT_NE(missing.out.find("absent-keys"), std::string::npos) << missing.out;
 }
 
+TEST_F(AuthTest, TprKeyNewAndTheCommandsKeyFlags) {
+  WriteKeys({Role::kRead});
+  StartServers();
+  // `tpr key new` appends a line and prints the key once.
+  const std::string tpr = BinaryPath("tpr");
+  const ShellResult made =
+      RunShell(absl::StrCat("(", tpr, " key new --role write --keys ", keys_path_,
+                            " --name ci 2>/dev/null)"));
+  ASSERT_EQ(made.exit_code, 0) << made.out;
+  const std::string key(absl::StripAsciiWhitespace(made.out));
+  ASSERT_EQ(key.size(), 68u) << made.out;
+  const std::string file = ReadText(keys_path_);
+  EXPECT_NE(file.find(common::HashApiKey(key) + " write ci"), std::string::npos) << file;
+  EXPECT_EQ(file.find(key), std::string::npos) << "the file holds only the hash";
+  EXPECT_NE(RunShell(absl::StrCat(tpr, " key new --role root --keys ", keys_path_)).exit_code, 0);
+
+  const std::string at = absl::StrCat(" --indexer ", indexer_.address(), " ");
+  // No key: refused, and the message says how to give one.
+  ShellResult r = RunShell(tpr + at + "stats");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("UNAUTHENTICATED"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("TPR_API_KEY"), std::string::npos) << r.out;
+  // The new key works from the environment once the watcher reloaded, and
+  // -v prints the request id.
+  bool ok = false;
+  for (int i = 0; i < 100 && !ok; ++i) {
+    r = RunShell(absl::StrCat("TPR_API_KEY=", key, " ", tpr, at, "-v stats"));
+    ok = r.exit_code == 0;
+    if (!ok) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(ok) << r.out;
+  EXPECT_NE(r.out.find("/tpr.v1.Indexer/Stats: OK request_id="), std::string::npos) << r.out;
+  // A read key from the flag cannot delete.
+  r = RunShell(absl::StrCat(tpr, at, "--api-key ", keys_[Role::kRead], " remove some/id"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("PERMISSION_DENIED"), std::string::npos) << r.out;
+  r = RunShell(absl::StrCat(tpr, at, "--api-key ", key, " remove some/id"));
+  EXPECT_NE(r.out.find("NOT_FOUND"), std::string::npos) << r.out;
+}
+
 TEST(AuthFormatTest, HashMatchesOpensslAndLinesParse) {
   // Oracle: OpenSSL's command-line digest of the same bytes.
   const ShellResult r = RunShell("printf %s tpr_abc | openssl dgst -sha256 -r");

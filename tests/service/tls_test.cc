@@ -190,6 +190,22 @@ TEST_F(TlsTest, CertificateIsReloadedWhenItsFilesChange) {
   EXPECT_FALSE(Stats(Tls("ca1")).ok()) << "the old certificate is still served";
 }
 
+TEST_F(TlsTest, TprCommandTakesTheTlsFlags) {
+  StartTlsIndexer({"--tls-client-ca", Path("ca1.pem")});
+  const std::string tpr = absl::StrCat(BinaryPath("tpr"), " --indexer ", server_.address());
+  ShellResult r = RunShell(absl::StrCat(tpr, " --tls --tls-ca ", Path("ca1.pem"), " --tls-cert ",
+                                        Path("client1.pem"), " --tls-key ", Path("client1.key"),
+                                        " --json stats"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("\"models\""), std::string::npos) << r.out;
+  r = RunShell(tpr + " stats");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("does it use TLS?"), std::string::npos) << r.out;
+  r = RunShell(absl::StrCat("TPR_TLS=1 TPR_TLS_CA=", Path("ca1.pem"), " ", tpr, " stats"));
+  EXPECT_EQ(r.exit_code, 1) << "mutual TLS without a client certificate";
+  EXPECT_NE(r.out.find("--tls-cert"), std::string::npos) << r.out;
+}
+
 TEST_F(TlsTest, UnusableFilesAreRefusedAtStart) {
   auto start = [&](const std::string& cert, const std::string& key) {
     return RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ", Path("data"),
