@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/logging.h"
+#include "common/metrics.h"
 
 namespace tpr::common {
 
@@ -29,6 +30,8 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
                  "how often the TLS files are checked for changes (seconds)")
       ->capture_default_str()
       ->check(CLI::Range(1, 86400));
+  app.add_option("--metrics-listen", flags->metrics_listen,
+                 "HOST:PORT serving Prometheus metrics at /metrics (port 0: a free one, logged)");
 }
 
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
@@ -42,6 +45,14 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
         MakeTlsServerCredentials(tls);
     if (!credentials.ok()) return credentials.status();
     options->credentials = *std::move(credentials);
+  }
+  if (!flags.metrics_listen.empty()) {
+    auto metrics = std::make_shared<Metrics>();
+    if (absl::Status s = metrics->Serve(flags.metrics_listen); !s.ok()) return s;
+    const std::string host = flags.metrics_listen.substr(0, flags.metrics_listen.rfind(':'));
+    LogEvent(options->log_name,
+             absl::StrCat("metrics: http://", host, ":", metrics->port(), "/metrics"));
+    options->metrics = std::move(metrics);
   }
   if (!flags.api_keys.empty()) {
     absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> keys =

@@ -40,6 +40,9 @@ struct ServerFlags {
   // --tls-cert, --tls-key, --tls-client-ca, --tls-refresh-s (common/tls.h);
   // no cert: plaintext.
   TlsServerOptions tls;
+  // --metrics-listen HOST:PORT: serve Prometheus /metrics there; empty:
+  // no metrics. Default empty.
+  std::string metrics_listen;
 };
 
 // AddServerFlags adds the shared flags to `app`, storing into `*flags`

@@ -44,6 +44,7 @@
 #include "common/call_interceptor.h"
 #include "common/health.h"
 #include "common/logging.h"
+#include "common/metrics.h"
 
 namespace tpr::common {
 
@@ -82,6 +83,9 @@ struct ServerOptions {
   // reflection needs a key of a sufficient role, and SIGHUP reloads the
   // keys file (ServeUntilSignal). Kept alive by these options. Default none.
   std::shared_ptr<ApiKeyAuthenticator> api_keys;
+  // Prometheus metrics (common/metrics.h) every call is recorded into; the
+  // caller serves them (Metrics::Serve). Default none.
+  std::shared_ptr<Metrics> metrics;
   // Credentials the port is opened with (e.g. TLS, common/tls.h); StartServer
   // attaches api_keys' processor to them. nullptr: plaintext. Default nullptr.
   std::shared_ptr<grpc::ServerCredentials> credentials;
@@ -132,6 +136,7 @@ inline absl::StatusOr<StartedServer> StartServer(
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
+    if (options.metrics != nullptr) interceptors.push_back(options.metrics->InterceptorFactory());
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
