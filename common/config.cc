@@ -8,7 +8,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "common/logging.h"
+#include "eval/lib/report.h"
 
 namespace tpr::common {
 namespace {
@@ -46,7 +46,7 @@ class EnvOverFileToml final : public CLI::ConfigTOML {
 std::string TomlValue(const std::string& value) {
   double number;
   if (value == "true" || value == "false" || absl::SimpleAtod(value, &number)) return value;
-  return JsonString(value);
+  return ::tpr::eval::JsonString(value);
 }
 
 }  // namespace

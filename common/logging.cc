@@ -8,12 +8,18 @@
 #include <mutex>
 #include <random>
 
+#include "absl/status/status.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "eval/lib/report.h"
 
 namespace tpr::common {
 namespace {
+
+// The one JSON string escaper of the project (valid UTF-8 kept, other bytes
+// replaced), shared with the evaluation reports.
+using ::tpr::eval::JsonString;
 
 std::atomic<LogFormat>& Format() {
   static std::atomic<LogFormat> format{LogFormat::kText};
@@ -49,18 +55,6 @@ void Event(absl::string_view level, absl::string_view service, absl::string_view
   }
 }
 
-// The canonical names of grpc::StatusCode 0..16.
-absl::string_view CodeName(int code) {
-  static constexpr absl::string_view kNames[] = {
-      "OK",        "CANCELLED",         "UNKNOWN",          "INVALID_ARGUMENT",
-      "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",   "PERMISSION_DENIED",
-      "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE",
-      "UNIMPLEMENTED", "INTERNAL",      "UNAVAILABLE",      "DATA_LOSS",
-      "UNAUTHENTICATED"};
-  if (code < 0 || code > 16) return "UNKNOWN";
-  return kNames[code];
-}
-
 }  // namespace
 
 absl::StatusOr<LogFormat> ParseLogFormat(absl::string_view name) {
@@ -84,7 +78,8 @@ void LogWarning(absl::string_view service, absl::string_view message) {
 void LogCall(absl::string_view service, const CallRecord& call) {
   const bool quiet_code = call.code == 0 || call.code == 1 || call.code == 5;
   const absl::string_view level = quiet_code ? "info" : "warning";
-  const absl::string_view code = CodeName(call.code);
+  // gRPC and absl share the canonical codes and their names.
+  const std::string code = absl::StatusCodeToString(static_cast<absl::StatusCode>(call.code));
   if (Format().load(std::memory_order_relaxed) == LogFormat::kJson) {
     std::string line = absl::StrCat(
         "{\"time\":\"", UtcNow(), "\",\"level\":\"", level, "\",\"service\":",
@@ -122,27 +117,6 @@ std::string SanitizeRequestId(absl::string_view id) {
     }
   }
   return std::string(id);
-}
-
-// Hand-written: a dozen lines, and the only JSON the services write.
-std::string JsonString(absl::string_view s) {
-  std::string out = "\"";
-  for (unsigned char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (c < 0x20) {
-          out += absl::StrFormat("\\u%04x", c);
-        } else {
-          out += static_cast<char>(c);
-        }
-    }
-  }
-  return out + "\"";
 }
 
 }  // namespace tpr::common

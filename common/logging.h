@@ -80,10 +80,6 @@ std::string NewRequestId();
 // empty string otherwise. Thread-safe.
 std::string SanitizeRequestId(absl::string_view id);
 
-// JsonString returns `s` as a JSON string literal (RFC 8259 escaping, with
-// quotes). Thread-safe. O(size).
-std::string JsonString(absl::string_view s);
-
 }  // namespace tpr::common
 
 #endif  // TPR_COMMON_LOGGING_H_

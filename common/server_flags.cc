@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/logging.h"
+#include "common/metrics.h"
 
 namespace tpr::common {
 
@@ -16,6 +17,21 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
   app.add_flag("--log-calls,!--no-log-calls", flags->log_calls,
                "log one line per call (health checks and reflection excepted)")
       ->default_str(flags->log_calls ? "true" : "false");
+  app.add_option("--api-keys", flags->api_keys,
+                 "file of hashed API keys with roles (tpr key new); when given, every call but "
+                 "health and reflection needs 'authorization: Bearer KEY'; reloaded on SIGHUP "
+                 "and when the file changes");
+  app.add_option("--tls-cert", flags->tls.cert_file,
+                 "PEM certificate chain: serve TLS (with --tls-key); re-read when it changes");
+  app.add_option("--tls-key", flags->tls.key_file, "PEM private key of --tls-cert");
+  app.add_option("--tls-client-ca", flags->tls.client_ca_file,
+                 "PEM authority: require client certificates it signed (mutual TLS)");
+  app.add_option("--tls-refresh-s", flags->tls.refresh_interval_s,
+                 "how often the TLS files are checked for changes (seconds)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 86400));
+  app.add_option("--metrics-listen", flags->metrics_listen,
+                 "HOST:PORT serving Prometheus metrics at /metrics (port 0: a free one, logged)");
 }
 
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
@@ -23,6 +39,30 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
+  const TlsServerOptions& tls = flags.tls;
+  if (!tls.cert_file.empty() || !tls.key_file.empty() || !tls.client_ca_file.empty()) {
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+        MakeTlsServerCredentials(tls);
+    if (!credentials.ok()) return credentials.status();
+    options->credentials = *std::move(credentials);
+  }
+  if (!flags.metrics_listen.empty()) {
+    auto metrics = std::make_shared<Metrics>();
+    if (absl::Status s = metrics->Serve(flags.metrics_listen); !s.ok()) return s;
+    const std::string host = flags.metrics_listen.substr(0, flags.metrics_listen.rfind(':'));
+    LogEvent(options->log_name,
+             absl::StrCat("metrics: http://", host, ":", metrics->port(), "/metrics"));
+    options->metrics = std::move(metrics);
+  }
+  if (!flags.api_keys.empty()) {
+    absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> keys =
+        ApiKeyAuthenticator::Open(flags.api_keys, options->log_name);
+    if (!keys.ok()) {
+      return absl::Status(keys.status().code(),
+                          absl::StrCat("--api-keys: ", keys.status().message()));
+    }
+    options->api_keys = *std::move(keys);
+  }
   return absl::OkStatus();
 }
 

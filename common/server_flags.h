@@ -23,6 +23,7 @@
 #include "absl/status/status.h"
 #include "common/config.h"
 #include "common/server_lifecycle.h"
+#include "common/tls.h"
 
 namespace tpr::common {
 
@@ -33,6 +34,15 @@ struct ServerFlags {
   std::string log_format = "text";
   // --log-calls: one log line per call. Default true.
   bool log_calls = true;
+  // --api-keys: keys file (common/auth.h); empty: no keys, every call open.
+  // Default empty.
+  std::string api_keys;
+  // --tls-cert, --tls-key, --tls-client-ca, --tls-refresh-s (common/tls.h);
+  // no cert: plaintext.
+  TlsServerOptions tls;
+  // --metrics-listen HOST:PORT: serve Prometheus /metrics there; empty:
+  // no metrics. Default empty.
+  std::string metrics_listen;
 };
 
 // AddServerFlags adds the shared flags to `app`, storing into `*flags`
@@ -41,7 +51,8 @@ struct ServerFlags {
 void AddServerFlags(CLI::App& app, ServerFlags* flags);
 
 // ApplyServerFlags sets the process-wide log format and fills the matching
-// fields of `*options`. Returns INVALID_ARGUMENT naming the flag at fault.
+// fields of `*options` (opening the keys file). Returns INVALID_ARGUMENT or
+// NOT_FOUND naming the flag and the file or line at fault.
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
 
 // FinishServerFlags runs after parsing: with --print-config it prints the

@@ -22,6 +22,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <functional>
 #include <initializer_list>
 #include <memory>
 #include <mutex>
@@ -39,9 +40,11 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/string_view.h"
+#include "common/auth.h"
 #include "common/call_interceptor.h"
 #include "common/health.h"
 #include "common/logging.h"
+#include "common/metrics.h"
 
 namespace tpr::common {
 
@@ -76,8 +79,15 @@ struct ServerOptions {
   // reason. Empty function: always ready. Default empty, 1000 ms.
   ReadinessCheck readiness_check;
   int readiness_poll_ms = 1000;
-  // Credentials the port is opened with. nullptr: plaintext
-  // (grpc::InsecureServerCredentials). Default nullptr.
+  // API keys (common/auth.h): when set, every call but health checks and
+  // reflection needs a key of a sufficient role, and SIGHUP reloads the
+  // keys file (ServeUntilSignal). Kept alive by these options. Default none.
+  std::shared_ptr<ApiKeyAuthenticator> api_keys;
+  // Prometheus metrics (common/metrics.h) every call is recorded into; the
+  // caller serves them (Metrics::Serve). Default none.
+  std::shared_ptr<Metrics> metrics;
+  // Credentials the port is opened with (e.g. TLS, common/tls.h); StartServer
+  // attaches api_keys' processor to them. nullptr: plaintext. Default nullptr.
   std::shared_ptr<grpc::ServerCredentials> credentials;
 };
 
@@ -108,10 +118,16 @@ inline absl::StatusOr<StartedServer> StartServer(
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   StartedServer started;
-  builder.AddListeningPort(
-      options.listen_address,
-      options.credentials ? options.credentials : grpc::InsecureServerCredentials(),
-      &started.port);
+  std::shared_ptr<grpc::ServerCredentials> credentials = options.credentials;
+  if (options.api_keys != nullptr) {
+    if (credentials == nullptr) {
+      credentials = InsecureServerCredentialsWithAuth(options.api_keys->Processor());
+    } else {
+      credentials->SetAuthMetadataProcessor(options.api_keys->Processor());
+    }
+  }
+  if (credentials == nullptr) credentials = grpc::InsecureServerCredentials();
+  builder.AddListeningPort(options.listen_address, credentials, &started.port);
   {
     CallInterceptorOptions calls;
     calls.service = options.log_name;
@@ -120,6 +136,7 @@ inline absl::StatusOr<StartedServer> StartServer(
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
+    if (options.metrics != nullptr) interceptors.push_back(options.metrics->InterceptorFactory());
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
@@ -172,11 +189,12 @@ inline void OnShutdownSignal(int signo) {
 
 }  // namespace internal
 
-// WaitForShutdownSignal installs SIGTERM/SIGINT handlers (once per process)
-// and blocks until one of them arrives; returns the signal number. SIGPIPE is
+// WaitForShutdownSignal installs SIGTERM/SIGINT/SIGHUP handlers (once per
+// process) and blocks until SIGTERM or SIGINT arrives; returns the signal
+// number. Each SIGHUP calls `on_hangup` (when set) and waits on. SIGPIPE is
 // ignored as a side effect (a vanished client must not kill the server).
 // Thread-safe to call from one thread at a time.
-inline int WaitForShutdownSignal() {
+inline int WaitForShutdownSignal(const std::function<void()>& on_hangup = nullptr) {
   int* fds = internal::SignalPipe();
   if (fds[0] < 0) {
     if (pipe(fds) != 0) return -1;
@@ -186,11 +204,16 @@ inline int WaitForShutdownSignal() {
     action.sa_flags = SA_RESTART;
     sigaction(SIGTERM, &action, nullptr);
     sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGHUP, &action, nullptr);
     signal(SIGPIPE, SIG_IGN);
   }
   unsigned char byte = 0;
   while (true) {
     const ssize_t n = read(fds[0], &byte, 1);
+    if (n == 1 && byte == SIGHUP) {
+      if (on_hangup) on_hangup();
+      continue;
+    }
     if (n == 1) return byte;
     if (n < 0 && errno == EINTR) continue;
     return -1;
@@ -226,7 +249,11 @@ template <typename ShutDown>
 int ServeUntilSignalWith(const ServerOptions& options, int port, ShutDown shut_down) {
   LogEvent(options.log_name,
            absl::StrCat("serving on ", options.listen_address, " (port ", port, ")"));
-  const int signo = WaitForShutdownSignal();
+  const int signo = WaitForShutdownSignal([&options] {
+    if (options.api_keys == nullptr) return;
+    LogEvent(options.log_name, "SIGHUP: reloading the API keys");
+    (void)options.api_keys->Reload();  // Errors are logged; old keys stay.
+  });
   LogEvent(options.log_name,
            absl::StrCat("signal ", signo, ": shutting down, grace ",
                         options.shutdown_grace_ms, " ms"));

@@ -32,10 +32,18 @@ struct Globals {
   bool json = false;
   // Deadline per call, in seconds. Default 120.
   double timeout_s = 120;
+  // TLS and API key (--tls, --tls-ca, --tls-cert, --tls-key,
+  // --tls-server-name, --api-key or TPR_API_KEY), as the SDK's
+  // ConnectionOptions. Default: plaintext, no key.
+  tpr::client::ConnectionOptions connection;
+  // -v: print each call's method, status and request id on stderr.
+  // Default false.
+  bool verbose = false;
 };
 
-// AddGlobalFlags declares --extractor, --indexer, --json and --timeout on
-// `app`, storing into `*g` (which must outlive parsing).
+// AddGlobalFlags declares --extractor, --indexer, --json, --timeout, the TLS
+// flags, --api-key and -v on `app`, storing into `*g` (which must outlive
+// parsing).
 void AddGlobalFlags(CLI::App* app, Globals* g);
 
 // CallOptionsFor returns the SDK call options of `g` (its deadline, the

@@ -154,20 +154,7 @@ absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
 }
 
 absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses) {
-  absl::StatusOr<std::string> target = ChannelTarget(addresses);
-  if (!target.ok()) return target.status();
-  grpc::ChannelArguments args;
-  args.SetLoadBalancingPolicyName("round_robin");
-  args.SetMaxReceiveMessageSize(64 << 20);
-  args.SetMaxSendMessageSize(64 << 20);
-  // gRPC's reconnect backoff starts at 1 s and grows to 120 s; while a
-  // subchannel waits, calls fail fast with UNAVAILABLE, so our retries would
-  // all land inside one wait. Reconnecting on the scale of our own backoff
-  // lets a restarted server be found within a retry or two.
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-  return grpc::CreateCustomChannel(*target, grpc::InsecureChannelCredentials(), args);
+  return MakeChannel(addresses, ConnectionOptions());
 }
 
 // --- ExtractorClient ---------------------------------------------------------

@@ -71,6 +71,11 @@ int main(int argc, char** argv) {
   // Destroyed after the server (declared first): its workers drain any job
   // still queued when the grace period ended.
   tpr::extractor_service::ExtractorService service(service_options);
+  if (server_options.metrics != nullptr) {
+    server_options.metrics->AddGaugeCallback(
+        "tpr_extractor_admitted_calls", "Extract calls admitted (uploading, queued or running)",
+        [&service] { return static_cast<double>(service.InFlight()); });
+  }
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(server_options, {&service});
   if (!started.ok()) {

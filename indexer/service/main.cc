@@ -70,6 +70,18 @@ int main(int argc, char** argv) {
     log(absl::StrCat("cannot open the data directory: ", core.status().ToString()));
     return 1;
   }
+  if (server_options.metrics != nullptr) {
+    const tpr::indexer::IndexerCore* c = core->get();
+    tpr::common::Metrics& m = *server_options.metrics;
+    m.AddGaugeCallback("tpr_indexer_models", "Models stored",
+                       [c] { return static_cast<double>(c->Stats().models()); });
+    m.AddGaugeCallback("tpr_indexer_indexed", "Models in the VP-tree proper",
+                       [c] { return static_cast<double>(c->Stats().indexed()); });
+    m.AddGaugeCallback("tpr_indexer_buffered", "Models waiting in the insert buffer",
+                       [c] { return static_cast<double>(c->Stats().buffered()); });
+    m.AddGaugeCallback("tpr_indexer_disk_bytes", "Size of the data directory, bytes",
+                       [c] { return static_cast<double>(c->Stats().disk_bytes()); });
+  }
   tpr::indexer::ServiceOptions service_options;
   service_options.max_concurrent_searches = max_searches;
   service_options.log = log;

@@ -22,7 +22,10 @@
 #include <stdlib.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <map>
 #include <memory>
 #include <string>
@@ -32,7 +35,10 @@
 #include <grpcpp/security/credentials.h>
 
 #include "absl/strings/str_cat.h"
+#include "common/auth.h"
+#include "common/metrics.h"
 #include "common/server_lifecycle.h"
+#include "common/tls.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
 #include "tests/indexer/signature_testing.h"
@@ -268,6 +274,140 @@ void BM_ReopenDataDir(benchmark::State& state) {
 }
 BENCHMARK(BM_ReopenDataDir)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond)
     ->UseRealTime()->Iterations(2);
+
+
+// BM_SecurityAndMetricsOverhead/N: the same cheap 10-NN search (N = 10
+// models: 10 EMDs) against three servers over one IndexerCore, timed side
+// by side in each iteration (order rotating): plaintext; TLS + API key
+// (ECDSA P-256 certificate made with openssl, `authorization: Bearer`
+// checked in the auth filter: one SHA-256 per call); plaintext with
+// Prometheus metrics recorded (common/metrics.h). Counters: p50 of each,
+// p50 of the per-query differences (targets: TLS + key <= 300 us added at
+// p50; metrics < 2% of search throughput, i.e. of the summed time).
+// Connections are established before timing (TLS handshakes are per
+// connection, not per call).
+void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const std::string dir = FreshDir("security");
+  const std::string certs = absl::StrCat(
+      "cd ", dir, " && openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes "
+      "-keyout ca.key -out ca.pem -days 2 -subj /CN=bench-ca 2>/dev/null && "
+      "openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout server.key "
+      "-out server.csr -subj /CN=localhost 2>/dev/null && "
+      "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > san.ext && "
+      "openssl x509 -req -in server.csr -CA ca.pem -CAkey ca.key -CAcreateserial -days 2 "
+      "-out server.pem -extfile san.ext 2>/dev/null");
+  if (std::system(certs.c_str()) != 0) {
+    state.SkipWithError("openssl failed");
+    return;
+  }
+  const std::string key = *tpr::common::NewApiKey();
+  {
+    std::ofstream out(dir + "/keys");
+    out << tpr::common::KeyFileLine(key, tpr::common::Role::kRead, "bench") << "\n";
+  }
+  CoreOptions core_options;
+  core_options.data_dir = dir + "/data";
+  core_options.persist_interval_ms = 0;
+  auto core = std::move(*IndexerCore::Open(core_options));
+  {
+    BatchWriter batch(core.get());
+    for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
+      if (!batch.Add(std::move(r)).ok()) std::abort();
+    }
+    if (!batch.Finish().ok()) std::abort();
+  }
+  core->WaitForRebuild();
+
+  // Three services over the one core (a service serves one server).
+  std::vector<std::unique_ptr<IndexerService>> services;
+  std::vector<tpr::common::StartedServer> servers;
+  std::vector<std::unique_ptr<tpr::v1::Indexer::Stub>> stubs;
+  auto metrics = std::make_shared<tpr::common::Metrics>();
+  for (int config = 0; config < 3; ++config) {
+    tpr::common::ServerOptions options;
+    if (config == 1) {
+      tpr::common::TlsServerOptions tls;
+      tls.cert_file = dir + "/server.pem";
+      tls.key_file = dir + "/server.key";
+      options.credentials = *tpr::common::MakeTlsServerCredentials(tls);
+      options.api_keys = *tpr::common::ApiKeyAuthenticator::Open(dir + "/keys", "bench", 0);
+    }
+    if (config == 2) options.metrics = metrics;
+    services.push_back(std::make_unique<IndexerService>(core.get(), ServiceOptions{}));
+    auto started = tpr::common::StartServer(options, {services.back().get()});
+    if (!started.ok()) std::abort();
+    const std::string address = absl::StrCat("127.0.0.1:", started->port);
+    std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+    if (config == 1) {
+      grpc::SslCredentialsOptions ssl;
+      std::ifstream in(dir + "/ca.pem");
+      std::stringstream pem;
+      pem << in.rdbuf();
+      ssl.pem_root_certs = pem.str();
+      credentials = grpc::SslCredentials(ssl);
+    }
+    stubs.push_back(tpr::v1::Indexer::NewStub(grpc::CreateChannel(address, credentials)));
+    servers.push_back(std::move(*started));
+  }
+  std::vector<tpr::v1::SearchRequest> queries;
+  for (tpr::v1::UpsertRequest& r : Requests(64, 99, "q")) {
+    tpr::v1::SearchRequest q;
+    *q.mutable_signature() = r.model().signature();
+    q.set_k(10);
+    queries.push_back(std::move(q));
+  }
+  auto search = [&](int config, const tpr::v1::SearchRequest& q) {
+    grpc::ClientContext context;
+    if (config == 1) context.AddMetadata("authorization", "Bearer " + key);
+    auto reader = stubs[static_cast<size_t>(config)]->Search(&context, q);
+    tpr::v1::SearchResponse response;
+    while (reader->Read(&response)) benchmark::DoNotOptimize(response);
+    return reader->Finish().ok();
+  };
+  for (int config = 0; config < 3; ++config) {  // Connect and warm up.
+    for (int i = 0; i < 20; ++i) {
+      if (!search(config, queries[0])) {
+        state.SkipWithError("warm-up search failed");
+        return;
+      }
+    }
+  }
+  std::vector<double> us[3];
+  std::vector<double> secure_added, metrics_added;
+  size_t i = 0;
+  for (auto _ : state) {
+    const tpr::v1::SearchRequest& q = queries[i % queries.size()];
+    double t[3];
+    for (int k = 0; k < 3; ++k) {
+      const int config = static_cast<int>((i + static_cast<size_t>(k)) % 3);
+      const auto t0 = std::chrono::steady_clock::now();
+      if (!search(config, q)) state.SkipWithError("search failed");
+      t[config] = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0)
+                      .count();
+      us[config].push_back(t[config]);
+    }
+    secure_added.push_back(t[1] - t[0]);
+    metrics_added.push_back(t[2] - t[0]);
+    ++i;
+  }
+  auto sum = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return s;
+  };
+  state.counters["plain_p50_us"] = Percentile(us[0], 0.5);
+  state.counters["tls_key_p50_us"] = Percentile(us[1], 0.5);
+  state.counters["metrics_p50_us"] = Percentile(us[2], 0.5);
+  state.counters["tls_key_added_p50_us"] = Percentile(secure_added, 0.5);
+  state.counters["metrics_added_p50_us"] = Percentile(metrics_added, 0.5);
+  state.counters["metrics_overhead_pct"] = 100.0 * (sum(us[2]) - sum(us[0])) / sum(us[0]);
+  for (tpr::common::StartedServer& s : servers) {
+    s.server->Shutdown(std::chrono::system_clock::now());
+    s.server->Wait();
+  }
+}
+BENCHMARK(BM_SecurityAndMetricsOverhead)->Arg(10)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 }  // namespace
 }  // namespace tpr::indexer

@@ -153,6 +153,9 @@ class ServiceProcess {
     return -1;
   }
 
+  // Sends `signo` without waiting (e.g. SIGHUP); returns kill()'s result.
+  int Signal(int signo) { return pid_ > 0 ? kill(pid_, signo) : -1; }
+
   int port() const { return port_; }
   std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
   const std::string& log_path() const { return log_path_; }

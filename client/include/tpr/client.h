@@ -22,6 +22,7 @@
 #define TPR_CLIENT_CLIENT_H_
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -75,6 +76,46 @@ absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses);
 // Errors: those of ChannelTarget.
 absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses);
 
+// ConnectionOptions: how a client reaches and authenticates to the servers
+// (TLS, API key) and what it hears about each call. Defaults: plaintext, no
+// key.
+struct ConnectionOptions {
+  // Speak TLS. Default false.
+  bool tls = false;
+  // PEM file of the certificate authorities to trust; empty: the system's
+  // roots. Only with tls.
+  std::string tls_ca_file;
+  // PEM client certificate chain and private key, for servers that demand
+  // mutual TLS (--tls-client-ca). Both or neither. Only with tls.
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  // Name the server's certificate must carry when it differs from the host
+  // in the address (e.g. connecting by IP). Empty: the address's host.
+  std::string tls_server_name;
+  // API key, sent with every call as `authorization: Bearer <key>`. Empty:
+  // none. ConnectionOptionsFromEnvironment() reads TPR_API_KEY.
+  std::string api_key;
+  // Called when each call ends (on the thread that ends it) with the full
+  // method name, the server's request id (trailing `x-request-id`, "" when
+  // the call never reached a server) and the final status. Default none.
+  std::function<void(absl::string_view method, absl::string_view request_id,
+                     const grpc::Status& status)>
+      on_call_done;
+};
+
+// ConnectionOptionsFromEnvironment returns default options with api_key
+// taken from the TPR_API_KEY environment variable (empty when unset).
+ConnectionOptions ConnectionOptionsFromEnvironment();
+
+// MakeChannel with `connection`: as above, over TLS when connection.tls (the
+// files are read now: NOT_FOUND naming a missing one, INVALID_ARGUMENT for
+// a certificate without its key), adding the API key to every call. A call
+// that cannot connect fails with UNAVAILABLE and a hint: plaintext against
+// a TLS server, or a TLS handshake refused (wrong CA, wrong name, missing
+// client certificate), never a hang.
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses,
+                                                           const ConnectionOptions& connection);
+
 // kChunkBytes is the size of one upload message of ExtractorClient: 1 MiB,
 // well under gRPC's 4 MiB default message limit.
 inline constexpr size_t kChunkBytes = size_t{1} << 20;
@@ -88,6 +129,10 @@ class ExtractorClient {
 
   // Connect returns a client over MakeChannel(addresses).
   static absl::StatusOr<ExtractorClient> Connect(absl::string_view addresses,
+                                                 CallOptions defaults = {});
+  // Connect over MakeChannel(addresses, connection): TLS and API key.
+  static absl::StatusOr<ExtractorClient> Connect(absl::string_view addresses,
+                                                 const ConnectionOptions& connection,
                                                  CallOptions defaults = {});
 
   // ExtractFile reads the mesh file at `path` and calls ExtractBytes with its
@@ -162,6 +207,10 @@ class IndexerClient {
  public:
   explicit IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
   static absl::StatusOr<IndexerClient> Connect(absl::string_view addresses,
+                                               CallOptions defaults = {});
+  // Connect over MakeChannel(addresses, connection): TLS and API key.
+  static absl::StatusOr<IndexerClient> Connect(absl::string_view addresses,
+                                               const ConnectionOptions& connection,
                                                CallOptions defaults = {});
 
   // Upsert stores `model`; returns true when the id was new. ALREADY_EXISTS

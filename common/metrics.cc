@@ -1,0 +1,251 @@
+#include "common/metrics.h"
+
+#include <chrono>
+#include <exception>
+#include <sstream>
+#include <utility>
+
+#include <prometheus/collectable.h>
+#include <prometheus/exposer.h>
+#include <prometheus/text_serializer.h>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "tpr/v1/extractor.pb.h"
+#include "tpr/v1/indexer.pb.h"
+
+namespace tpr::common {
+
+// Seconds, from 0.5 ms to 30 s: a cached search takes a fraction of a
+// millisecond, an extraction of a large mesh tens of seconds.
+const prometheus::Histogram::BucketBoundaries& SecondsBuckets() {
+  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
+      0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30};
+  return *buckets;
+}
+
+// Counts per search, 1 to 100000 (an exhaustive search of a large index).
+const prometheus::Histogram::BucketBoundaries& CountBuckets() {
+  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
+      1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000, 100000};
+  return *buckets;
+}
+
+struct Metrics::Families {
+  explicit Families(prometheus::Registry& r)
+      : requests(prometheus::BuildCounter()
+                     .Name("tpr_rpc_requests_total")
+                     .Help("Calls finished, by method and gRPC status code")
+                     .Register(r)),
+        duration(prometheus::BuildHistogram()
+                     .Name("tpr_rpc_duration_seconds")
+                     .Help("Call duration from metadata to status, by method and code")
+                     .Register(r)),
+        in_flight(prometheus::BuildGauge()
+                      .Name("tpr_rpc_in_flight")
+                      .Help("Calls started and not yet finished, by method")
+                      .Register(r)),
+        stage(prometheus::BuildHistogram()
+                  .Name("tpr_extractor_stage_duration_seconds")
+                  .Help("Duration of each extraction stage (ExtractResponse.timings)")
+                  .Register(r)),
+        mesh_bytes(prometheus::BuildHistogram()
+                       .Name("tpr_extractor_mesh_bytes")
+                       .Help("Size of each uploaded mesh, in bytes")
+                       .Register(r)
+                       .Add({}, prometheus::Histogram::BucketBoundaries{
+                                    1e3, 1e4, 1e5, 1e6, 1e7, 1e8})),
+        emds(prometheus::BuildHistogram()
+                 .Name("tpr_indexer_search_emd_computations")
+                 .Help("Full EMD computations per search (SearchStats)")
+                 .Register(r)
+                 .Add({}, CountBuckets())),
+        lower_bounds(prometheus::BuildHistogram()
+                         .Name("tpr_indexer_search_lower_bounds")
+                         .Help("Lower bounds computed per search (SearchStats)")
+                         .Register(r)
+                         .Add({}, CountBuckets())),
+        search_seconds(prometheus::BuildHistogram()
+                           .Name("tpr_indexer_search_duration_seconds")
+                           .Help("Server-side time of each search (SearchStats)")
+                           .Register(r)
+                           .Add({}, SecondsBuckets())) {}
+
+  prometheus::Family<prometheus::Counter>& requests;
+  prometheus::Family<prometheus::Histogram>& duration;
+  prometheus::Family<prometheus::Gauge>& in_flight;
+  prometheus::Family<prometheus::Histogram>& stage;
+  prometheus::Histogram& mesh_bytes;
+  prometheus::Histogram& emds;
+  prometheus::Histogram& lower_bounds;
+  prometheus::Histogram& search_seconds;
+};
+
+// Gauges computed at scrape time.
+class Metrics::GaugeCallbacks final : public prometheus::Collectable {
+ public:
+  void Add(std::string name, std::string help, std::function<double()> read) {
+    std::lock_guard<std::mutex> lock(mu_);
+    gauges_.push_back({std::move(name), std::move(help), std::move(read)});
+  }
+
+  std::vector<prometheus::MetricFamily> Collect() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    std::vector<prometheus::MetricFamily> out;
+    for (const Gauge& g : gauges_) {
+      prometheus::MetricFamily family;
+      family.name = g.name;
+      family.help = g.help;
+      family.type = prometheus::MetricType::Gauge;
+      prometheus::ClientMetric metric;
+      metric.gauge.value = g.read();
+      family.metric.push_back(std::move(metric));
+      out.push_back(std::move(family));
+    }
+    return out;
+  }
+
+ private:
+  struct Gauge {
+    std::string name;
+    std::string help;
+    std::function<double()> read;
+  };
+  mutable std::mutex mu_;
+  std::vector<Gauge> gauges_;
+};
+
+namespace {
+
+using grpc::experimental::InterceptionHookPoints;
+
+enum class Kind { kOther, kExtract, kSearch };
+
+class MetricsInterceptor final : public grpc::experimental::Interceptor {
+ public:
+  MetricsInterceptor(grpc::experimental::ServerRpcInfo* info, Metrics::Families* families)
+      : families_(families),
+        method_(info->method() != nullptr ? info->method() : ""),
+        start_(std::chrono::steady_clock::now()) {
+    if (method_ == "/tpr.v1.Extractor/Extract") kind_ = Kind::kExtract;
+    if (method_ == "/tpr.v1.Indexer/Search") kind_ = Kind::kSearch;
+    in_flight_ = &families_->in_flight.Add({{"method", method_}});
+    in_flight_->Increment();
+  }
+
+  ~MetricsInterceptor() override {
+    if (!finished_) Finish(grpc::StatusCode::CANCELLED);
+    in_flight_->Decrement();
+  }
+
+  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+    if (kind_ == Kind::kExtract &&
+        methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_MESSAGE)) {
+      // The method fixes the message type.
+      if (const auto* chunk = static_cast<const tpr::v1::ExtractRequest*>(methods->GetRecvMessage())) {
+        upload_bytes_ += chunk->data().size();
+      }
+    }
+    if (kind_ != Kind::kOther &&
+        methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_MESSAGE)) {
+      const void* message = methods->GetSendMessage();
+      if (message != nullptr && kind_ == Kind::kExtract) {
+        const auto* response = static_cast<const tpr::v1::ExtractResponse*>(message);
+        for (const tpr::v1::StageTiming& t : response->timings()) {
+          families_->stage.Add({{"stage", t.stage()}}, SecondsBuckets()).Observe(t.milliseconds() / 1000);
+        }
+        families_->mesh_bytes.Observe(static_cast<double>(upload_bytes_));
+      }
+      if (message != nullptr && kind_ == Kind::kSearch) {
+        const auto* response = static_cast<const tpr::v1::SearchResponse*>(message);
+        if (response->has_stats()) {
+          families_->emds.Observe(static_cast<double>(response->stats().emd_computations()));
+          families_->lower_bounds.Observe(static_cast<double>(response->stats().lower_bounds()));
+          families_->search_seconds.Observe(response->stats().milliseconds() / 1000);
+        }
+      }
+    }
+    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
+      Finish(methods->GetSendStatus().error_code());
+    }
+    methods->Proceed();
+  }
+
+ private:
+  void Finish(grpc::StatusCode code) {
+    finished_ = true;
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const std::string code_name = absl::StatusCodeToString(static_cast<absl::StatusCode>(code));
+    const prometheus::Labels labels = {{"method", method_}, {"code", code_name}};
+    families_->requests.Add(labels).Increment();
+    families_->duration.Add(labels, SecondsBuckets()).Observe(seconds);
+  }
+
+  Metrics::Families* families_;
+  std::string method_;
+  Kind kind_ = Kind::kOther;
+  std::chrono::steady_clock::time_point start_;
+  prometheus::Gauge* in_flight_ = nullptr;
+  size_t upload_bytes_ = 0;
+  bool finished_ = false;
+};
+
+class MetricsInterceptorFactory final
+    : public grpc::experimental::ServerInterceptorFactoryInterface {
+ public:
+  explicit MetricsInterceptorFactory(Metrics::Families* families) : families_(families) {}
+  grpc::experimental::Interceptor* CreateServerInterceptor(
+      grpc::experimental::ServerRpcInfo* info) override {
+    return new MetricsInterceptor(info, families_);
+  }
+
+ private:
+  Metrics::Families* families_;
+};
+
+}  // namespace
+
+Metrics::Metrics()
+    : registry_(std::make_shared<prometheus::Registry>()),
+      callbacks_(std::make_shared<GaugeCallbacks>()),
+      families_(std::make_unique<Families>(*registry_)) {}
+
+Metrics::~Metrics() = default;
+
+absl::Status Metrics::Serve(const std::string& listen) {
+  try {
+    exposer_ = std::make_unique<prometheus::Exposer>(listen);
+  } catch (const std::exception& e) {
+    return absl::UnavailableError(
+        absl::StrCat("--metrics-listen: cannot serve /metrics on ", listen, ": ", e.what()));
+  }
+  exposer_->RegisterCollectable(registry_);
+  exposer_->RegisterCollectable(callbacks_);
+  return absl::OkStatus();
+}
+
+int Metrics::port() const {
+  if (exposer_ == nullptr) return 0;
+  std::vector<int> ports = exposer_->GetListeningPorts();
+  return ports.empty() ? 0 : ports.front();
+}
+
+void Metrics::AddGaugeCallback(const std::string& name, const std::string& help,
+                               std::function<double()> read) {
+  callbacks_->Add(name, help, std::move(read));
+}
+
+std::string Metrics::Scrape() const {
+  std::vector<prometheus::MetricFamily> all = registry_->Collect();
+  std::vector<prometheus::MetricFamily> gauges = callbacks_->Collect();
+  all.insert(all.end(), gauges.begin(), gauges.end());
+  return prometheus::TextSerializer().Serialize(all);
+}
+
+std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
+Metrics::InterceptorFactory() {
+  return std::make_unique<MetricsInterceptorFactory>(families_.get());
+}
+
+}  // namespace tpr::common

@@ -1,0 +1,92 @@
+// Prometheus metrics for the TPR services (prometheus-cpp), served over HTTP
+// at /metrics (--metrics-listen HOST:PORT).
+//
+// Histograms, never summaries, so that replicas can be aggregated; no label
+// takes a per-model or per-request value (ids, request ids), only the
+// method and the status code. What is measured:
+//   every service (a server interceptor, common/server_lifecycle.h):
+//     tpr_rpc_requests_total{method,code}          counter
+//     tpr_rpc_duration_seconds{method,code}        histogram
+//     tpr_rpc_in_flight{method}                    gauge
+//   tpr-extractor (read from the Extract call's messages):
+//     tpr_extractor_stage_duration_seconds{stage}  histogram (StageTiming)
+//     tpr_extractor_mesh_bytes                     histogram (upload size)
+//   tpr-indexer (read from the Search stream's final SearchStats):
+//     tpr_indexer_search_emd_computations          histogram per search
+//     tpr_indexer_search_lower_bounds              histogram per search
+//     tpr_indexer_search_duration_seconds          histogram (server time)
+// plus gauges read at scrape time that each main.cc adds (AddGaugeCallback):
+// the indexer's models, indexed, buffered and disk bytes, the extractor's
+// admitted calls.
+//
+//   auto metrics = std::make_shared<tpr::common::Metrics>();
+//   absl::Status s = metrics->Serve("127.0.0.1:9102");
+//   server_options.metrics = metrics;            // StartServer installs it
+#ifndef TPR_COMMON_METRICS_H_
+#define TPR_COMMON_METRICS_H_
+
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <grpcpp/support/server_interceptor.h>
+#include <prometheus/counter.h>
+#include <prometheus/family.h>
+#include <prometheus/gauge.h>
+#include <prometheus/histogram.h>
+#include <prometheus/registry.h>
+
+#include "absl/status/status.h"
+
+namespace prometheus {
+class Exposer;
+}  // namespace prometheus
+
+namespace tpr::common {
+
+// Metrics: one registry, its families, and the HTTP endpoint. Thread-safe.
+class Metrics {
+ public:
+  Metrics();
+  ~Metrics();
+  Metrics(const Metrics&) = delete;
+  Metrics& operator=(const Metrics&) = delete;
+
+  // Serve starts the HTTP endpoint on `listen` ("HOST:PORT", port 0 picks a
+  // free one; see port()). UNAVAILABLE when it cannot bind. Call once.
+  absl::Status Serve(const std::string& listen);
+  // The port Serve bound, 0 before.
+  int port() const;
+
+  // AddGaugeCallback adds a gauge `name` whose value `read` returns at each
+  // scrape (called on the HTTP thread; must be thread-safe). Call before
+  // Serve.
+  void AddGaugeCallback(const std::string& name, const std::string& help,
+                        std::function<double()> read);
+
+  // Text exposition of every metric, as /metrics serves it (for tests and
+  // debugging). Cost: one pass over all series.
+  std::string Scrape() const;
+
+  // InterceptorFactory returns the server interceptor factory that records
+  // the calls of a server into these metrics. The Metrics must outlive the
+  // server.
+  std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> InterceptorFactory();
+
+  // For the interceptor (metrics.cc).
+  struct Families;
+  Families& families() { return *families_; }
+
+ private:
+  class GaugeCallbacks;
+  std::shared_ptr<prometheus::Registry> registry_;
+  std::shared_ptr<GaugeCallbacks> callbacks_;
+  std::unique_ptr<Families> families_;
+  std::unique_ptr<prometheus::Exposer> exposer_;
+};
+
+}  // namespace tpr::common
+
+#endif  // TPR_COMMON_METRICS_H_
