@@ -14,7 +14,7 @@
 #include "absl/status/status.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
-#include "indexer/service/indexer_core.h"
+#include "indexer/service/convert.h"
 #include "tests/fuzz/fuzz_check.h"
 #include "tpr/v1/signature.pb.h"
 
