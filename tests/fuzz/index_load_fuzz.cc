@@ -30,8 +30,10 @@ using Items = std::vector<std::pair<std::string, tpr::index::Signature>>;
 
 // BruteForce returns the k nearest items to `query` by (distance, id).
 std::vector<tpr::index::Neighbor> BruteForce(const Items& items,
-                                             const tpr::index::Signature& query, size_t k) {
-  const tpr::index::GroundDistanceOptions ground = tpr::fuzz::FuzzIndexOptions().ground;
+                                             const tpr::index::Signature& query,
+                                             size_t k) {
+  const tpr::index::GroundDistanceOptions ground =
+      tpr::fuzz::FuzzIndexOptions().ground;
   const tpr::index::PreparedSignature q = *tpr::index::Prepare(query, ground);
   std::vector<tpr::index::Neighbor> all;
   for (const auto& [id, s] : items) {
@@ -52,26 +54,29 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       BruteForce(items, items[7].second, 10);
   const tpr::fuzz::LoaderInput in = tpr::fuzz::DecodeLoaderInput(data, size);
   absl::StatusOr<std::unique_ptr<tpr::index::SignatureIndex>> index =
-      tpr::index::SignatureIndex::Load(in.bytes, items, tpr::fuzz::FuzzIndexOptions());
+      tpr::index::SignatureIndex::Load(in.bytes, items,
+                                       tpr::fuzz::FuzzIndexOptions());
   if (!index.ok()) {
-    const absl::StatusCode code = index.status().code();
-    FUZZ_CHECK(code == absl::StatusCode::kInvalidArgument ||
-                   code == absl::StatusCode::kDataLoss ||
-                   code == absl::StatusCode::kFailedPrecondition,
-               "a refusal is INVALID_ARGUMENT, DATA_LOSS or FAILED_PRECONDITION");
-    FUZZ_CHECK(!index.status().message().empty(), "a refusal says why");
+    tpr::fuzz::CheckRefusal(
+        index.status(),
+        {absl::StatusCode::kInvalidArgument, absl::StatusCode::kDataLoss,
+         absl::StatusCode::kFailedPrecondition});
     return 0;
   }
-  FUZZ_CHECK((*index)->size() == items.size(), "the index holds exactly the given models");
-  const std::vector<tpr::index::Neighbor> got = (*index)->Knn(items[7].second, 10);
+  FUZZ_CHECK((*index)->size() == items.size(),
+             "the index holds exactly the given models");
+  const std::vector<tpr::index::Neighbor> got =
+      (*index)->Knn(items[7].second, 10);
   FUZZ_CHECK(got.size() == expected.size(), "10 results from 40 models");
   std::set<std::string> seen;
   for (size_t i = 0; i < got.size(); ++i) {
     FUZZ_CHECK(seen.insert(got[i].id).second, "results distinct");
-    FUZZ_CHECK(std::any_of(items.begin(), items.end(),
-                           [&](const auto& it) { return it.first == got[i].id; }),
-               "results are known ids");
-    FUZZ_CHECK(i == 0 || got[i - 1].distance <= got[i].distance, "results ascending");
+    FUZZ_CHECK(
+        std::any_of(items.begin(), items.end(),
+                    [&](const auto& it) { return it.first == got[i].id; }),
+        "results are known ids");
+    FUZZ_CHECK(i == 0 || got[i - 1].distance <= got[i].distance,
+               "results ascending");
     if (in.checksum_given) {
       FUZZ_CHECK(got[i].id == expected[i].id &&
                      std::abs(got[i].distance - expected[i].distance) <= 1e-9,

@@ -30,14 +30,16 @@ inline LoaderInput DecodeLoaderInput(const uint8_t* data, size_t size) {
   in.checksum_given = (data[0] & 1) != 0;
   in.bytes.assign(reinterpret_cast<const char*>(data) + 1, size - 1);
   if (!in.checksum_given) {
-    tpr::index::PutU(&in.bytes, tpr::index::Fnv1a(in.bytes.data(), in.bytes.size()), 8);
+    tpr::index::PutU(&in.bytes,
+                     tpr::index::Fnv1a(in.bytes.data(), in.bytes.size()), 8);
   }
   return in;
 }
 
 // EncodeLoaderInput is the inverse for a writer's bytes (which end with
 // their checksum): the seed in the given mode.
-inline std::string EncodeLoaderInput(const std::string& bytes, bool checksum_given) {
+inline std::string EncodeLoaderInput(const std::string& bytes,
+                                     bool checksum_given) {
   std::string out(1, checksum_given ? '\x01' : '\x00');
   out += checksum_given ? bytes : bytes.substr(0, bytes.size() - 8);
   return out;

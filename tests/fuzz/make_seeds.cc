@@ -52,17 +52,22 @@ int main(int argc, char** argv) {
   for (size_t i = 0; i < 4; ++i) {
     std::string bytes;
     tpr::indexer::testing::ToWire(items[i].second).SerializeToString(&bytes);
-    Write(out / "signature_convert" / ("generated_" + std::to_string(i)), bytes);
+    Write(out / "signature_convert" / ("generated_" + std::to_string(i)),
+          bytes);
   }
 
   for (size_t n : {1, 5, 40}) {
     tpr::index::VpTreeOptions options;
     options.leaf_size = 4;
     auto tree = tpr::index::VpTree::Build(
-        n, [](uint32_t a, uint32_t b) { return a > b ? double(a - b) : double(b - a); },
+        n,
+        [](uint32_t a, uint32_t b) {
+          return a > b ? double(a - b) : double(b - a);
+        },
         options);
     if (!tree.ok()) return 1;
-    WriteLoaderSeeds(out / "vp_tree_load", "line_" + std::to_string(n), tree->Serialize());
+    WriteLoaderSeeds(out / "vp_tree_load", "line_" + std::to_string(n),
+                     tree->Serialize());
   }
 
   for (size_t n : {items.size(), size_t{30}}) {
@@ -71,7 +76,8 @@ int main(int argc, char** argv) {
         items.begin(), items.begin() + static_cast<std::ptrdiff_t>(n));
     if (!index.UpsertBatch(some).ok()) return 1;
     index.Rebuild();
-    WriteLoaderSeeds(out / "index_load", "items_" + std::to_string(n), index.SerializeTree());
+    WriteLoaderSeeds(out / "index_load", "items_" + std::to_string(n),
+                     index.SerializeTree());
   }
   return 0;
 }

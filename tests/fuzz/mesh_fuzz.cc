@@ -32,15 +32,17 @@ void CheckMesh(const LoadedMesh& loaded) {
   const size_t n = mesh.positions.size();
   FUZZ_CHECK(n > 0 && !mesh.triangles.empty(), "an accepted mesh is not empty");
   for (const auto& p : mesh.positions) {
-    FUZZ_CHECK(std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()),
-               "coordinates are finite");
+    FUZZ_CHECK(
+        std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()),
+        "coordinates are finite");
   }
   std::vector<bool> referenced(n, false);
   std::set<std::array<int32_t, 3>> seen_triangles;
   std::set<std::pair<int32_t, int32_t>> directed_edges;
   for (const auto& t : mesh.triangles) {
     for (int32_t v : t) {
-      FUZZ_CHECK(v >= 0 && static_cast<size_t>(v) < n, "triangle index in range");
+      FUZZ_CHECK(v >= 0 && static_cast<size_t>(v) < n,
+                 "triangle index in range");
       referenced[static_cast<size_t>(v)] = true;
     }
     FUZZ_CHECK(t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
@@ -53,12 +55,15 @@ void CheckMesh(const LoadedMesh& loaded) {
                  "each directed edge once (manifold, consistently oriented)");
     }
   }
-  FUZZ_CHECK(std::all_of(referenced.begin(), referenced.end(), [](bool b) { return b; }),
+  FUZZ_CHECK(std::all_of(referenced.begin(), referenced.end(),
+                         [](bool b) { return b; }),
              "every vertex referenced");
-  FUZZ_CHECK(loaded.stats.vertices == static_cast<int64_t>(n), "stats.vertices");
+  FUZZ_CHECK(loaded.stats.vertices == static_cast<int64_t>(n),
+             "stats.vertices");
   FUZZ_CHECK(loaded.stats.faces == static_cast<int64_t>(mesh.triangles.size()),
              "stats.faces");
-  FUZZ_CHECK(std::isfinite(loaded.stats.area) && loaded.stats.area >= 0, "stats.area");
+  FUZZ_CHECK(std::isfinite(loaded.stats.area) && loaded.stats.area >= 0,
+             "stats.area");
 }
 
 }  // namespace
@@ -72,11 +77,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   absl::StatusOr<LoadedMesh> loaded = tpr::extract::LoadMeshFromBuffer(
       bytes, tpr::extract::MeshFormat::TPR_FUZZ_MESH_FORMAT, "", options);
   if (!loaded.ok()) {
-    const absl::StatusCode code = loaded.status().code();
-    FUZZ_CHECK(code == absl::StatusCode::kInvalidArgument ||
-                   code == absl::StatusCode::kResourceExhausted,
-               "a refusal is INVALID_ARGUMENT or RESOURCE_EXHAUSTED");
-    FUZZ_CHECK(!loaded.status().message().empty(), "a refusal says why");
+    tpr::fuzz::CheckRefusal(loaded.status(),
+                            {absl::StatusCode::kInvalidArgument,
+                             absl::StatusCode::kResourceExhausted});
     return 0;
   }
   CheckMesh(*loaded);

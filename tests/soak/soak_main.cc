@@ -113,7 +113,8 @@ bool Listening(int port) {
   addr.sin_family = AF_INET;
   addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   addr.sin_port = htons(static_cast<uint16_t>(port));
-  const bool ok = connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+  const bool ok =
+      connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
   close(fd);
   return ok;
 }
@@ -132,7 +133,9 @@ void KillChildAndExit(int sig) {
 class IndexerProcess {
  public:
   IndexerProcess(std::string binary, std::string data_dir, std::string log_path)
-      : binary_(std::move(binary)), data_dir_(std::move(data_dir)), log_path_(std::move(log_path)) {}
+      : binary_(std::move(binary)),
+        data_dir_(std::move(data_dir)),
+        log_path_(std::move(log_path)) {}
   ~IndexerProcess() { Kill9(); }
 
   // Start launches the child (on the previous port when there was one, so
@@ -171,14 +174,17 @@ class IndexerProcess {
       if (waitpid(pid_, &status, WNOHANG) == pid_) {
         pid_ = 0;
         g_child = 0;
-        if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return absl::OkStatus();
-        return absl::InternalError(absl::StrCat("tpr-indexer exited with status ", status,
-                                                " after SIGTERM (log: ", log_path_, ")"));
+        if (WIFEXITED(status) && WEXITSTATUS(status) == 0)
+          return absl::OkStatus();
+        return absl::InternalError(
+            absl::StrCat("tpr-indexer exited with status ", status,
+                         " after SIGTERM (log: ", log_path_, ")"));
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
     Kill9();
-    return absl::InternalError("tpr-indexer did not exit within 60 s of SIGTERM");
+    return absl::InternalError(
+        "tpr-indexer did not exit within 60 s of SIGTERM");
   }
 
   std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
@@ -193,14 +199,15 @@ class IndexerProcess {
       // The child dies with us, whatever ends us.
       prctl(PR_SET_PDEATHSIG, SIGKILL);
       if (getppid() != parent) _exit(127);
-      const int fd = open(log_path_.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+      const int fd =
+          open(log_path_.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (fd >= 0) {
         dup2(fd, 1);
         dup2(fd, 2);
         close(fd);
       }
-      execl(binary_.c_str(), binary_.c_str(), "--listen", listen.c_str(), "--data-dir",
-            data_dir_.c_str(), static_cast<char*>(nullptr));
+      execl(binary_.c_str(), binary_.c_str(), "--listen", listen.c_str(),
+            "--data-dir", data_dir_.c_str(), static_cast<char*>(nullptr));
       _exit(127);
     }
     pid_ = pid;
@@ -214,14 +221,16 @@ class IndexerProcess {
       if (waitpid(pid_, &status, WNOHANG) == pid_) {
         pid_ = 0;
         g_child = 0;
-        return absl::UnavailableError(absl::StrCat("tpr-indexer exited at start (status ",
-                                                   status, "); log: ", log_path_));
+        return absl::UnavailableError(
+            absl::StrCat("tpr-indexer exited at start (status ", status,
+                         "); log: ", log_path_));
       }
       // Poll the port with plain connects: a gRPC channel that found the
       // port closed waits out its reconnect backoff, which would blur the
       // measured restart time. Once it accepts, Stats must answer.
       if (Listening(port_)) {
-        absl::StatusOr<client::IndexerClient> client = client::IndexerClient::Connect(listen);
+        absl::StatusOr<client::IndexerClient> client =
+            client::IndexerClient::Connect(listen);
         if (!client.ok()) return client.status();
         if (client->Stats(&call).ok()) return absl::OkStatus();
       }
@@ -275,7 +284,8 @@ bool Matches(const v1::Model& stored, const std::string& id, const Version& v) {
   const auto it = stored.metadata().find("version");
   return stored.id() == id && it != stored.metadata().end() &&
          it->second == std::to_string(v.version) && stored.label() == v.label &&
-         stored.signature().SerializeAsString() == ToWire(v.signature).SerializeAsString();
+         stored.signature().SerializeAsString() ==
+             ToWire(v.signature).SerializeAsString();
 }
 
 // ---------------------------------------------------------------------------
@@ -287,11 +297,11 @@ const char* const kKindNames[kKinds] = {"add", "update", "delete", "search"};
 struct Figures {
   std::mutex mu;
   std::vector<double> latency_ms[kKinds];  // acknowledged operations only
-  int64_t failed_at_kill = 0;    // operations cut off by a kill
-  int64_t unexpected_errors = 0; // operations failed with the server up
+  int64_t failed_at_kill = 0;              // operations cut off by a kill
+  int64_t unexpected_errors = 0;  // operations failed with the server up
   int64_t kills = 0;
   int64_t rounds = 0;
-  int64_t resolved_landed = 0;   // in-flight writes found applied
+  int64_t resolved_landed = 0;  // in-flight writes found applied
   int64_t resolved_not_landed = 0;
   int64_t losses = 0;
   int64_t phantoms = 0;
@@ -310,7 +320,8 @@ struct Figures {
       ++failed_at_kill;
     } else {
       ++unexpected_errors;
-      std::fprintf(stderr, "soak: error with the server up: %s\n", what.c_str());
+      std::fprintf(stderr, "soak: error with the server up: %s\n",
+                   what.c_str());
     }
   }
   void Wrong(const std::string& what) {
@@ -323,7 +334,8 @@ struct Figures {
 double Percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size())));
+  const size_t i = std::min(
+      v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size())));
   return v[i];
 }
 
@@ -336,7 +348,8 @@ double MsSince(Clock::time_point t) {
 
 class Soak {
  public:
-  explicit Soak(const Options& options) : options_(options), rng_(options.seed) {
+  explicit Soak(const Options& options)
+      : options_(options), rng_(options.seed) {
     index::testing::SignatureGeneratorOptions gen;
     gen.seed = options.seed;
     gen.features = 12;
@@ -344,10 +357,12 @@ class Soak {
     gen.classes = 5;
     for (int w = 0; w < options.writers + options.searchers + 1; ++w) {
       gen.seed = options.seed * 1000 + static_cast<uint64_t>(w);
-      generators_.push_back(std::make_unique<index::testing::SignatureGenerator>(gen));
+      generators_.push_back(
+          std::make_unique<index::testing::SignatureGenerator>(gen));
     }
     for (int i = 0; i < options.ids; ++i) {
-      slots_.push_back(Slot{absl::StrFormat("s%05d", i), Version{}, std::nullopt});
+      slots_.push_back(
+          Slot{absl::StrFormat("s%05d", i), Version{}, std::nullopt});
     }
   }
 
@@ -355,7 +370,8 @@ class Soak {
   int Run(IndexerProcess* server) {
     const Clock::time_point start = Clock::now();
     const auto left = [&] {
-      return options_.seconds - std::chrono::duration<double>(Clock::now() - start).count();
+      return options_.seconds -
+             std::chrono::duration<double>(Clock::now() - start).count();
     };
     if (!Restart(server)) return 1;
     std::uniform_real_distribution<double> run_for(options_.min_run_seconds,
@@ -375,7 +391,8 @@ class Soak {
     server->Terminate().IgnoreError();
     Report(std::chrono::duration<double>(Clock::now() - start).count());
     const bool ok = figures_.losses == 0 && figures_.phantoms == 0 &&
-                    figures_.wrong_answers == 0 && figures_.unexpected_errors == 0;
+                    figures_.wrong_answers == 0 &&
+                    figures_.unexpected_errors == 0;
     return ok ? 0 : 1;
   }
 
@@ -407,7 +424,8 @@ class Soak {
       threads.emplace_back([&, w] { Writer(*client, w, stop, killed); });
     }
     for (int s = 0; s < options_.searchers; ++s) {
-      threads.emplace_back([&, s] { Searcher(*client, options_.writers + s, stop, killed); });
+      threads.emplace_back(
+          [&, s] { Searcher(*client, options_.writers + s, stop, killed); });
     }
     std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
     if (kill_at_end) {
@@ -426,11 +444,13 @@ class Soak {
     return call;
   }
 
-  void Writer(const client::IndexerClient& client, int w, const std::atomic<bool>& stop,
-              const std::atomic<bool>& killed) {
-    std::mt19937_64 rng(options_.seed * 7919 + static_cast<uint64_t>(w) * 104729 +
+  void Writer(const client::IndexerClient& client, int w,
+              const std::atomic<bool>& stop, const std::atomic<bool>& killed) {
+    std::mt19937_64 rng(options_.seed * 7919 +
+                        static_cast<uint64_t>(w) * 104729 +
                         static_cast<uint64_t>(figures_.rounds));
-    index::testing::SignatureGenerator& gen = *generators_[static_cast<size_t>(w)];
+    index::testing::SignatureGenerator& gen =
+        *generators_[static_cast<size_t>(w)];
     std::vector<size_t> mine;
     for (size_t i = static_cast<size_t>(w); i < slots_.size();
          i += static_cast<size_t>(options_.writers)) {
@@ -464,11 +484,12 @@ class Soak {
       if (kind == kDelete) {
         status = client.Delete(slot.id, &call);
       } else {
-        absl::StatusOr<bool> created =
-            client.Upsert(ToModel(slot.id, next), /*overwrite=*/kind == kUpdate, &call);
+        absl::StatusOr<bool> created = client.Upsert(
+            ToModel(slot.id, next), /*overwrite=*/kind == kUpdate, &call);
         status = created.status();
         if (created.ok() && *created != (kind == kAdd)) {
-          figures_.Wrong(absl::StrCat(slot.id, ": upsert said created=", *created));
+          figures_.Wrong(
+              absl::StrCat(slot.id, ": upsert said created=", *created));
         }
       }
       if (status.ok()) {
@@ -477,23 +498,26 @@ class Soak {
       } else {
         // The outcome is unknown: it may have landed before the kill.
         slot.pending = std::move(next);
-        figures_.Error(killed, absl::StrCat(kKindNames[kind], " ", slot.id, ": ",
-                                            status.ToString()));
+        figures_.Error(killed, absl::StrCat(kKindNames[kind], " ", slot.id,
+                                            ": ", status.ToString()));
       }
     }
   }
 
-  void Searcher(const client::IndexerClient& client, int g, const std::atomic<bool>& stop,
+  void Searcher(const client::IndexerClient& client, int g,
+                const std::atomic<bool>& stop,
                 const std::atomic<bool>& killed) {
     std::mt19937_64 rng(options_.seed * 31 + static_cast<uint64_t>(g));
-    index::testing::SignatureGenerator& gen = *generators_[static_cast<size_t>(g)];
+    index::testing::SignatureGenerator& gen =
+        *generators_[static_cast<size_t>(g)];
     const client::CallOptions call = CallTimeout();
     while (!stop && !killed) {
       v1::SearchRequest request;
       *request.mutable_signature() = ToWire(gen.Next());
       request.set_k(1 + static_cast<int>(rng() % 10));
       const Clock::time_point t0 = Clock::now();
-      std::unique_ptr<client::SearchStream> stream = client.Search(request, &call);
+      std::unique_ptr<client::SearchStream> stream =
+          client.Search(request, &call);
       std::vector<v1::Neighbor> got;
       for (v1::Neighbor n; stream->Next(&n);) got.push_back(n);
       const absl::Status status = stream->Finish();
@@ -509,14 +533,16 @@ class Soak {
           figures_.Wrong("search results out of order under writes");
         }
       }
-      if (got.size() > static_cast<size_t>(request.k())) figures_.Wrong("more than k results");
+      if (got.size() > static_cast<size_t>(request.k()))
+        figures_.Wrong("more than k results");
     }
   }
 
   // Verify checks every id and a batch of searches against the oracle,
   // resolving writes that were in flight at the kill.
   void Verify(const std::string& address) {
-    absl::StatusOr<client::IndexerClient> client = client::IndexerClient::Connect(address);
+    absl::StatusOr<client::IndexerClient> client =
+        client::IndexerClient::Connect(address);
     if (!client.ok()) {
       figures_.Wrong(client.status().ToString());
       return;
@@ -525,8 +551,10 @@ class Soak {
     for (Slot& slot : slots_) {
       absl::StatusOr<v1::Model> stored = client->Get(slot.id, &call);
       ++figures_.verified_gets;
-      if (!stored.ok() && stored.status().code() != absl::StatusCode::kNotFound) {
-        figures_.Wrong(absl::StrCat("get ", slot.id, ": ", stored.status().ToString()));
+      if (!stored.ok() &&
+          stored.status().code() != absl::StatusCode::kNotFound) {
+        figures_.Wrong(
+            absl::StrCat("get ", slot.id, ": ", stored.status().ToString()));
         continue;
       }
       const bool present = stored.ok();
@@ -543,15 +571,18 @@ class Soak {
         std::string found = "nothing";
         if (present) {
           const auto it = stored->metadata().find("version");
-          found = it == stored->metadata().end() ? "a model without a version"
-                                                 : absl::StrCat("version ", it->second);
+          found = it == stored->metadata().end()
+                      ? "a model without a version"
+                      : absl::StrCat("version ", it->second);
         }
-        std::fprintf(stderr, "soak: LOSS: %s version %lld acknowledged, found %s\n",
-                     slot.id.c_str(), static_cast<long long>(slot.acked.version),
-                     found.c_str());
+        std::fprintf(stderr,
+                     "soak: LOSS: %s version %lld acknowledged, found %s\n",
+                     slot.id.c_str(),
+                     static_cast<long long>(slot.acked.version), found.c_str());
       } else {
         ++figures_.phantoms;
-        std::fprintf(stderr, "soak: PHANTOM: %s acknowledged absent, found a model\n",
+        std::fprintf(stderr,
+                     "soak: PHANTOM: %s acknowledged absent, found a model\n",
                      slot.id.c_str());
       }
       slot.pending.reset();
@@ -559,12 +590,14 @@ class Soak {
 
     std::vector<TestModel> state;
     for (const Slot& slot : slots_) {
-      if (slot.acked.present) state.push_back({slot.id, slot.acked.label, slot.acked.signature});
+      if (slot.acked.present)
+        state.push_back({slot.id, slot.acked.label, slot.acked.signature});
     }
     absl::StatusOr<v1::StatsResponse> stats = client->Stats(&call);
     if (!stats.ok() || stats->models() != static_cast<int64_t>(state.size())) {
-      figures_.Wrong(absl::StrCat("stats: ", stats.ok() ? std::to_string(stats->models())
-                                                         : stats.status().ToString(),
+      figures_.Wrong(absl::StrCat("stats: ",
+                                  stats.ok() ? std::to_string(stats->models())
+                                             : stats.status().ToString(),
                                   " models, oracle ", state.size()));
     }
     index::testing::SignatureGenerator& gen = *generators_.back();
@@ -590,19 +623,23 @@ class Soak {
     }
   }
 
-  void CheckSearch(const client::IndexerClient& client, const v1::SearchRequest& request,
-                   const index::Signature& query, const std::vector<TestModel>& state,
+  void CheckSearch(const client::IndexerClient& client,
+                   const v1::SearchRequest& request,
+                   const index::Signature& query,
+                   const std::vector<TestModel>& state,
                    const std::string& exclude) {
     ++figures_.verified_searches;
     const client::CallOptions call = CallTimeout();
-    std::unique_ptr<client::SearchStream> stream = client.Search(request, &call);
+    std::unique_ptr<client::SearchStream> stream =
+        client.Search(request, &call);
     std::vector<v1::Neighbor> got;
     for (v1::Neighbor n; stream->Next(&n);) got.push_back(n);
     const absl::Status status = stream->Finish();
-    const std::string what =
-        absl::StrCat("search k=", request.k(), request.has_signature() ? " by signature" : " by id ",
-                     request.id(), request.label().empty() ? "" : " label ", request.label(),
-                     request.exclude_self() ? " exclude_self" : "");
+    const std::string what = absl::StrCat(
+        "search k=", request.k(),
+        request.has_signature() ? " by signature" : " by id ", request.id(),
+        request.label().empty() ? "" : " label ", request.label(),
+        request.exclude_self() ? " exclude_self" : "");
     if (!status.ok()) {
       figures_.Wrong(absl::StrCat(what, ": ", status.ToString()));
       return;
@@ -611,23 +648,27 @@ class Soak {
     // come in any order, so each rank is checked by distance and each id by
     // its own EMD.
     const std::vector<Hit> all =
-        BruteForce(query, state, static_cast<int>(state.size()), 0, request.label(), exclude);
+        BruteForce(query, state, static_cast<int>(state.size()), 0,
+                   request.label(), exclude);
     std::map<std::string, double> distance_of;
     for (const Hit& h : all) distance_of[h.id] = h.distance;
     const size_t want = std::min(all.size(), static_cast<size_t>(request.k()));
     if (got.size() != want) {
-      figures_.Wrong(absl::StrCat(what, ": ", got.size(), " results, brute force ", want));
+      figures_.Wrong(
+          absl::StrCat(what, ": ", got.size(), " results, brute force ", want));
       return;
     }
     std::map<std::string, int> seen;
     for (size_t i = 0; i < got.size(); ++i) {
       const double tol = 1e-9 * (1 + all[i].distance);
       const auto it = distance_of.find(got[i].id());
-      if (std::abs(got[i].distance() - all[i].distance) > tol || it == distance_of.end() ||
-          std::abs(it->second - got[i].distance()) > tol || ++seen[got[i].id()] > 1) {
-        figures_.Wrong(absl::StrFormat("%s: rank %d is %s at %.12g, brute force %s at %.12g",
-                                       what, i, got[i].id(), got[i].distance(), all[i].id,
-                                       all[i].distance));
+      if (std::abs(got[i].distance() - all[i].distance) > tol ||
+          it == distance_of.end() ||
+          std::abs(it->second - got[i].distance()) > tol ||
+          ++seen[got[i].id()] > 1) {
+        figures_.Wrong(absl::StrFormat(
+            "%s: rank %d is %s at %.12g, brute force %s at %.12g", what, i,
+            got[i].id(), got[i].distance(), all[i].id, all[i].distance));
         return;
       }
     }
@@ -636,29 +677,41 @@ class Soak {
   void Report(double seconds) {
     Figures& f = figures_;
     int64_t ops = 0;
-    for (int k = 0; k < kKinds; ++k) ops += static_cast<int64_t>(f.latency_ms[k].size());
-    std::printf("soak: %.0f s, %lld rounds, %lld kill -9, %lld acknowledged operations:",
-                seconds, static_cast<long long>(f.rounds), static_cast<long long>(f.kills),
-                static_cast<long long>(ops));
+    for (int k = 0; k < kKinds; ++k)
+      ops += static_cast<int64_t>(f.latency_ms[k].size());
+    std::printf(
+        "soak: %.0f s, %lld rounds, %lld kill -9, %lld acknowledged "
+        "operations:",
+        seconds, static_cast<long long>(f.rounds),
+        static_cast<long long>(f.kills), static_cast<long long>(ops));
     for (int k = 0; k < kKinds; ++k) {
-      std::printf(" %s %zu%s", kKindNames[k], f.latency_ms[k].size(), k + 1 < kKinds ? "," : "\n");
+      std::printf(" %s %zu%s", kKindNames[k], f.latency_ms[k].size(),
+                  k + 1 < kKinds ? "," : "\n");
     }
     std::printf(
-        "soak: cut off by a kill %lld (found landed %lld, not landed %lld); errors with the "
+        "soak: cut off by a kill %lld (found landed %lld, not landed %lld); "
+        "errors with the "
         "server up %lld\n",
-        static_cast<long long>(f.failed_at_kill), static_cast<long long>(f.resolved_landed),
-        static_cast<long long>(f.resolved_not_landed), static_cast<long long>(f.unexpected_errors));
-    std::printf("soak: verified %lld gets and %lld searches against the oracle\n",
-                static_cast<long long>(f.verified_gets), static_cast<long long>(f.verified_searches));
+        static_cast<long long>(f.failed_at_kill),
+        static_cast<long long>(f.resolved_landed),
+        static_cast<long long>(f.resolved_not_landed),
+        static_cast<long long>(f.unexpected_errors));
+    std::printf(
+        "soak: verified %lld gets and %lld searches against the oracle\n",
+        static_cast<long long>(f.verified_gets),
+        static_cast<long long>(f.verified_searches));
     std::printf("soak: losses %lld, phantoms %lld, wrong answers %lld\n",
-                static_cast<long long>(f.losses), static_cast<long long>(f.phantoms),
+                static_cast<long long>(f.losses),
+                static_cast<long long>(f.phantoms),
                 static_cast<long long>(f.wrong_answers));
     for (int k = 0; k < kKinds; ++k) {
-      std::printf("soak: %-6s latency p50 %.2f ms, p99 %.2f ms\n", kKindNames[k],
-                  Percentile(f.latency_ms[k], 0.50), Percentile(f.latency_ms[k], 0.99));
+      std::printf("soak: %-6s latency p50 %.2f ms, p99 %.2f ms\n",
+                  kKindNames[k], Percentile(f.latency_ms[k], 0.50),
+                  Percentile(f.latency_ms[k], 0.99));
     }
     std::printf("soak: restart to serving p50 %.3f s, max %.3f s\n",
-                Percentile(f.restart_seconds, 0.5), Percentile(f.restart_seconds, 1.0));
+                Percentile(f.restart_seconds, 0.5),
+                Percentile(f.restart_seconds, 1.0));
     std::fflush(stdout);
   }
 
@@ -675,40 +728,53 @@ class Soak {
 int main(int argc, char** argv) {
   tpr::soak::Options options;
   options.indexer_binary = TPR_SOAK_INDEXER_BINARY;
-  CLI::App app{"tpr-soak: adds, updates, deletes and searches against a tpr-indexer that is "
-               "killed with SIGKILL at random moments, checked against an in-process oracle"};
-  app.add_option("--indexer", options.indexer_binary, "tpr-indexer binary")->capture_default_str();
+  CLI::App app{
+      "tpr-soak: adds, updates, deletes and searches against a tpr-indexer "
+      "that is "
+      "killed with SIGKILL at random moments, checked against an in-process "
+      "oracle"};
+  app.add_option("--indexer", options.indexer_binary, "tpr-indexer binary")
+      ->capture_default_str();
   app.add_option("--seconds", options.seconds, "Time bound of the traffic")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--writers", options.writers, "Writer threads")->check(CLI::Range(1, 64))
+  app.add_option("--writers", options.writers, "Writer threads")
+      ->check(CLI::Range(1, 64))
       ->capture_default_str();
-  app.add_option("--searchers", options.searchers, "Searcher threads")->check(CLI::Range(0, 64))
+  app.add_option("--searchers", options.searchers, "Searcher threads")
+      ->check(CLI::Range(0, 64))
       ->capture_default_str();
-  app.add_option("--ids", options.ids, "Size of the id space")->check(CLI::Range(1, 100000))
+  app.add_option("--ids", options.ids, "Size of the id space")
+      ->check(CLI::Range(1, 100000))
       ->capture_default_str();
-  app.add_option("--min-run", options.min_run_seconds, "Shortest traffic between kills (s)")
+  app.add_option("--min-run", options.min_run_seconds,
+                 "Shortest traffic between kills (s)")
       ->capture_default_str();
-  app.add_option("--max-run", options.max_run_seconds, "Longest traffic between kills (s)")
+  app.add_option("--max-run", options.max_run_seconds,
+                 "Longest traffic between kills (s)")
       ->capture_default_str();
   app.add_option("--verify-searches", options.verify_searches,
                  "Searches checked against brute force after each restart")
       ->capture_default_str();
-  app.add_option("--seed", options.seed, "Seed of every random choice")->capture_default_str();
+  app.add_option("--seed", options.seed, "Seed of every random choice")
+      ->capture_default_str();
   app.add_option("--work-dir", options.work_dir,
-                 "Directory for the data and the indexer log (default: a fresh one in $TMPDIR)");
+                 "Directory for the data and the indexer log (default: a fresh "
+                 "one in $TMPDIR)");
   app.add_flag("--keep", options.keep, "Keep the work directory");
   CLI11_PARSE(app, argc, argv);
   if (options.ids < options.writers || options.min_run_seconds <= 0 ||
       options.max_run_seconds < options.min_run_seconds) {
-    std::fprintf(stderr, "soak: need ids >= writers and 0 < min-run <= max-run\n");
+    std::fprintf(stderr,
+                 "soak: need ids >= writers and 0 < min-run <= max-run\n");
     return 2;
   }
 
   std::string work = options.work_dir;
   if (work.empty()) {
     const char* tmp = std::getenv("TMPDIR");
-    std::string pattern = std::string(tmp != nullptr ? tmp : "/tmp") + "/tpr-soak-XXXXXX";
+    std::string pattern =
+        std::string(tmp != nullptr ? tmp : "/tmp") + "/tpr-soak-XXXXXX";
     if (mkdtemp(pattern.data()) == nullptr) {
       std::perror("soak: mkdtemp");
       return 2;
@@ -721,21 +787,26 @@ int main(int argc, char** argv) {
   // Watchdog: a hung indexer or client must not hang CI.
   std::thread([limit = options.seconds + 180] {
     std::this_thread::sleep_for(std::chrono::duration<double>(limit));
-    std::fprintf(stderr, "soak: still running %.0f s after the start; giving up\n", limit);
+    std::fprintf(stderr,
+                 "soak: still running %.0f s after the start; giving up\n",
+                 limit);
     tpr::soak::KillChildAndExit(SIGALRM);
   }).detach();
 
   const std::string log = work + "/tpr-indexer.log";
-  std::printf("soak: %s, data and log in %s\n", options.indexer_binary.c_str(), work.c_str());
+  std::printf("soak: %s, data and log in %s\n", options.indexer_binary.c_str(),
+              work.c_str());
   int code;
   {
-    tpr::soak::IndexerProcess server(options.indexer_binary, work + "/data", log);
+    tpr::soak::IndexerProcess server(options.indexer_binary, work + "/data",
+                                     log);
     code = tpr::soak::Soak(options).Run(&server);
   }
   if (code == 0 && !options.keep && options.work_dir.empty()) {
     std::filesystem::remove_all(work);
   } else if (code != 0) {
-    std::printf("soak: FAILED; data and indexer log kept in %s\n", work.c_str());
+    std::printf("soak: FAILED; data and indexer log kept in %s\n",
+                work.c_str());
   }
   return code;
 }
