@@ -4,7 +4,8 @@
 // Oracle: a signature the converter accepts must be matchable: Prepare
 // succeeds, the EMD to itself is 0 (up to rounding) and the EMD to a fixed
 // valid signature is finite, non-negative and symmetric. A refusal must be
-// INVALID_ARGUMENT or RESOURCE_EXHAUSTED with a message. Protobuf's parser
+// INVALID_ARGUMENT, RESOURCE_EXHAUSTED or FAILED_PRECONDITION (another
+// signature_version) with a message. Protobuf's parser
 // sees the raw bytes, so the corpus is serialized tpr.v1.Signature messages.
 #include <cmath>
 #include <cstddef>
@@ -45,9 +46,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   absl::StatusOr<tpr::index::Signature> converted =
       tpr::indexer::ToIndexSignature(wire);
   if (!converted.ok()) {
-    tpr::fuzz::CheckRefusal(converted.status(),
-                            {absl::StatusCode::kInvalidArgument,
-                             absl::StatusCode::kResourceExhausted});
+    tpr::fuzz::CheckRefusal(converted.status(), {absl::StatusCode::kInvalidArgument,
+                                                 absl::StatusCode::kResourceExhausted,
+                                                 absl::StatusCode::kFailedPrecondition}));
     return 0;
   }
   const tpr::index::GroundDistanceOptions ground;
