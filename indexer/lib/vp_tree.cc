@@ -502,8 +502,11 @@ class VpCursor : public NeighborCursor {
       // without branches so the compiler can vectorize it.
       const uint32_t depth = node.depth;
       const double* q = path_.data();
+      // data() + offset, not &v[offset]: a tree that is one leaf has no
+      // stored distances, and indexing an empty vector is undefined
+      // (UBSan, found by tests/fuzz fuzz_vp_tree_load).
       const double* row =
-          &data_->item_dists[data_->item_row[data_->leaf_items[node.begin]]];
+          data_->item_dists.data() + data_->item_row[data_->leaf_items[node.begin]];
       for (uint32_t p = node.begin; p < node.end; ++p, row += depth) {
         double bound = e.key;
         for (uint32_t j = 0; j < depth; ++j) {

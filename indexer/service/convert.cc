@@ -85,9 +85,10 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature&
                                                      ": integral_geodesic is ",
                                                      f.integral_geodesic(), "; must be in [0, 1]"));
     }
-    if (absl::Status st = CheckBand(i, "curvature", f.curvature(), -kInf, kInf);
+    if (absl::Status st =
+            CheckBand(i, "curvature", f.curvature(), -kMaxBandMagnitude, kMaxBandMagnitude);
         !st.ok() || !(st = CheckBand(i, "area", f.area(), 0.0, 1.0 + kAreaSlack)).ok() ||
-        !(st = CheckBand(i, "distance", f.distance(), 0.0, kInf)).ok()) {
+        !(st = CheckBand(i, "distance", f.distance(), 0.0, kMaxBandMagnitude)).ok()) {
       return st;
     }
     tpr::index::Feature g;

@@ -26,6 +26,14 @@ inline constexpr int kMaxBands = 256;
 // stamps the same number (extractor/service/convert.h).
 inline constexpr int kSignatureVersion = 2;
 
+// kMaxBandMagnitude bounds |curvature| and distance band values. Far beyond
+// what a mesh gives (curvature bands are area-weighted curvature integrals,
+// order 10-100; distances order 0.1), and small enough that the ground
+// distance's sums of squared differences over 3 x kMaxBands bands stay
+// finite: (2e15)^2 x 768 ~ 3e33. Without it a finite 1e200 made every EMD
+// +inf (found by tests/fuzz fuzz_signature_convert).
+inline constexpr double kMaxBandMagnitude = 1e15;
+
 // ToIndexSignature validates the wire signature `s` against every range the
 // contract (proto/tpr/v1/signature.proto) documents and returns it in the
 // library's form. Errors:
@@ -36,7 +44,8 @@ inline constexpr int kSignatureVersion = 2;
 //    feature; options.bands outside 1..256; a feature whose kind is neither
 //    point nor ring; curvature, area or distance not of length
 //    options.bands; integral_geodesic outside [0, 1]; a weight, area or
-//    distance that is negative; an area above 1; any value not finite;
+//    distance that is negative; an area above 1; a curvature or distance
+//    above kMaxBandMagnitude in magnitude; any value not finite;
 //    weights not summing to 1 within 1e-6 (Eq. 6); a spectrum longer than
 //    tpr::index::kMaxSpectrum or than options.spectrum_eigenvalues when
 //    that is set, not

@@ -11,6 +11,7 @@
 #include <limits>
 #include <string>
 
+#include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
 #include "tests/indexer/signature_testing.h"
 
@@ -228,6 +229,47 @@ TEST(IndexerConvertTest, OtherSignatureVersionsAreFailedPrecondition) {
     const std::string want = version < kSignatureVersion ? "tpr add --update" : "upgrade";
     EXPECT_NE(std::string(r.status().message()).find(want), std::string::npos) << r.status();
   }
+}
+
+// Found by fuzz_signature_convert: finite but huge band values (curvature
+// 8e165, distance 1.3e240) were accepted, and their squared differences
+// overflowed, so the EMD to any other signature was +inf. Values are now
+// bounded by kMaxBandMagnitude, and the bound itself keeps the EMD finite.
+TEST(IndexerConvertTest, HugeFiniteBandValuesAreRefusedAndTheBoundKeepsEmdFinite) {
+  ExpectInvalid([](v1::Signature* s) { s->mutable_features(2)->set_curvature(1, 8.0e165); },
+                {"feature 2", "curvature[1]"});
+  ExpectInvalid([](v1::Signature* s) { s->mutable_features(2)->set_curvature(1, -8.0e165); },
+                {"feature 2", "curvature[1]"});
+  ExpectInvalid([](v1::Signature* s) { s->mutable_features(4)->set_distance(0, 1.3e240); },
+                {"feature 4", "distance[0]"});
+
+  // The most extreme accepted signature, 256 bands at +-bound, against a
+  // valid one of 256 bands at the other extreme.
+  v1::Signature a = Valid();
+  v1::Signature b = Valid();
+  a.mutable_options()->set_bands(kMaxBands);
+  b.mutable_options()->set_bands(kMaxBands);
+  for (v1::Signature* s : {&a, &b}) {
+    const double sign = s == &a ? 1.0 : -1.0;
+    for (v1::Feature& f : *s->mutable_features()) {
+      f.clear_curvature();
+      f.clear_area();
+      f.clear_distance();
+      for (int i = 0; i < kMaxBands; ++i) {
+        f.add_curvature(sign * kMaxBandMagnitude);
+        f.add_area(s == &a ? 1.0 : 0.0);
+        f.add_distance(s == &a ? kMaxBandMagnitude : 0.0);
+      }
+    }
+  }
+  absl::StatusOr<index::Signature> ia = ToIndexSignature(a);
+  absl::StatusOr<index::Signature> ib = ToIndexSignature(b);
+  ASSERT_TRUE(ia.ok()) << ia.status();
+  ASSERT_TRUE(ib.ok()) << ib.status();
+  const index::GroundDistanceOptions ground;
+  const double d = index::Emd(*index::Prepare(*ia, ground), *index::Prepare(*ib, ground));
+  EXPECT_TRUE(std::isfinite(d)) << d;
+  EXPECT_GT(d, 0.0);
 }
 
 }  // namespace
