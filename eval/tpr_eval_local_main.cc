@@ -43,6 +43,7 @@
 #include "extractor/synth/synth.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "indexer/lib/signature_index.h"
 
 namespace tpr::eval {
@@ -293,7 +294,8 @@ Described Describe(const Model& model, const Config& config, size_t index) {
 // Everything the command line sets.
 struct Flags {
   std::string manifest, synthetic, out_dir, dump;
-  bool invariance = false, tune = false, index_timing = false;
+  bool invariance = false, tune = false, tune_spectral = false, index_timing = false;
+  std::string spectral_transform;  // "" keeps the default
   int threads =
       static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   Config config;
@@ -328,6 +330,14 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "ring length threshold (4.6.2)");
   app->add_option("--point-prominence", c.extract.point_min_prominence,
                   "smallest protrusion holding a topological point, / sqrt(area) (0 = paper)");
+  app->add_option("--spectral-weight", c.ground.spectral.weight,
+                  "w_s: weight of the spectral term (0: the paper's TPR distance)");
+  app->add_option("--spectral-transform", f->spectral_transform,
+                  "phi of the spectral term: raw, by_index or log");
+  app->add_option("--spectral-eigenvalues", c.ground.spectral.eigenvalues,
+                  "eigenvalues the spectral term compares");
+  app->add_flag("--tune-spectral", f->tune_spectral,
+                "score phi x w_s on the two halves of every class (JSON under \"spectral_tuning\")");
   app->add_option("--w1", c.ground.w1, "Eq. 7 weight of G'");
   app->add_option("--w2", c.ground.w2, "Eq. 7 weight of curvature");
   app->add_option("--w3", c.ground.w3, "Eq. 7 weight of area");
@@ -498,19 +508,52 @@ void DumpFeatures(const std::string& file, const std::vector<Model>& models,
 // The leave-one-out matrices over the kept models (position a is model
 // kept[a]), with the workers' busy time: per-pair costs that do not depend
 // on the thread count.
+// tpr is the distance searched with (metric.h): emd + w_s * spectral, where
+// emd is the paper's TPR distance (w_s = 0) and spectral the spectral term
+// at weight 1, which alone is the ShapeDNA baseline.
 struct Matching {
-  DistanceMatrix tpr, d2;
+  DistanceMatrix tpr, emd, spectral, d2;
   double tpr_thread_ms = 0.0, d2_thread_ms = 0.0, wall_ms = 0.0;
   double pairs = 0.0;
   double EmdMicroseconds() const { return 1000 * tpr_thread_ms / pairs; }
   double D2Microseconds() const { return 1000 * d2_thread_ms / pairs; }
 };
 
+// SpectralMatrix returns the spectral term of metric.h at weight 1 with
+// transform `t` between every pair of kept models. O(n^2 eigenvalues).
+DistanceMatrix SpectralMatrix(const std::vector<Described>& described,
+                              const std::vector<int>& kept,
+                              index::SpectralOptions options,
+                              index::SpectralTransform t, int threads) {
+  options.weight = 1.0;
+  options.transform = t;
+  std::vector<std::vector<double>> e(kept.size());
+  for (size_t a = 0; a < kept.size(); ++a) {
+    e[a] = index::SpectralEmbedding(described[kept[a]].raw.spectrum, options);
+  }
+  return PairwiseDistances(kept.size(), threads, [&] {
+    return [&](size_t a, size_t b) {
+      return index::SpectralDistance(e[a].data(), e[b].data(), e[a].size());
+    };
+  });
+}
+
+// Sum returns a + w b.
+DistanceMatrix Sum(const DistanceMatrix& a, double w, const DistanceMatrix& b) {
+  DistanceMatrix out(a.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    for (size_t j = i + 1; j < a.size(); ++j) out.Set(i, j, a(i, j) + w * b(i, j));
+  }
+  return out;
+}
+
 Matching MatchAll(const std::vector<Described>& described,
-                  const std::vector<int>& kept, int threads) {
+                  const std::vector<int>& kept, const Config& config, int threads) {
   Matching m;
   const Clock::time_point start = Clock::now();
-  m.tpr = PairwiseDistances(
+  // One EMD per pair: the spectral term is added afterwards, which equals
+  // index::Distance (metric.h) to rounding.
+  m.emd = PairwiseDistances(
       kept.size(), threads,
       [&] {
         return [&, solver = index::EmdSolver()](size_t a, size_t b) mutable {
@@ -519,6 +562,9 @@ Matching MatchAll(const std::vector<Described>& described,
         };
       },
       &m.tpr_thread_ms);
+  m.spectral = SpectralMatrix(described, kept, config.ground.spectral,
+                              config.ground.spectral.transform, threads);
+  m.tpr = Sum(m.emd, config.ground.spectral.weight, m.spectral);
   m.d2 = PairwiseDistances(
       kept.size(), threads,
       [&] {
@@ -731,9 +777,84 @@ std::string WithinBetween(const std::vector<std::string>& labels, const Distance
                          between, between > 0 ? within / between : 0.0);
 }
 
+std::string TprTitle(const Config& c) {
+  return absl::StrFormat("TPR + spectrum (EMD of Eq. 7 + %g x ||phi(spec)||, phi = %s, %d eigenvalues)",
+                         c.ground.spectral.weight,
+                         index::SpectralTransformName(c.ground.spectral.transform),
+                         c.ground.spectral.eigenvalues);
+}
+
+std::string ShapeDnaTitle(const Config& c) {
+  return absl::StrFormat("ShapeDNA (spectrum alone, phi = %s, %d eigenvalues, L2)",
+                         index::SpectralTransformName(c.ground.spectral.transform),
+                         c.ground.spectral.eigenvalues);
+}
+
+// Restrict returns the submatrix of `d` over positions `members`.
+DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members) {
+  DistanceMatrix out(members.size());
+  for (size_t a = 0; a < members.size(); ++a) {
+    for (size_t b = a + 1; b < members.size(); ++b) out.Set(a, b, d(members[a], members[b]));
+  }
+  return out;
+}
+
+// The grid of spectral weights --tune-spectral scores (0 is the paper).
+const std::vector<double>& SpectralWeightGrid() {
+  static const std::vector<double> grid = {0,   0.01, 0.02, 0.05, 0.1, 0.2, 0.5,
+                                           1,   2,    5,    10,   20,  50,  100};
+  return grid;
+}
+
+// TuneSpectral scores every (phi, w_s) of the grid on each half of every
+// class (models alternate between the halves within a class), with W1..W4
+// as given, and returns them as JSON: [{"phi","w","fold","objective",
+// "metrics"}, ...] where objective = mean(NN, FT, ST, DCG). No EMD is
+// recomputed: a fold is a submatrix of the full matrices. The choice is
+// made across data sets by scripts/eval-shrec (best summed over every set
+// on one half, reported on the other), never on one set alone.
+std::string TuneSpectral(const std::vector<Model>& models,
+                         const std::vector<Described>& described,
+                         const std::vector<int>& kept, const Config& config,
+                         const Matching& m, int threads) {
+  std::map<std::string, int> seen;
+  std::vector<size_t> fold[2];
+  for (size_t a = 0; a < kept.size(); ++a) {
+    fold[seen[models[kept[a]].label]++ % 2].push_back(a);
+  }
+  std::string json = "[";
+  bool first = true;
+  for (index::SpectralTransform t :
+       {index::SpectralTransform::kRaw, index::SpectralTransform::kByIndex,
+        index::SpectralTransform::kLog}) {
+    const DistanceMatrix spectral =
+        SpectralMatrix(described, kept, config.ground.spectral, t, threads);
+    for (int f = 0; f < 2; ++f) {
+      std::vector<std::string> labels;
+      for (size_t a : fold[f]) labels.push_back(models[kept[a]].label);
+      const DistanceMatrix e = Restrict(m.emd, fold[f]);
+      const DistanceMatrix s = Restrict(spectral, fold[f]);
+      std::vector<double> weights = SpectralWeightGrid();
+      weights.push_back(-1);  // the spectrum alone (ShapeDNA)
+      for (double w : weights) {
+        const Metrics scores =
+            Evaluate(labels, LeaveOneOutQueries(w < 0 ? s : Sum(e, w, s))).overall;
+        absl::StrAppend(&json, first ? "" : ",", "{\"phi\":\"",
+                        index::SpectralTransformName(t), "\",\"w\":", w < 0 ? "\"alone\"" : JsonNumber(w),
+                        ",\"fold\":", f, ",\"objective\":", JsonNumber(Objective(scores)),
+                        ",\"metrics\":", MetricsJson(scores), "}");
+        first = false;
+      }
+    }
+  }
+  return json + "]";
+}
+
 // Everything a run measured, for the files of --out.
 struct Results {
-  Scores tpr, d2;
+  Scores tpr, paper, shapedna, d2;
+  std::string spectral_tune_json;  // "" without --tune-spectral
+  Config config;
   Summary summary;
   Matching matching;
   IndexTiming index_timing;
@@ -749,7 +870,9 @@ std::string TablesMarkdown(const Results& r,
   double features = 0.0;
   for (int i : s.kept) features += described[i].points + described[i].rings;
   std::string md =
-      ScoresMarkdown("TPR (EMD, Eq. 7)", r.tpr, s.models_per_class) +
+      ScoresMarkdown(TprTitle(r.config), r.tpr, s.models_per_class) +
+      ScoresMarkdown("Paper TPR (EMD of Eq. 7, w_s = 0)", r.paper, s.models_per_class) +
+      ScoresMarkdown(ShapeDnaTitle(r.config), r.shapedna, s.models_per_class) +
       ScoresMarkdown("D2 (Osada et al. 2001, L1)", r.d2, s.models_per_class);
   md +=
       "#### Features per model (mean)\n\n| class | points | rings "
@@ -815,7 +938,13 @@ absl::Status WriteOutputs(const std::string& out_dir, const Results& r,
       ",\"tpr\":{\"overall\":", MetricsJson(r.tpr.overall),
       ",\"per_class\":", PerClassJson(r.tpr, s.models_per_class),
       "},\"d2\":{\"overall\":", MetricsJson(r.d2.overall), "}",
-      r.tune_json.empty() ? "" : ",\"tuning\":" + r.tune_json, "}\n");
+      ",\"paper\":{\"overall\":", MetricsJson(r.paper.overall),
+      ",\"per_class\":", PerClassJson(r.paper, s.models_per_class),
+      "},\"shapedna\":{\"overall\":", MetricsJson(r.shapedna.overall),
+      ",\"per_class\":", PerClassJson(r.shapedna, s.models_per_class), "}",
+      r.tune_json.empty() ? "" : ",\"tuning\":" + r.tune_json,
+      r.spectral_tune_json.empty() ? "" : ",\"spectral_tuning\":" + r.spectral_tune_json,
+      "}\n");
   const fs::path out(out_dir);
   const std::vector<std::pair<std::string, std::string>> files = {
       {"results.json", json},
@@ -855,6 +984,19 @@ int Run(int argc, char** argv) {
   }
   Config& config = flags.config;
   config.d2.seed = config.seed;
+  if (!flags.spectral_transform.empty()) {
+    absl::StatusOr<index::SpectralTransform> t =
+        index::ParseSpectralTransform(flags.spectral_transform);
+    if (!t.ok()) {
+      std::fprintf(stderr, "tpr-eval-local: %s\n", t.status().ToString().c_str());
+      return 2;
+    }
+    config.ground.spectral.transform = *t;
+  }
+  if (absl::Status st = index::ValidateOptions(config.ground); !st.ok()) {
+    std::fprintf(stderr, "tpr-eval-local: %s\n", st.ToString().c_str());
+    return 2;
+  }
 
   size_t base_size = 0;
   absl::StatusOr<std::vector<Model>> models = LoadModels(flags, &base_size);
@@ -866,6 +1008,7 @@ int Run(int argc, char** argv) {
   const std::vector<Described> described =
       DescribeAll(*models, config, flags.threads);
   Results r;
+  r.config = config;
   r.summary = Summarize(*models, described);
   const std::vector<int>& kept = r.summary.kept;
   if (kept.size() < 2) {
@@ -878,7 +1021,7 @@ int Run(int argc, char** argv) {
   if (!flags.dump.empty()) DumpFeatures(flags.dump, *models, described, kept);
 
   // Full matrices over all kept models, so that timing is honest.
-  r.matching = MatchAll(described, kept, flags.threads);
+  r.matching = MatchAll(described, kept, config, flags.threads);
   if (flags.invariance) {
     r.copy_note = InvarianceNote(*models, kept, r.matching.tpr, base_size);
     std::printf("%s\n", r.copy_note.c_str());
@@ -893,14 +1036,23 @@ int Run(int argc, char** argv) {
   }
 
   r.tpr = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.tpr));
+  r.paper = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.emd));
+  r.shapedna = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.spectral));
   r.d2 = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.d2));
-  std::printf("\nTPR (EMD, Eq. 7)\n%s",
+  std::printf("\n%s\n%s", TprTitle(config).c_str(),
               ScoresTable(r.tpr, r.summary.models_per_class).c_str());
   std::printf("%s\n", WithinBetween(r.summary.labels, r.matching.tpr).c_str());
+  std::printf("\nPaper TPR (EMD of Eq. 7, w_s = 0)\n%s",
+              ScoresTable(r.paper, r.summary.models_per_class).c_str());
+  std::printf("\n%s\n%s", ShapeDnaTitle(config).c_str(),
+              ScoresTable(r.shapedna, r.summary.models_per_class).c_str());
   std::printf("\nD2 (Osada et al. 2001, L1)\n%s",
               ScoresTable(r.d2, r.summary.models_per_class).c_str());
   if (flags.tune)
     r.tune_json = Tune(*models, described, kept, config, flags.threads);
+  if (flags.tune_spectral) {
+    r.spectral_tune_json = TuneSpectral(*models, described, kept, config, r.matching, flags.threads);
+  }
 
   if (!flags.out_dir.empty()) {
     if (absl::Status st = WriteOutputs(flags.out_dir, r, described); !st.ok()) {

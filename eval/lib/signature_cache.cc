@@ -13,7 +13,8 @@ namespace tpr::eval {
 namespace {
 
 constexpr char kMagicV1[] = "tpr-eval-cache-v1";
-constexpr char kMagic[] = "tpr-eval-cache-v2";  // v1 plus vertex and face counts
+constexpr char kMagicV2[] = "tpr-eval-cache-v2";  // v1 plus vertex and face counts
+constexpr char kMagic[] = "tpr-eval-cache-v3";    // v2 plus the spectrum
 
 void WriteVector(std::ostream& out, const std::vector<double>& v) {
   out << v.size();
@@ -53,12 +54,15 @@ bool LoadCached(const std::string& dir, const std::string& key,
   std::ifstream in(std::filesystem::path(dir) / CacheFileName(key));
   if (!in) return false;
   std::string magic, stored_key;
-  if (!std::getline(in, magic) || (magic != kMagic && magic != kMagicV1)) return false;
+  if (!std::getline(in, magic) ||
+      (magic != kMagic && magic != kMagicV2 && magic != kMagicV1)) {
+    return false;
+  }
   if (!std::getline(in, stored_key) || stored_key != key) return false;
   CachedDescription d;
   size_t stages = 0, features = 0;
   if (!(in >> d.points >> d.rings >> d.extract_ms >> stages)) return false;
-  if (magic == kMagic && !(in >> d.vertices >> d.faces)) return false;
+  if (magic != kMagicV1 && !(in >> d.vertices >> d.faces)) return false;
   for (size_t i = 0; i < stages; ++i) {
     std::string name;
     double ms = 0.0;
@@ -73,6 +77,7 @@ bool LoadCached(const std::string& dir, const std::string& key,
       if (!ReadVector(in, band)) return false;
     }
   }
+  if (magic == kMagic && !ReadVector(in, &d.signature.spectrum)) return false;
   std::string end;
   if (!(in >> end) || end != "end") return false;
   *out = std::move(d);
@@ -105,6 +110,7 @@ bool StoreCached(const std::string& dir, const std::string& key,
       out << buf;
       for (const std::vector<double>* band : index::BandVectors(f)) WriteVector(out, *band);
     }
+    WriteVector(out, d.signature.spectrum);
     out << "end\n";
     if (!out) return false;
   }
