@@ -20,6 +20,7 @@
 #include <grpcpp/create_channel.h>
 #include <gtest/gtest.h>
 
+#include "absl/strings/str_format.h"
 #include "common/server_lifecycle.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
@@ -535,6 +536,7 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
   constexpr int kConcurrent = 8;
   constexpr int kThreads = 2;
   constexpr int64_t kMaxMesh = int64_t{8} << 20;
+  constexpr int kPushers = 8;
   testing::TempDir dir;
   testing::ServiceProcess process;
   ASSERT_TRUE(process
@@ -571,7 +573,7 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
   // limit), never buffered beyond it.
   std::vector<std::thread> pushers;
   std::atomic<int> refused{0};
-  for (int i = 0; i < 8; ++i) {
+  for (int i = 0; i < kPushers; ++i) {
     pushers.emplace_back([&, i] {
       RawUpload upload(stub.get(), std::chrono::seconds(60));
       if (i % 2 == 0) {
@@ -585,10 +587,10 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
     });
   }
   for (std::thread& t : pushers) t.join();
-  EXPECT_EQ(refused.load(), 8);
+  EXPECT_EQ(refused.load(), kPushers);
   const int64_t uploads_peak = PeakResidentBytes(process.pid());
 
-  // 3. The held uploads complete and are parsed (kThreads at a time).
+  // 3. The held uploads complete and are parsed, one after another.
   for (auto& upload : held) {
     const grpc::Status status = upload->Finish(/*close=*/true);
     EXPECT_FALSE(status.ok());
@@ -602,14 +604,24 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
                "MiB after parsing them\n",
                baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0, kConcurrent,
                held_bytes / 1048576.0, (parse_peak - baseline) / 1048576.0);
-  // Uploads: the buffers themselves plus one chunk in flight per call and
-  // gRPC's transport buffers (16 MiB of slack in all).
-  EXPECT_LE(uploads_peak - baseline, kConcurrent * kMaxMesh + (int64_t{16} << 20));
-  // Parsing: while the other uploads are held, intake of a hostile upload
-  // may use a bounded multiple of its size (16x here; the issue measured
-  // 14x before intake refused lying counts early).
-  EXPECT_LE(parse_peak - baseline,
-            kConcurrent * kMaxMesh + kThreads * 16 * kMaxMesh + (int64_t{16} << 20));
+  // Uploads, from the code: each admitted call's buffer is at most
+  // kMaxMesh (reserved once, never reallocated), and every call, admitted
+  // or refused, holds at most one message gRPC accepted: main.cc caps a
+  // message at min(max-mesh-bytes, 4 MiB) + 64 KiB.
+  const int64_t max_message = std::min<int64_t>(kMaxMesh, int64_t{4} << 20) + (64 << 10);
+  const int64_t upload_bound = kConcurrent * kMaxMesh + (kConcurrent + kPushers) * max_message;
+  const std::string figures = absl::StrFormat(
+      "measured VmHWM baseline %.1f MiB, growth %.1f MiB holding the uploads, %.1f MiB after "
+      "parsing; upload bound %.1f MiB",
+      baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0,
+      (parse_peak - baseline) / 1048576.0, upload_bound / 1048576.0);
+  EXPECT_LE(uploads_peak - baseline, upload_bound) << figures;
+  // Parsing: the test finishes the held uploads one after another, so one
+  // is parsed while the others are still held. Intake documents no memory
+  // multiple of its input (only max_vertices / max_faces), so this is an
+  // allowance, not a guarantee: 16x the upload for the mesh being parsed
+  // (the issue measured 14x before intake refused lying counts early).
+  EXPECT_LE(parse_peak - baseline, upload_bound + 16 * kMaxMesh) << figures;
   held.clear();
   stub.reset();
   channel.reset();
