@@ -103,15 +103,6 @@ grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call, bool i
   return status;
 }
 
-absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError(absl::StrCat("cannot open mesh file ", path));
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) return absl::DataLossError(absl::StrCat("cannot read mesh file ", path));
-  return std::move(buffer).str();
-}
-
 }  // namespace
 
 absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
@@ -171,48 +162,124 @@ absl::StatusOr<ExtractorClient> ExtractorClient::Connect(absl::string_view addre
   return ExtractorClient(*std::move(channel), defaults);
 }
 
-absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
-    const std::string& path, const v1::ExtractOptions& options, const CallOptions* call) const {
-  absl::StatusOr<std::string> bytes = ReadWholeFile(path);
-  if (!bytes.ok()) return bytes.status();
-  const size_t slash = path.find_last_of('/');
-  const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
-  return ExtractBytes(*bytes, name, options, v1::MESH_FORMAT_UNSPECIFIED, call);
-}
+namespace {
 
-absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
-    absl::string_view bytes, absl::string_view file_name, const v1::ExtractOptions& options,
-    v1::MeshFormat format, const CallOptions* call) const {
+// A restartable sequence of upload chunks: Next stores the next chunk (at
+// most kChunkBytes) in *chunk and returns true, false at the end, or an
+// error when the source cannot be read. Restart rewinds it for a retry.
+class ChunkSource {
+ public:
+  virtual ~ChunkSource() = default;
+  virtual absl::Status Restart() = 0;
+  virtual absl::StatusOr<bool> Next(std::string* chunk) = 0;
+};
+
+class BytesSource final : public ChunkSource {
+ public:
+  explicit BytesSource(absl::string_view bytes) : bytes_(bytes) {}
+  absl::Status Restart() override {
+    offset_ = 0;
+    return absl::OkStatus();
+  }
+  absl::StatusOr<bool> Next(std::string* chunk) override {
+    if (offset_ >= bytes_.size()) return false;
+    const size_t n = std::min(kChunkBytes, bytes_.size() - offset_);
+    chunk->assign(bytes_.data() + offset_, n);
+    offset_ += n;
+    return true;
+  }
+
+ private:
+  absl::string_view bytes_;
+  size_t offset_ = 0;
+};
+
+// Reads the file kChunkBytes at a time: the whole mesh is never in memory.
+class FileSource final : public ChunkSource {
+ public:
+  explicit FileSource(std::string path) : path_(std::move(path)) {}
+  absl::Status Restart() override {
+    in_.close();
+    in_.clear();
+    in_.open(path_, std::ios::binary);
+    if (!in_) return absl::NotFoundError(absl::StrCat("cannot open mesh file ", path_));
+    return absl::OkStatus();
+  }
+  absl::StatusOr<bool> Next(std::string* chunk) override {
+    chunk->resize(kChunkBytes);
+    in_.read(chunk->data(), static_cast<std::streamsize>(kChunkBytes));
+    if (in_.bad()) return absl::DataLossError(absl::StrCat("cannot read mesh file ", path_));
+    chunk->resize(static_cast<size_t>(in_.gcount()));
+    return !chunk->empty();
+  }
+
+ private:
+  std::string path_;
+  std::ifstream in_;
+};
+
+// One Extract call streaming `source`, retried on UNAVAILABLE.
+absl::StatusOr<v1::ExtractResponse> ExtractFrom(grpc::Channel* channel, v1::Extractor::Stub* stub,
+                                                ChunkSource& source, absl::string_view file_name,
+                                                const v1::ExtractOptions& options,
+                                                v1::MeshFormat format, const CallOptions& call) {
   v1::ExtractResponse response;
-  grpc::Status status = WithRetries(
-      channel_.get(), call ? *call : defaults_, /*idempotent=*/true, [&](grpc::ClientContext* context) {
+  absl::Status local = absl::OkStatus();  // a failure of the source, not the call
+  grpc::Status status =
+      WithRetries(channel, call, /*idempotent=*/true, [&](grpc::ClientContext* context) {
         response.Clear();
+        local = source.Restart();
+        if (!local.ok()) return grpc::Status(grpc::StatusCode::CANCELLED, "source");
         std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer =
-            stub_->Extract(context, &response);
-        size_t offset = 0;
+            stub->Extract(context, &response);
+        // The first message always goes out, even for an empty source, so
+        // that the server sees the header (and reports "no mesh data").
         bool first = true;
-        // The first message always goes out, even for empty bytes, so that
-        // the server sees the header (and reports "no mesh data").
-        while (first || offset < bytes.size()) {
+        while (true) {
           v1::ExtractRequest request;
+          absl::StatusOr<bool> more = source.Next(request.mutable_data());
+          if (!more.ok()) {
+            local = more.status();
+            context->TryCancel();
+            writer->Finish();
+            return grpc::Status(grpc::StatusCode::CANCELLED, "source");
+          }
+          if (!*more && !first) break;
           if (first) {
             request.set_format(format);
             request.set_file_name(std::string(file_name));
             *request.mutable_options() = options;
           }
-          const size_t n = std::min(kChunkBytes, bytes.size() - offset);
-          request.set_data(bytes.data() + offset, n);
-          offset += n;
           first = false;
           // A failed write means the server already ended the call (for
           // example RESOURCE_EXHAUSTED at its byte limit): Finish says why.
-          if (!writer->Write(request)) break;
+          if (!writer->Write(request) || !*more) break;
         }
         writer->WritesDone();
         return writer->Finish();
       });
+  if (!local.ok()) return local;
   if (!status.ok()) return FromGrpcStatus(status);
   return response;
+}
+
+}  // namespace
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
+    const std::string& path, const v1::ExtractOptions& options, const CallOptions* call) const {
+  const size_t slash = path.find_last_of('/');
+  const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
+  FileSource source(path);
+  return ExtractFrom(channel_.get(), stub_.get(), source, name, options,
+                     v1::MESH_FORMAT_UNSPECIFIED, call ? *call : defaults_);
+}
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
+    absl::string_view bytes, absl::string_view file_name, const v1::ExtractOptions& options,
+    v1::MeshFormat format, const CallOptions* call) const {
+  BytesSource source(bytes);
+  return ExtractFrom(channel_.get(), stub_.get(), source, file_name, options, format,
+                     call ? *call : defaults_);
 }
 
 // --- IndexerClient -------------------------------------------------------------

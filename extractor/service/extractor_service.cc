@@ -1,8 +1,11 @@
 #include "extractor/service/extractor_service.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <deque>
+#include <optional>
+#include <set>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -70,7 +73,7 @@ class WorkerPool {
 
 }  // namespace
 
-absl::StatusOr<v1::ExtractResponse> RunExtraction(const std::string& bytes,
+absl::StatusOr<v1::ExtractResponse> RunExtraction(std::string bytes,
                                                   const v1::ExtractRequest& header,
                                                   const ServiceOptions& options,
                                                   const std::function<bool()>& cancelled) {
@@ -79,6 +82,14 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(const std::string& bytes,
   }
   TPR_ASSIGN_OR_RETURN(extract::Options extract_options,
                        OptionsFromProto(header.options(), options.max_threads_per_extraction));
+  // The library would name its internal cycle_search_hops; the caller set
+  // cycle_min_vertices, so name that and its range.
+  if (extract_options.cycle_min_vertices >= extract_options.cycle_search_hops) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.cycle_min_vertices must be in [0, ", extract_options.cycle_search_hops - 1,
+        "] (cycles around a saddle are searched within ", extract_options.cycle_search_hops,
+        " edges), got ", header.options().cycle_min_vertices()));
+  }
   if (cancelled()) return absl::CancelledError("extraction cancelled before intake");
 
   extract::IntakeOptions intake_options;
@@ -88,6 +99,7 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(const std::string& bytes,
                        extract::LoadMeshFromBuffer(bytes, FormatFromProto(header.format()),
                                                    header.file_name(), intake_options));
   const double intake_ms = MillisecondsSince(intake_start);
+  std::string().swap(bytes);  // the upload is parsed: free it before extraction
   if (cancelled()) return absl::CancelledError("extraction cancelled after intake");
 
   TPR_ASSIGN_OR_RETURN(extract::ExtractResult result,
@@ -114,10 +126,47 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(const std::string& bytes,
   return response;
 }
 
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+class ExtractReactor;
+
+// Refuses uploads that stall or crawl (ServiceOptions::upload_idle_timeout_ms,
+// min_upload_bytes_per_second): a thread wakes a few times per idle timeout,
+// asks every open call whether its upload has expired, and finishes those
+// that have. Calls register when admitted and unregister in OnDone.
+class UploadWatchdog {
+ public:
+  explicit UploadWatchdog(const ServiceOptions& options);
+  ~UploadWatchdog();
+  void Add(ExtractReactor* call) {
+    absl::MutexLock lock(&mu_);
+    calls_.insert(call);
+  }
+  void Remove(ExtractReactor* call) {
+    absl::MutexLock lock(&mu_);
+    calls_.erase(call);
+  }
+
+ private:
+  void Loop();
+
+  absl::Mutex mu_;
+  std::set<ExtractReactor*> calls_ ABSL_GUARDED_BY(mu_);
+  bool stopping_ ABSL_GUARDED_BY(mu_) = false;
+  absl::Duration period_;
+  std::thread thread_;
+};
+
+}  // namespace
+
 struct ExtractorService::State {
-  explicit State(const ServiceOptions& o) : options(o), pool(o.worker_threads) {}
+  explicit State(const ServiceOptions& o)
+      : options(o), watchdog(o), pool(o.worker_threads) {}
   const ServiceOptions options;
   std::atomic<int> in_flight{0};
+  UploadWatchdog watchdog;
   // Declared last: destroyed first, so queued jobs still see valid state.
   WorkerPool pool;
 };
@@ -127,50 +176,74 @@ namespace {
 // One Extract call. Lifetime: created by the service, deleted in OnDone,
 // which gRPC calls once Finish has completed and every reaction returned.
 // The worker job touches the reactor only up to its Finish call.
+//
+// Exactly one party finishes the call. While uploading (phase_ kUploading)
+// that is OnReadDone or, for an expired upload, the watchdog; each claims
+// the call by leaving kUploading under mu_, so the other then does
+// nothing. Once the upload is complete (kQueued) only the worker finishes.
 class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> {
  public:
-  ExtractReactor(const ServiceOptions* options, WorkerPool* pool, std::atomic<int>* in_flight,
-                 grpc::CallbackServerContext* context, v1::ExtractResponse* response)
-      : options_(options),
-        pool_(pool),
-        in_flight_(in_flight),
+  ExtractReactor(ExtractorService::State* state, grpc::CallbackServerContext* context,
+                 v1::ExtractResponse* response)
+      : state_(state),
+        options_(&state->options),
         context_(context),
-        response_(response) {
+        response_(response),
+        admitted_(Clock::now()),
+        last_message_(admitted_) {
     StartRead(&request_);
+    // After StartRead: the watchdog may finish the call from now on.
+    state_->watchdog.Add(this);
   }
 
   void OnReadDone(bool ok) override {
+    absl::MutexLock lock(&mu_);
+    if (phase_ != Phase::kUploading) return;  // the watchdog finished it
     if (!ok) {
       // End of the upload (or a broken stream / cancel).
       if (cancelled_.load() || context_->IsCancelled()) {
-        Finish(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
+        FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
         return;
       }
       if (!got_first_) {
-        Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                            "the upload carried no messages (no mesh data)"));
+        FinishLocked(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                  "the upload carried no messages (no mesh data)"));
         return;
       }
-      pool_->Submit([this] { Work(); });
+      phase_ = Phase::kQueued;
+      state_->pool.Submit([this] { Work(); });
       return;
     }
+    last_message_ = Clock::now();
     if (!got_first_) {
       got_first_ = true;
       header_.set_format(request_.format());
       header_.set_file_name(request_.file_name());
       *header_.mutable_options() = request_.options();
     }
-    const std::string& chunk = request_.data();
-    if (static_cast<int64_t>(bytes_.size() + chunk.size()) > options_->max_mesh_bytes) {
+    std::string* chunk = request_.mutable_data();
+    if (static_cast<int64_t>(bytes_.size() + chunk->size()) > options_->max_mesh_bytes) {
       // Stop reading now: the rest of the stream is never buffered.
-      Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                          absl::StrCat("mesh upload exceeds the server limit of ",
-                                       options_->max_mesh_bytes, " bytes (--max-mesh-bytes)")));
+      FinishLocked(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                absl::StrCat("mesh upload exceeds the server limit of ",
+                                             options_->max_mesh_bytes,
+                                             " bytes (--max-mesh-bytes)")));
       return;
     }
-    bytes_.append(chunk);
+    if (bytes_.empty()) {
+      bytes_.swap(*chunk);  // most uploads are one chunk: no copy
+    } else {
+      // Reserve the limit once instead of growing geometrically: growth
+      // would briefly hold old and new buffers (up to 3x the data), while
+      // untouched reserved pages cost no resident memory.
+      if (bytes_.capacity() < static_cast<size_t>(options_->max_mesh_bytes)) {
+        bytes_.reserve(static_cast<size_t>(options_->max_mesh_bytes));
+      }
+      bytes_.append(*chunk);
+      chunk->clear();
+    }
     if (cancelled_.load()) {
-      Finish(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
+      FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
       return;
     }
     StartRead(&request_);
@@ -179,31 +252,115 @@ class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> 
   void OnCancel() override { cancelled_.store(true); }
 
   void OnDone() override {
-    in_flight_->fetch_sub(1);
+    state_->watchdog.Remove(this);
+    state_->in_flight.fetch_sub(1);
     delete this;
   }
 
+  // Expire returns why the upload must be refused at `now`, claiming the
+  // call (the caller must then Finish it with that status), or nullopt when
+  // it is not uploading or is within both limits. Thread-safe.
+  std::optional<grpc::Status> Expire(Clock::time_point now) {
+    absl::MutexLock lock(&mu_);
+    if (phase_ != Phase::kUploading) return std::nullopt;
+    const int64_t idle_ms = options_->upload_idle_timeout_ms;
+    const int64_t rate = options_->min_upload_bytes_per_second;
+    std::optional<grpc::Status> refusal;
+    if (idle_ms > 0 && now - last_message_ >= std::chrono::milliseconds(idle_ms)) {
+      refusal = grpc::Status(
+          grpc::StatusCode::DEADLINE_EXCEEDED,
+          absl::StrCat("upload stalled: no message for ", idle_ms,
+                       " ms (server --upload-idle-timeout-ms) after ", bytes_.size(), " bytes"));
+    } else if (rate > 0) {
+      const double beyond_grace_s =
+          std::chrono::duration<double>(now - admitted_).count() - idle_ms / 1000.0;
+      if (beyond_grace_s > 0 && static_cast<double>(bytes_.size()) < rate * beyond_grace_s) {
+        refusal = grpc::Status(
+            grpc::StatusCode::DEADLINE_EXCEEDED,
+            absl::StrCat("upload too slow: ", bytes_.size(), " bytes in ",
+                         static_cast<int64_t>(beyond_grace_s * 1000 + idle_ms),
+                         " ms, below the server minimum of ", rate,
+                         " bytes/s after the first ", idle_ms,
+                         " ms (--min-upload-bytes-per-second)"));
+      }
+    }
+    if (refusal.has_value()) {
+      phase_ = Phase::kFinished;
+      std::string().swap(bytes_);
+    }
+    return refusal;
+  }
+
  private:
+  enum class Phase { kUploading, kQueued, kFinished };
+
+  // Finishes from a reaction: gRPC defers the resulting OnDone until the
+  // reaction returns, so holding mu_ here is safe.
+  void FinishLocked(grpc::Status status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    phase_ = Phase::kFinished;
+    std::string().swap(bytes_);
+    Finish(std::move(status));
+  }
+
   void Work() {
     absl::StatusOr<v1::ExtractResponse> result = RunExtraction(
-        bytes_, header_, *options_,
+        std::move(bytes_), header_, *options_,
         [this] { return cancelled_.load() || context_->IsCancelled(); });
-    std::string().swap(bytes_);  // free the upload before waiting on the wire
     if (result.ok()) *response_ = *std::move(result);
     Finish(ToGrpcStatus(result.status()));
   }
 
-  const ServiceOptions* options_;
-  WorkerPool* pool_;
-  std::atomic<int>* in_flight_;
-  grpc::CallbackServerContext* context_;
-  v1::ExtractResponse* response_;
+  ExtractorService::State* const state_;
+  const ServiceOptions* const options_;
+  grpc::CallbackServerContext* const context_;
+  v1::ExtractResponse* const response_;
+  const Clock::time_point admitted_;
+  absl::Mutex mu_;
+  Phase phase_ ABSL_GUARDED_BY(mu_) = Phase::kUploading;
+  Clock::time_point last_message_ ABSL_GUARDED_BY(mu_);
   v1::ExtractRequest request_;
   v1::ExtractRequest header_;
+  // Written under mu_ while uploading; the worker owns it once kQueued.
   std::string bytes_;
   bool got_first_ = false;
   std::atomic<bool> cancelled_{false};
 };
+
+UploadWatchdog::UploadWatchdog(const ServiceOptions& options) {
+  if (options.upload_idle_timeout_ms <= 0 && options.min_upload_bytes_per_second <= 0) return;
+  // A few checks per idle timeout, so that a stalled upload is refused
+  // within about 1.25 timeouts; at most every 250 ms otherwise.
+  const int64_t idle = options.upload_idle_timeout_ms;
+  period_ = absl::Milliseconds(idle > 0 ? std::clamp<int64_t>(idle / 4, 5, 250) : 250);
+  thread_ = std::thread([this] { Loop(); });
+}
+
+UploadWatchdog::~UploadWatchdog() {
+  {
+    absl::MutexLock lock(&mu_);
+    stopping_ = true;
+  }
+  if (thread_.joinable()) thread_.join();
+}
+
+void UploadWatchdog::Loop() {
+  while (true) {
+    std::vector<std::pair<ExtractReactor*, grpc::Status>> expired;
+    {
+      absl::MutexLock lock(&mu_);
+      mu_.AwaitWithTimeout(absl::Condition(&stopping_), period_);
+      if (stopping_) return;
+      const Clock::time_point now = Clock::now();
+      for (ExtractReactor* call : calls_) {
+        if (std::optional<grpc::Status> s = call->Expire(now)) expired.emplace_back(call, *s);
+      }
+    }
+    // Outside both locks: Finish may run OnDone on this thread, which
+    // unregisters (mu_) and deletes the call. A claimed call cannot finish
+    // any other way, so it is alive until this Finish.
+    for (auto& [call, status] : expired) call->Finish(std::move(status));
+  }
+}
 
 // Answers a call refused at admission without reading it.
 class RejectReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> {
@@ -229,8 +386,7 @@ grpc::ServerReadReactor<v1::ExtractRequest>* ExtractorService::Extract(
     state_->in_flight.fetch_sub(1);
     return new RejectReactor(state_->options.max_concurrent);
   }
-  return new ExtractReactor(&state_->options, &state_->pool, &state_->in_flight, context,
-                            response);
+  return new ExtractReactor(state_.get(), context, response);
 }
 
 int ExtractorService::InFlight() const { return state_->in_flight.load(); }

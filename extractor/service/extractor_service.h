@@ -23,10 +23,22 @@ namespace tpr::extractor_service {
 
 // ServiceOptions bounds what one tpr-extractor process does at once.
 //
-// Memory bound: at most `max_concurrent` calls hold an upload, each at most
-// `max_mesh_bytes`, plus the parsed meshes of at most `worker_threads`
-// running extractions, so the peak is about max_concurrent x max_mesh_bytes
-// + worker_threads x (mesh size x ~10). The defaults keep that near 1 GiB.
+// Memory bound: at most `max_concurrent` calls hold an upload, each buffer
+// at most `max_mesh_bytes` and never reallocated (it reserves that much
+// address space once; Linux backs only the pages written), plus one chunk
+// in flight per call (gRPC's message limit, 4 MiB + slack: see main.cc),
+// plus the intake and extraction memory of at most `worker_threads` meshes
+// (a call's upload buffer is freed as soon as intake has parsed it; the
+// parsed mesh is bounded by `max_vertices`). Peak resident memory is thus
+// about max_concurrent x max_mesh_bytes + worker_threads x (intake and
+// extraction of one mesh); tests/service/extractor_service_test.cc
+// measures it on a real process (VmHWM) under hostile uploads.
+//
+// Time bound: an upload that stalls for `upload_idle_timeout_ms`, or that
+// averages less than `min_upload_bytes_per_second` after that grace, is
+// refused, so slow clients cannot hold every slot: a slot is held for at
+// most upload_idle_timeout_ms + max_mesh_bytes / min_upload_bytes_per_second
+// while uploading.
 struct ServiceOptions {
   // Threads that run intake and extraction; extractions beyond this wait in
   // a FIFO queue (they count against max_concurrent). Default 2.
@@ -42,6 +54,16 @@ struct ServiceOptions {
   // gets RESOURCE_EXHAUSTED immediately, without reading its upload, so a
   // burst can never exhaust memory; clients retry with backoff. Default 16.
   int max_concurrent = 16;
+  // An upload that delivers no message for this long (from admission, or
+  // since its last message) is refused with DEADLINE_EXCEEDED naming the
+  // flag, and its slot freed. 0 disables. Default 10,000 ms.
+  int64_t upload_idle_timeout_ms = 10'000;
+  // Once upload_idle_timeout_ms has passed since admission, an upload must
+  // have received at least this many bytes per second elapsed beyond that
+  // grace; one that falls behind is refused with DEADLINE_EXCEEDED naming
+  // the flag. 0 disables. Default 131,072 (128 KiB/s, a 1 Mbit/s link): a
+  // 64 MiB upload may take up to about 8.5 minutes.
+  int64_t min_upload_bytes_per_second = 128 << 10;
   // Upper bound on ExtractOptions.threads a client may ask for (Dijkstra
   // sweeps run in parallel inside one extraction). Default 2.
   int max_threads_per_extraction = 2;
@@ -52,13 +74,15 @@ struct ServiceOptions {
 // `header.options()`, conversion to the response (signature with mesh stats,
 // extractor version and options filled; timings starting with "intake";
 // warnings of intake then extraction; the explanation when asked for).
+// `bytes` is taken by value and freed as soon as intake has parsed it, so
+// that the upload and the extraction's working memory never coexist.
 // `cancelled` is polled between stages (the library's ExtractSignature itself
 // is not interruptible, so a cancel during it takes effect when it returns).
 // Errors: INVALID_ARGUMENT for empty bytes, bad options or a malformed mesh
 // (intake's message), RESOURCE_EXHAUSTED above max_vertices, CANCELLED when
 // `cancelled` returned true. Thread-safe. Cost: intake O(n log n) plus
 // extraction (Table 4 of the paper).
-absl::StatusOr<v1::ExtractResponse> RunExtraction(const std::string& bytes,
+absl::StatusOr<v1::ExtractResponse> RunExtraction(std::string bytes,
                                                   const v1::ExtractRequest& header,
                                                   const ServiceOptions& options,
                                                   const std::function<bool()>& cancelled);
@@ -74,15 +98,19 @@ class ExtractorService final : public v1::Extractor::CallbackService {
   ExtractorService& operator=(const ExtractorService&) = delete;
 
   // Extract: see extractor.proto. Client-streaming upload; the reactor
-  // buffers chunks, then queues the extraction on the worker pool.
+  // buffers chunks (refusing stalled or crawling uploads, see
+  // ServiceOptions), then queues the extraction on the worker pool.
   grpc::ServerReadReactor<v1::ExtractRequest>* Extract(
       grpc::CallbackServerContext* context, v1::ExtractResponse* response) override;
 
   // InFlight returns the number of admitted calls not yet done. Thread-safe.
   int InFlight() const;
 
- private:
+  // State is defined in the .cc; named here only so that the call objects
+  // there can refer to it.
   struct State;
+
+ private:
   std::unique_ptr<State> state_;
 };
 

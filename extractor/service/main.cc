@@ -44,6 +44,16 @@ int main(int argc, char** argv) {
                  "RESOURCE_EXHAUSTED immediately")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  app.add_option("--upload-idle-timeout-ms", service_options.upload_idle_timeout_ms,
+                 "refuse an upload (DEADLINE_EXCEEDED) that sends no message for this long, "
+                 "freeing its slot; 0 disables")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--min-upload-bytes-per-second", service_options.min_upload_bytes_per_second,
+                 "after the first --upload-idle-timeout-ms, refuse an upload averaging less "
+                 "than this (DEADLINE_EXCEEDED); 0 disables")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--max-threads-per-extraction", service_options.max_threads_per_extraction,
                  "cap on ExtractOptions.threads a client may request")
       ->capture_default_str()
@@ -63,10 +73,12 @@ int main(int argc, char** argv) {
   }
   server_options.readiness_service = "tpr.v1.Extractor";
 
-  // A chunk is at most 4 MiB by convention (1 MiB recommended); allow some
-  // slack above it but never more than the whole-mesh limit.
+  // A chunk is under 4 MiB by contract (extractor.proto; the SDK sends 1
+  // MiB): a larger message is refused by gRPC before it is buffered, so each
+  // call holds at most one chunk beyond its upload buffer (memory bound in
+  // extractor_service.h). 64 KiB of slack covers the header fields.
   server_options.max_receive_message_bytes = static_cast<int>(
-      std::min<int64_t>(service_options.max_mesh_bytes + (1 << 20), int64_t{64} << 20));
+      std::min<int64_t>(service_options.max_mesh_bytes, int64_t{4} << 20) + (64 << 10));
 
   // Destroyed after the server (declared first): its workers drain any job
   // still queued when the grace period ended.
@@ -87,6 +99,8 @@ int main(int argc, char** argv) {
       absl::StrCat("threads ", service_options.worker_threads, ", max-concurrent ",
                    service_options.max_concurrent, ", max-mesh-bytes ",
                    service_options.max_mesh_bytes, ", max-vertices ",
-                   service_options.max_vertices));
+                   service_options.max_vertices, ", upload-idle-timeout-ms ",
+                   service_options.upload_idle_timeout_ms, ", min-upload-bytes-per-second ",
+                   service_options.min_upload_bytes_per_second));
   return tpr::common::ServeUntilSignal(*started, server_options);
 }

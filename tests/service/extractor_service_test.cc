@@ -4,9 +4,13 @@
 // and convert).
 #include "extractor/service/extractor_service.h"
 
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -16,6 +20,7 @@
 #include <grpcpp/create_channel.h>
 #include <gtest/gtest.h>
 
+#include "absl/strings/str_format.h"
 #include "common/server_lifecycle.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
@@ -310,6 +315,368 @@ TEST(ExtractorBinaryTest, SigtermDuringAnUploadFinishesItAndExitsZero) {
   EXPECT_TRUE(status.ok()) << status.error_message();
   EXPECT_GT(response.signature().features_size(), 0);
   stopper.join();
+}
+
+// A client that opens an upload, sends `first` and then (optionally) more
+// data at its own pace, over a raw stub so that the test controls timing.
+class RawUpload {
+ public:
+  RawUpload(v1::Extractor::Stub* stub, std::chrono::seconds deadline) {
+    context_.set_deadline(std::chrono::system_clock::now() + deadline);
+    writer_ = stub->Extract(&context_, &response_);
+  }
+  bool Write(const std::string& data, const std::string& file_name = "") {
+    v1::ExtractRequest request;
+    request.set_file_name(file_name);
+    request.set_data(data);
+    return writer_->Write(request);
+  }
+  // Waits for the server's status (without closing the upload first when
+  // `close` is false: a stalled client never does).
+  grpc::Status Finish(bool close = false) {
+    if (close) writer_->WritesDone();
+    return writer_->Finish();
+  }
+  const v1::ExtractResponse& response() const { return response_; }
+
+ private:
+  grpc::ClientContext context_;
+  v1::ExtractResponse response_;
+  std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer_;
+};
+
+// Issue 12 item 5, reproduced: as many uploads as there are slots each send
+// 4 bytes and wait. While they wait everyone else is refused; after the idle
+// timeout they are refused with DEADLINE_EXCEEDED naming the flag, their
+// slots are free, and a normal client is served.
+TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
+  TearDown();
+  ServiceOptions options;
+  options.max_concurrent = 4;
+  options.upload_idle_timeout_ms = 400;
+  options.min_upload_bytes_per_second = 0;
+  StartWith(options);
+  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto stub = v1::Extractor::NewStub(channel);
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::unique_ptr<RawUpload>> slow;
+  for (int i = 0; i < options.max_concurrent; ++i) {
+    slow.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(60)));
+    ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
+  }
+  const std::string off = GeneratedOff("biped_adult", 0, 1000);
+  for (int i = 0; i < 200 && service_->InFlight() < options.max_concurrent; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_EQ(service_->InFlight(), options.max_concurrent);
+  absl::StatusOr<v1::ExtractResponse> refused = client_->ExtractBytes(off, "b.off");
+  EXPECT_TRUE(absl::IsResourceExhausted(refused.status())) << refused.status();
+
+  for (auto& upload : slow) {
+    const grpc::Status status = upload->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED)
+        << status.error_message();
+    EXPECT_NE(status.error_message().find("--upload-idle-timeout-ms"),
+              std::string::npos)
+        << status.error_message();
+  }
+  const double waited = std::chrono::duration<double>(
+                            std::chrono::steady_clock::now() - start)
+                            .count();
+  EXPECT_GE(waited, 0.4);
+  EXPECT_LT(waited, 5.0) << "the idle timeout was not enforced promptly";
+  for (int i = 0; i < 200 && service_->InFlight() > 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  EXPECT_EQ(service_->InFlight(), 0);
+  absl::StatusOr<v1::ExtractResponse> served = client_->ExtractBytes(off, "c.off");
+  EXPECT_TRUE(served.ok()) << served.status();
+}
+
+// A client that never stalls but trickles (2 KB/s against a 40 KB/s
+// minimum) is refused once the grace has passed; a client at loopback
+// speed sending many small chunks under the same limits is served.
+TEST_F(ExtractorServiceTest, TricklingUploadIsRefusedBelowTheMinimumRate) {
+  TearDown();
+  ServiceOptions options;
+  options.upload_idle_timeout_ms = 300;
+  options.min_upload_bytes_per_second = 40'000;
+  StartWith(options);
+  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto stub = v1::Extractor::NewStub(channel);
+  const std::string off = GeneratedOff("biped_adult", 1, 2000);
+  ASSERT_GT(off.size(), 40'000u);
+
+  RawUpload trickle(stub.get(), std::chrono::seconds(60));
+  const auto start = std::chrono::steady_clock::now();
+  size_t sent = 0;
+  bool first = true;
+  // 100 bytes every 50 ms; Write fails once the server has finished the
+  // call. Bounded: at most 10 s of trickling.
+  while (sent < off.size() &&
+         std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+    if (!trickle.Write(off.substr(sent, 100), first ? "trickle.off" : "")) break;
+    first = false;
+    sent += 100;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  const grpc::Status status = trickle.Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED)
+      << status.error_message();
+  EXPECT_NE(status.error_message().find("--min-upload-bytes-per-second"),
+            std::string::npos)
+      << status.error_message();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(3));
+
+  RawUpload fast(stub.get(), std::chrono::seconds(60));
+  for (size_t at = 0; at < off.size(); at += 1000) {
+    ASSERT_TRUE(fast.Write(off.substr(at, 1000), at == 0 ? "fast.off" : ""));
+  }
+  const grpc::Status fast_status = fast.Finish(/*close=*/true);
+  EXPECT_TRUE(fast_status.ok()) << fast_status.error_message();
+  EXPECT_GT(fast.response().signature().features_size(), 0);
+}
+
+// The reproduction of issue 12 item 5 on the real binary with its flags:
+// 16 streams that send 4 bytes and wait no longer hold every slot for
+// minutes; a normal client is served once the idle timeout has passed.
+TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
+  testing::TempDir dir;
+  testing::ServiceProcess process;
+  ASSERT_TRUE(process
+                  .Start(testing::BinaryPath("tpr-extractor"),
+                         {"--threads", "1", "--max-concurrent", "16",
+                          "--upload-idle-timeout-ms", "500"},
+                         dir.path() + "/extractor.log")
+                  .ok());
+  auto channel =
+      grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+  auto stub = v1::Extractor::NewStub(channel);
+  std::vector<std::unique_ptr<RawUpload>> slow;
+  for (int i = 0; i < 16; ++i) {
+    slow.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
+    ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
+  }
+  absl::StatusOr<client::ExtractorClient> c =
+      client::ExtractorClient::Connect(process.address());
+  ASSERT_TRUE(c.ok());
+  const std::string off = GeneratedOff("biped_adult", 0, 1000);
+  // Right away every slot is held (the 16 were admitted first) ...
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  absl::StatusOr<v1::ExtractResponse> refused = c->ExtractBytes(off, "a.off");
+  EXPECT_TRUE(absl::IsResourceExhausted(refused.status())) << refused.status();
+  // ... and a client retrying for a few seconds gets through.
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<v1::ExtractResponse> served = refused;
+  while (!served.ok() && absl::IsResourceExhausted(served.status()) &&
+         std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    served = c->ExtractBytes(off, "a.off");
+  }
+  EXPECT_TRUE(served.ok()) << served.status();
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(3));
+  for (auto& upload : slow) {
+    EXPECT_EQ(upload->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+  // Close the connections first: open channels hold up the server's
+  // graceful shutdown until its grace period ends.
+  slow.clear();
+  stub.reset();
+  channel.reset();
+  c = absl::InternalError("closed");
+  EXPECT_EQ(process.Stop(SIGTERM), 0);
+}
+
+// VmHWM (peak resident set) of process `pid`, in bytes; -1 if unreadable.
+int64_t PeakResidentBytes(pid_t pid) {
+  std::ifstream in(absl::StrCat("/proc/", pid, "/status"));
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::atoll(line.c_str() + 6) * 1024;
+  }
+  return -1;
+}
+
+// Hostile uploads of `bytes` bytes each: an OBJ whose one face lists every
+// vertex index again and again (the issue's "one 30M-vertex polygon"), an
+// OFF and a PLY whose headers declare far more elements than follow, and
+// plain garbage.
+std::string HostileUpload(int kind, size_t bytes) {
+  std::string out;
+  out.reserve(bytes);
+  switch (kind % 4) {
+    case 0:
+      out = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf";
+      while (out.size() + 8 < bytes) out += " 1 2 3";
+      out += "\n";
+      break;
+    case 1:
+      out = "OFF\n200000000 400000000 0\n";
+      while (out.size() + 16 < bytes) out += "0 0 0\n";
+      break;
+    case 2:
+      out =
+          "ply\nformat ascii 1.0\nelement vertex 900000000\nproperty float x\n"
+          "property float y\nproperty float z\nelement face 900000000\n"
+          "property list uchar int vertex_indices\nend_header\n";
+      while (out.size() + 16 < bytes) out += "1 2 3\n";
+      break;
+    default:
+      while (out.size() < bytes) out += static_cast<char>('a' + out.size() % 26);
+  }
+  return out;
+}
+
+// Issue 12 item 6: the documented memory bound (extractor_service.h) on a
+// real process. Every slot holds a nearly full hostile upload at once while
+// more clients push oversized uploads (chunked, and as one huge message);
+// then the held uploads are parsed, two at a time. The growth of VmHWM over
+// a warmed-up baseline must stay within max_concurrent x max_mesh_bytes for
+// the uploads, plus the intake allowance of the two meshes being parsed.
+TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
+  constexpr int kConcurrent = 8;
+  constexpr int kThreads = 2;
+  constexpr int64_t kMaxMesh = int64_t{8} << 20;
+  constexpr int kPushers = 8;
+  testing::TempDir dir;
+  testing::ServiceProcess process;
+  ASSERT_TRUE(process
+                  .Start(testing::BinaryPath("tpr-extractor"),
+                         {"--threads", std::to_string(kThreads), "--max-concurrent",
+                          std::to_string(kConcurrent), "--max-mesh-bytes",
+                          std::to_string(kMaxMesh), "--upload-idle-timeout-ms", "30000"},
+                         dir.path() + "/extractor.log")
+                  .ok());
+  {
+    absl::StatusOr<client::ExtractorClient> c =
+        client::ExtractorClient::Connect(process.address());
+    ASSERT_TRUE(c.ok());
+    ASSERT_TRUE(c->ExtractBytes(GeneratedOff("biped_adult", 0, 3000), "warm.off").ok());
+  }
+  const int64_t baseline = PeakResidentBytes(process.pid());
+  ASSERT_GT(baseline, 0);
+
+  auto channel =
+      grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+  auto stub = v1::Extractor::NewStub(channel);
+  // 1. Every slot fills up to just under the limit, 1 MiB at a time.
+  const size_t held_bytes = kMaxMesh - (64 << 10);
+  std::vector<std::unique_ptr<RawUpload>> held;
+  for (int i = 0; i < kConcurrent; ++i) {
+    held.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
+    const std::string data = HostileUpload(i, held_bytes);
+    const char* names[] = {"a.obj", "b.off", "c.ply", "d.off"};
+    for (size_t at = 0; at < data.size(); at += 1 << 20) {
+      ASSERT_TRUE(held.back()->Write(data.substr(at, 1 << 20), at == 0 ? names[i % 4] : ""));
+    }
+  }
+  // 2. Meanwhile others push oversized uploads: refused (busy, or over the
+  // limit), never buffered beyond it.
+  std::vector<std::thread> pushers;
+  std::atomic<int> refused{0};
+  for (int i = 0; i < kPushers; ++i) {
+    pushers.emplace_back([&, i] {
+      RawUpload upload(stub.get(), std::chrono::seconds(60));
+      if (i % 2 == 0) {
+        upload.Write(std::string(size_t{32} << 20, 'x'), "huge.obj");  // one message
+      } else {
+        for (int mb = 0; mb < 12 && upload.Write(std::string(1 << 20, 'y'), "big.off"); ++mb) {
+        }
+      }
+      const grpc::Status status = upload.Finish(/*close=*/true);
+      if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) ++refused;
+    });
+  }
+  for (std::thread& t : pushers) t.join();
+  EXPECT_EQ(refused.load(), kPushers);
+  const int64_t uploads_peak = PeakResidentBytes(process.pid());
+
+  // 3. The held uploads complete and are parsed, one after another.
+  for (auto& upload : held) {
+    const grpc::Status status = upload->Finish(/*close=*/true);
+    EXPECT_FALSE(status.ok());
+    EXPECT_TRUE(status.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
+                status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED)
+        << status.error_code() << " " << status.error_message();
+  }
+  const int64_t parse_peak = PeakResidentBytes(process.pid());
+  std::fprintf(stderr,
+               "VmHWM baseline %.1f MiB; +%.1f MiB holding %d uploads of %.1f MiB; +%.1f "
+               "MiB after parsing them\n",
+               baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0, kConcurrent,
+               held_bytes / 1048576.0, (parse_peak - baseline) / 1048576.0);
+  // Uploads, from the code: each admitted call's buffer is at most
+  // kMaxMesh (reserved once, never reallocated), and every call, admitted
+  // or refused, holds at most one message gRPC accepted: main.cc caps a
+  // message at min(max-mesh-bytes, 4 MiB) + 64 KiB.
+  const int64_t max_message = std::min<int64_t>(kMaxMesh, int64_t{4} << 20) + (64 << 10);
+  const int64_t upload_bound = kConcurrent * kMaxMesh + (kConcurrent + kPushers) * max_message;
+  const std::string figures = absl::StrFormat(
+      "measured VmHWM baseline %.1f MiB, growth %.1f MiB holding the uploads, %.1f MiB after "
+      "parsing; upload bound %.1f MiB",
+      baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0,
+      (parse_peak - baseline) / 1048576.0, upload_bound / 1048576.0);
+  EXPECT_LE(uploads_peak - baseline, upload_bound) << figures;
+  // Parsing: the test finishes the held uploads one after another, so one
+  // is parsed while the others are still held. Intake documents no memory
+  // multiple of its input (only max_vertices / max_faces), so this is an
+  // allowance, not a guarantee: 16x the upload for the mesh being parsed
+  // (the issue measured 14x before intake refused lying counts early).
+  EXPECT_LE(parse_peak - baseline, upload_bound + 16 * kMaxMesh) << figures;
+  held.clear();
+  stub.reset();
+  channel.reset();
+  EXPECT_EQ(process.Stop(SIGTERM), 0);
+}
+
+// An out-of-range cycle_min_vertices is refused naming that option (the
+// one the caller set) and its range, not the library's internal hop limit.
+TEST_F(ExtractorServiceTest, CycleMinVerticesErrorNamesTheProtoOption) {
+  const std::string off = GeneratedOff("biped_adult", 0, 1000);
+  v1::ExtractOptions options;
+  options.set_cycle_min_vertices(10);
+  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(off, "a.off", options);
+  ASSERT_TRUE(absl::IsInvalidArgument(r.status())) << r.status();
+  EXPECT_NE(r.status().message().find("options.cycle_min_vertices"), absl::string_view::npos)
+      << r.status();
+  EXPECT_NE(r.status().message().find("got 10"), absl::string_view::npos) << r.status();
+  EXPECT_EQ(r.status().message().find("hops must"), absl::string_view::npos) << r.status();
+  options.set_cycle_min_vertices(5);  // the largest accepted value
+  EXPECT_TRUE(client_->ExtractBytes(off, "a.off", options).ok());
+}
+
+// ExtractFile streams the file as it reads it: from a FIFO whose writer
+// offers 16 MiB, an upload refused at the server's 1.5 MiB limit stops the
+// reading after a few chunks. Reading the whole file first would drain all
+// 16 MiB before sending anything.
+TEST_F(ExtractorServiceTest, ExtractFileStreamsInsteadOfReadingTheWholeFile) {
+  TearDown();
+  ServiceOptions options;
+  options.max_mesh_bytes = 3 << 19;  // 1.5 MiB
+  StartWith(options);
+  testing::TempDir dir;
+  const std::string fifo = dir.path() + "/mesh.off";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  signal(SIGPIPE, SIG_IGN);
+  std::atomic<int64_t> written{0};
+  std::thread writer([&] {
+    const int fd = open(fifo.c_str(), O_WRONLY);
+    if (fd < 0) return;
+    const std::string block(64 << 10, '0');
+    // Stops when the reader closes (EPIPE) or after 16 MiB.
+    while (written.load() < (int64_t{16} << 20)) {
+      const ssize_t n = write(fd, block.data(), block.size());
+      if (n <= 0) break;
+      written += n;
+    }
+    close(fd);
+  });
+  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractFile(fifo);
+  writer.join();
+  EXPECT_TRUE(absl::IsResourceExhausted(r.status())) << r.status();
+  EXPECT_LT(written.load(), int64_t{8} << 20)
+      << "ExtractFile read " << written.load() << " bytes before the refusal";
+  // A missing file is NOT_FOUND.
+  EXPECT_TRUE(absl::IsNotFound(client_->ExtractFile(dir.path() + "/none.off").status()));
 }
 
 }  // namespace

@@ -157,6 +157,8 @@ class ServiceProcess {
   int Signal(int signo) { return pid_ > 0 ? kill(pid_, signo) : -1; }
 
   int port() const { return port_; }
+  // The process id while running, else -1.
+  pid_t pid() const { return pid_; }
   std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
   const std::string& log_path() const { return log_path_; }
 

@@ -135,8 +135,11 @@ class ExtractorClient {
                                                  const ConnectionOptions& connection,
                                                  CallOptions defaults = {});
 
-  // ExtractFile reads the mesh file at `path` and calls ExtractBytes with its
-  // base name. NOT_FOUND when the file cannot be read; otherwise as
+  // ExtractFile uploads the mesh file at `path` as ExtractBytes does (file
+  // name: its base name), reading it kChunkBytes at a time as it streams, so
+  // that memory stays at one chunk whatever the file's size (a retry reads
+  // the file again). NOT_FOUND when the file cannot be opened, DATA_LOSS
+  // when reading it fails midway (the call is cancelled); otherwise as
   // ExtractBytes. Cost: one read of the file plus the call.
   absl::StatusOr<v1::ExtractResponse> ExtractFile(const std::string& path,
                                                   const v1::ExtractOptions& options = {},
