@@ -16,11 +16,16 @@
 
 namespace tpr::common {
 
-// Seconds, from 0.5 ms to 30 s: a cached search takes a fraction of a
-// millisecond, an extraction of a large mesh tens of seconds.
 const prometheus::Histogram::BucketBoundaries& SecondsBuckets() {
   static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
       0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30};
+  return *buckets;
+}
+
+const prometheus::Histogram::BucketBoundaries& FineSecondsBuckets() {
+  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
+      1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 0.01, 0.025, 0.05, 0.1,
+      0.25, 1};
   return *buckets;
 }
 
@@ -81,12 +86,13 @@ struct Metrics::Families {
   prometheus::Histogram& search_seconds;
 };
 
-// Gauges computed at scrape time.
+// Gauges and counters computed at scrape time.
 class Metrics::GaugeCallbacks final : public prometheus::Collectable {
  public:
-  void Add(std::string name, std::string help, std::function<double()> read) {
+  void Add(std::string name, std::string help, std::function<double()> read,
+           prometheus::MetricType type = prometheus::MetricType::Gauge) {
     std::lock_guard<std::mutex> lock(mu_);
-    gauges_.push_back({std::move(name), std::move(help), std::move(read)});
+    gauges_.push_back({std::move(name), std::move(help), std::move(read), type});
   }
 
   std::vector<prometheus::MetricFamily> Collect() const override {
@@ -96,9 +102,13 @@ class Metrics::GaugeCallbacks final : public prometheus::Collectable {
       prometheus::MetricFamily family;
       family.name = g.name;
       family.help = g.help;
-      family.type = prometheus::MetricType::Gauge;
+      family.type = g.type;
       prometheus::ClientMetric metric;
-      metric.gauge.value = g.read();
+      if (g.type == prometheus::MetricType::Counter) {
+        metric.counter.value = g.read();
+      } else {
+        metric.gauge.value = g.read();
+      }
       family.metric.push_back(std::move(metric));
       out.push_back(std::move(family));
     }
@@ -110,6 +120,7 @@ class Metrics::GaugeCallbacks final : public prometheus::Collectable {
     std::string name;
     std::string help;
     std::function<double()> read;
+    prometheus::MetricType type;
   };
   mutable std::mutex mu_;
   std::vector<Gauge> gauges_;
@@ -234,6 +245,11 @@ int Metrics::port() const {
 void Metrics::AddGaugeCallback(const std::string& name, const std::string& help,
                                std::function<double()> read) {
   callbacks_->Add(name, help, std::move(read));
+}
+
+void Metrics::AddCounterCallback(const std::string& name, const std::string& help,
+                                 std::function<double()> read) {
+  callbacks_->Add(name, help, std::move(read), prometheus::MetricType::Counter);
 }
 
 std::string Metrics::Scrape() const {

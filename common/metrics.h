@@ -15,9 +15,12 @@
 //     tpr_indexer_search_emd_computations          histogram per search
 //     tpr_indexer_search_lower_bounds              histogram per search
 //     tpr_indexer_search_duration_seconds          histogram (server time)
-// plus gauges read at scrape time that each main.cc adds (AddGaugeCallback):
-// the indexer's models, indexed, buffered and disk bytes, the extractor's
-// admitted calls.
+// plus gauges and counters read at scrape time that each main.cc adds
+// (AddGaugeCallback, AddCounterCallback): the indexer's models, indexed,
+// buffered, tombstoned, tree rebuilds, storage stalls and sizes, the
+// extractor's admitted calls; and families a service registers itself in
+// registry() (the gateway's per-shard latency and errors, the indexer's
+// RocksDB write and sync latency).
 //
 //   auto metrics = std::make_shared<tpr::common::Metrics>();
 //   absl::Status s = metrics->Serve("127.0.0.1:9102");
@@ -46,6 +49,14 @@ class Exposer;
 
 namespace tpr::common {
 
+// SecondsBuckets: histogram boundaries for call durations, 0.5 ms to 30 s (a
+// cached search takes a fraction of a millisecond, an extraction of a large
+// mesh tens of seconds).
+const prometheus::Histogram::BucketBoundaries& SecondsBuckets();
+// FineSecondsBuckets: boundaries for storage operations, 10 us to 1 s (a
+// synced write is tens of microseconds on tmpfs, milliseconds on disks).
+const prometheus::Histogram::BucketBoundaries& FineSecondsBuckets();
+
 // Metrics: one registry, its families, and the HTTP endpoint. Thread-safe.
 class Metrics {
  public:
@@ -65,6 +76,15 @@ class Metrics {
   // Serve.
   void AddGaugeCallback(const std::string& name, const std::string& help,
                         std::function<double()> read);
+  // AddCounterCallback is AddGaugeCallback for a count that only grows (a
+  // Prometheus counter; `name` should end in _total).
+  void AddCounterCallback(const std::string& name, const std::string& help,
+                          std::function<double()> read);
+
+  // registry holds every family; a service registers its own there (with
+  // prometheus::BuildHistogram() etc.). Thread-safe (prometheus-cpp's
+  // registry and families are).
+  prometheus::Registry& registry() { return *registry_; }
 
   // Text exposition of every metric, as /metrics serves it (for tests and
   // debugging). Cost: one pass over all series.

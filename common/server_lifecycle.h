@@ -30,6 +30,7 @@
 #include <vector>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/generic/async_generic_service.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/resource_quota.h>
 #include <grpcpp/security/server_credentials.h>
@@ -91,6 +92,26 @@ struct ServerOptions {
   std::shared_ptr<grpc::ServerCredentials> credentials;
 };
 
+namespace internal {
+
+// The credentials a port is opened with: options.credentials (plaintext
+// when null) with the API-key processor attached when options.api_keys.
+inline std::shared_ptr<grpc::ServerCredentials> ListeningCredentials(
+    const ServerOptions& options) {
+  std::shared_ptr<grpc::ServerCredentials> credentials = options.credentials;
+  if (options.api_keys != nullptr) {
+    if (credentials == nullptr) {
+      credentials = InsecureServerCredentialsWithAuth(options.api_keys->Processor());
+    } else {
+      credentials->SetAuthMetadataProcessor(options.api_keys->Processor());
+    }
+  }
+  if (credentials == nullptr) credentials = grpc::InsecureServerCredentials();
+  return credentials;
+}
+
+}  // namespace internal
+
 // StartedServer: a running server and the port it actually bound.
 // Destroying it stops the readiness monitor before the server.
 struct StartedServer {
@@ -118,15 +139,7 @@ inline absl::StatusOr<StartedServer> StartServer(
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   StartedServer started;
-  std::shared_ptr<grpc::ServerCredentials> credentials = options.credentials;
-  if (options.api_keys != nullptr) {
-    if (credentials == nullptr) {
-      credentials = InsecureServerCredentialsWithAuth(options.api_keys->Processor());
-    } else {
-      credentials->SetAuthMetadataProcessor(options.api_keys->Processor());
-    }
-  }
-  if (credentials == nullptr) credentials = grpc::InsecureServerCredentials();
+  std::shared_ptr<grpc::ServerCredentials> credentials = internal::ListeningCredentials(options);
   builder.AddListeningPort(options.listen_address, credentials, &started.port);
   {
     CallInterceptorOptions calls;
@@ -166,6 +179,96 @@ inline absl::StatusOr<StartedServer> StartServer(
         options.readiness_poll_ms, options.log_name);
   }
   return started;
+}
+
+namespace internal {
+
+// Answers every call of a method the server does not serve (on a loading
+// server: every call but health checks) with UNAVAILABLE and a message.
+class UnavailableGenericService final : public grpc::CallbackGenericService {
+ public:
+  explicit UnavailableGenericService(std::string message) : message_(std::move(message)) {}
+  grpc::ServerGenericBidiReactor* CreateReactor(grpc::GenericCallbackServerContext*) override {
+    class Reactor final : public grpc::ServerGenericBidiReactor {
+     public:
+      explicit Reactor(const std::string& message) {
+        Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, message));
+      }
+      void OnDone() override { delete this; }
+    };
+    return new Reactor(message_);
+  }
+
+ private:
+  const std::string message_;
+};
+
+}  // namespace internal
+
+// LoadingServer: the stand-in StartLoadingServer returns. Destroying it
+// shuts it down at once.
+struct LoadingServer {
+  std::unique_ptr<internal::UnavailableGenericService> service;
+  std::unique_ptr<grpc::Server> server;
+  // The port bound: give it to the real server (ListenAddressWithPort).
+  int port = 0;
+  ~LoadingServer() {
+    if (server) {
+      server->Shutdown(std::chrono::system_clock::now());
+      server->Wait();
+    }
+  }
+};
+
+// StartLoadingServer listens on options.listen_address (same credentials and
+// API keys as the real server) while a service opens its data, so that
+// probes see a live process that is not ready yet: the overall health
+// status (liveness) is SERVING, options.readiness_service (readiness) is
+// NOT_SERVING, and every other call fails with UNAVAILABLE "<log_name> is
+// not ready: <reason>", which clients retry. Once the data is open, start
+// the real server on port() of this one (ListenAddressWithPort) and then
+// destroy this one: gRPC servers bind with SO_REUSEPORT, so the port stays
+// open throughout. Its log line carries no "(port N)" (tests and scripts
+// wait for that in the real server's "serving on" line). Errors as
+// StartServer.
+inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
+    const ServerOptions& options, const std::string& reason) {
+  if (options.listen_address.empty()) {
+    return absl::InvalidArgumentError("listen address is empty");
+  }
+  grpc::EnableDefaultHealthCheckService(true);
+  auto loading = std::make_unique<LoadingServer>();
+  loading->service = std::make_unique<internal::UnavailableGenericService>(
+      absl::StrCat(options.log_name, " is not ready: ", reason));
+  grpc::ServerBuilder builder;
+  std::shared_ptr<grpc::ServerCredentials> credentials = internal::ListeningCredentials(options);
+  builder.AddListeningPort(options.listen_address, credentials, &loading->port);
+  builder.RegisterCallbackGenericService(loading->service.get());
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
+  loading->server = builder.BuildAndStart();
+  if (loading->server == nullptr || loading->port == 0) {
+    loading->server.reset();
+    return absl::UnavailableError(
+        absl::StrCat("cannot listen on ", options.listen_address,
+                     " (address in use or not resolvable)"));
+  }
+  if (grpc::HealthCheckServiceInterface* health = loading->server->GetHealthCheckService()) {
+    health->SetServingStatus(true);
+    if (!options.readiness_service.empty()) {
+      health->SetServingStatus(options.readiness_service, false);
+    }
+  }
+  LogEvent(options.log_name, absl::StrCat("not ready: ", reason, "; health answers on port ",
+                                          loading->port));
+  return loading;
+}
+
+// ListenAddressWithPort returns `address` ("HOST:PORT") with its port
+// replaced by `port`.
+inline std::string ListenAddressWithPort(const std::string& address, int port) {
+  const size_t colon = address.rfind(':');
+  return absl::StrCat(colon == std::string::npos ? address : address.substr(0, colon), ":",
+                      port);
 }
 
 namespace internal {

@@ -99,22 +99,8 @@ ConnectionOptions ConnectionOptionsFromEnvironment() {
   return connection;
 }
 
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses,
-                                                           const ConnectionOptions& connection) {
-  absl::StatusOr<std::string> target = ChannelTarget(addresses);
-  if (!target.ok()) return target.status();
-  grpc::ChannelArguments args;
-  args.SetLoadBalancingPolicyName("round_robin");
-  args.SetMaxReceiveMessageSize(64 << 20);
-  args.SetMaxSendMessageSize(64 << 20);
-  // gRPC's reconnect backoff starts at 1 s and grows to 120 s; while a
-  // subchannel waits, calls fail fast with UNAVAILABLE, so our retries would
-  // all land inside one wait. Reconnecting on the scale of our own backoff
-  // lets a restarted server be found within a retry or two.
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-
+absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(
+    const ConnectionOptions& connection, grpc::ChannelArguments* args) {
   std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
   if (connection.tls) {
     grpc::SslCredentialsOptions ssl;
@@ -138,15 +124,37 @@ absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view add
     }
     credentials = grpc::SslCredentials(ssl);
     if (!connection.tls_server_name.empty()) {
-      args.SetSslTargetNameOverride(connection.tls_server_name);
+      args->SetSslTargetNameOverride(connection.tls_server_name);
     }
   } else if (!connection.tls_ca_file.empty() || !connection.tls_cert_file.empty()) {
     return absl::InvalidArgumentError("TLS files given without TLS (add --tls)");
   }
+  return credentials;
+}
+
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses,
+                                                           const ConnectionOptions& connection) {
+  absl::StatusOr<std::string> target = ChannelTarget(addresses);
+  if (!target.ok()) return target.status();
+  grpc::ChannelArguments args;
+  args.SetLoadBalancingPolicyName("round_robin");
+  args.SetMaxReceiveMessageSize(64 << 20);
+  args.SetMaxSendMessageSize(64 << 20);
+  // gRPC's reconnect backoff starts at 1 s and grows to 120 s; while a
+  // subchannel waits, calls fail fast with UNAVAILABLE, so our retries would
+  // all land inside one wait. Reconnecting on the scale of our own backoff
+  // lets a restarted server be found within a retry or two.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+
+  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials =
+      MakeChannelCredentials(connection, &args);
+  if (!credentials.ok()) return credentials.status();
   std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> factories;
   factories.push_back(std::make_unique<CallInterceptorFactory>(
       std::make_shared<const ConnectionOptions>(connection)));
-  return grpc::experimental::CreateCustomChannelWithInterceptors(*target, credentials, args,
+  return grpc::experimental::CreateCustomChannelWithInterceptors(*target, *credentials, args,
                                                                  std::move(factories));
 }
 

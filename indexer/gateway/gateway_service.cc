@@ -11,11 +11,13 @@
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 #include <grpcpp/support/channel_arguments.h>
+#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "common/call_interceptor.h"
 #include "common/grpc_status.h"
+#include "common/metrics.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace tpr::gateway {
@@ -23,17 +25,80 @@ namespace {
 
 using Endpoint = Shards::Endpoint;
 
-std::shared_ptr<grpc::Channel> MakeShardChannel(const std::string& address,
-                                                const GatewayOptions& options) {
+// Sends the gateway's own API key to the shard and reports each call's end
+// (GatewayOptions::on_shard_call).
+class ShardCallInterceptor final : public grpc::experimental::Interceptor {
+ public:
+  ShardCallInterceptor(grpc::experimental::ClientRpcInfo* info, int shard,
+                       const GatewayOptions* options)
+      : shard_(shard),
+        method_(info->method() != nullptr ? info->method() : ""),
+        options_(options),
+        start_(std::chrono::steady_clock::now()) {}
+
+  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+    using grpc::experimental::InterceptionHookPoints;
+    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_INITIAL_METADATA) &&
+        !options_->shard_api_key.empty()) {
+      methods->GetSendInitialMetadata()->emplace("authorization",
+                                                 "Bearer " + options_->shard_api_key);
+    }
+    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_STATUS) &&
+        options_->on_shard_call) {
+      ShardCall call;
+      call.shard = shard_;
+      call.method = method_;
+      call.code = methods->GetRecvStatus()->error_code();
+      call.seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+      options_->on_shard_call(call);
+    }
+    methods->Proceed();
+  }
+
+ private:
+  const int shard_;
+  const std::string method_;
+  const GatewayOptions* options_;
+  const std::chrono::steady_clock::time_point start_;
+};
+
+class ShardCallInterceptorFactory final
+    : public grpc::experimental::ClientInterceptorFactoryInterface {
+ public:
+  ShardCallInterceptorFactory(int shard, const GatewayOptions* options)
+      : shard_(shard), options_(options) {}
+  grpc::experimental::Interceptor* CreateClientInterceptor(
+      grpc::experimental::ClientRpcInfo* info) override {
+    return new ShardCallInterceptor(info, shard_, options_);
+  }
+
+ private:
+  const int shard_;
+  const GatewayOptions* options_;
+};
+
+// `options` must outlive the channel (Shards owns both).
+std::shared_ptr<grpc::Channel> MakeShardChannel(const std::string& address, int shard,
+                                                const GatewayOptions* options) {
   grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(options.max_message_bytes);
-  args.SetMaxSendMessageSize(options.max_message_bytes);
+  args.SetMaxReceiveMessageSize(options->max_message_bytes);
+  args.SetMaxSendMessageSize(options->max_message_bytes);
   // gRPC's reconnect backoff starts at 1 s and grows to 120 s: a shard that
   // restarts would stay unreachable through this channel for minutes.
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  if (!options->shard_tls_server_name.empty()) {
+    args.SetSslTargetNameOverride(options->shard_tls_server_name);
+  }
+  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> factories;
+  factories.push_back(std::make_unique<ShardCallInterceptorFactory>(shard, options));
+  return grpc::experimental::CreateCustomChannelWithInterceptors(
+      address,
+      options->shard_credentials != nullptr ? options->shard_credentials
+                                            : grpc::InsecureChannelCredentials(),
+      args, std::move(factories));
 }
 
 // Codes that describe the caller's request, not the shard's health: passed
@@ -79,6 +144,32 @@ void AddStats(const tpr::v1::SearchStats& from, tpr::v1::SearchStats* to) {
 
 }  // namespace
 
+std::function<void(const ShardCall&)> ShardCallMetrics(tpr::common::Metrics& metrics) {
+  prometheus::Family<prometheus::Histogram>& duration =
+      prometheus::BuildHistogram()
+          .Name("tpr_gateway_shard_duration_seconds")
+          .Help("Calls of the gateway to its shards, by shard and method (not cancelled ones)")
+          .Register(metrics.registry());
+  prometheus::Family<prometheus::Counter>& errors =
+      prometheus::BuildCounter()
+          .Name("tpr_gateway_shard_errors_total")
+          .Help("Calls of the gateway to its shards that failed, by shard, method and code")
+          .Register(metrics.registry());
+  return [&duration, &errors](const ShardCall& call) {
+    if (call.code == grpc::StatusCode::CANCELLED) return;
+    const std::string shard = std::to_string(call.shard);
+    duration.Add({{"shard", shard}, {"method", call.method}}, tpr::common::SecondsBuckets())
+        .Observe(call.seconds);
+    if (call.code != grpc::StatusCode::OK) {
+      errors
+          .Add({{"shard", shard},
+                {"method", call.method},
+                {"code", absl::StatusCodeToString(static_cast<absl::StatusCode>(call.code))}})
+          .Increment();
+    }
+  };
+}
+
 // ---------------------------------------------------------------------------
 // Shards.
 
@@ -93,7 +184,7 @@ Shards::Shards(const GatewayOptions& options) : options_(options) {
       endpoint->shard = static_cast<int>(s);
       endpoint->address = addresses[i];
       endpoint->primary = i == 0;
-      endpoint->channel = MakeShardChannel(addresses[i], options_);
+      endpoint->channel = MakeShardChannel(addresses[i], static_cast<int>(s), &options_);
       endpoint->stub = tpr::v1::Indexer::NewStub(endpoint->channel);
       endpoint->serving = endpoint->primary;
       if (endpoint->primary) primaries_.push_back(endpoint.get());

@@ -40,6 +40,12 @@
 // cancellation propagate to the shards, and carries the call's request id
 // (x-request-id, common/call_interceptor.h) into the shards' logs.
 //
+// Security and observation (issue 11): the shard channels use the
+// credentials in GatewayOptions (TLS, optionally a client certificate for
+// shards that demand mutual TLS) and send shard_api_key as `authorization:
+// Bearer` with every call; every shard call ends in on_shard_call (latency
+// and code per shard; ShardCallMetrics turns it into Prometheus families).
+//
 // Health: a background thread asks every address's grpc.health.v1 service
 // for the readiness of "tpr.v1.Indexer" (common/health.h) every
 // health_interval_ms; a read goes only to addresses whose last answer
@@ -61,12 +67,28 @@
 #include <vector>
 
 #include <grpcpp/channel.h>
+#include <grpcpp/security/credentials.h>
 
 #include "absl/status/status.h"
 #include "indexer/gateway/shard_map.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
+namespace tpr::common {
+class Metrics;
+}  // namespace tpr::common
+
 namespace tpr::gateway {
+
+// ShardCall: one finished call of the gateway to a shard address.
+struct ShardCall {
+  int shard = 0;
+  // Full method name, e.g. "/tpr.v1.Indexer/Search" (health checks
+  // "/grpc.health.v1.Health/Check").
+  std::string method;
+  grpc::StatusCode code = grpc::StatusCode::OK;
+  // From the call's creation to its status, in seconds.
+  double seconds = 0;
+};
 
 // GatewayOptions: the shard map and how the gateway talks to the shards.
 struct GatewayOptions {
@@ -84,7 +106,30 @@ struct GatewayOptions {
   // Receives one line per notable event (an address going up or down, a
   // failed call that is not the caller's fault). Default: none.
   std::function<void(const std::string&)> log;
+  // Credentials of the shard channels: TLS (tpr::client::MakeChannelCredentials
+  // builds them from the --shard-tls* flags); nullptr: plaintext. Default
+  // nullptr.
+  std::shared_ptr<grpc::ChannelCredentials> shard_credentials;
+  // Name the shards' certificates carry when it differs from the host in
+  // their addresses. Default empty (the address's host).
+  std::string shard_tls_server_name;
+  // API key sent to the shards with every call (`authorization: Bearer`);
+  // needs role write for writes. Empty: none. Default empty.
+  std::string shard_api_key;
+  // Called when each call to a shard ends (health checks included), on the
+  // thread that ends it; must be thread-safe and quick. Default none.
+  std::function<void(const ShardCall&)> on_shard_call;
 };
+
+// ShardCallMetrics returns an on_shard_call that records into `metrics`
+// (which must outlive every call):
+//   tpr_gateway_shard_duration_seconds{shard,method}   histogram
+//   tpr_gateway_shard_errors_total{shard,method,code}  counter
+// Calls that end CANCELLED are neither timed nor errors: the gateway
+// cancels the shard streams a search no longer needs, and a caller's own
+// cancellation is not a shard's fault. Labels are bounded by the shard map
+// (shard index) and the API (method, code). Thread-safe.
+std::function<void(const ShardCall&)> ShardCallMetrics(tpr::common::Metrics& metrics);
 
 // Shards: the channels to every shard address and their health. Thread-safe.
 class Shards {

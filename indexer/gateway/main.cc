@@ -6,6 +6,8 @@
 //   tpr-gateway --listen 127.0.0.1:7003 --shard 127.0.0.1:7100
 //               --shard 127.0.0.1:7110,127.0.0.1:7111   (shard 1 has a replica)
 //   tpr-gateway --listen 0.0.0.0:7003 --shard-map /etc/tpr/shards.txt
+//   tpr-gateway ... --shard-tls --shard-tls-ca ca.pem --shard-api-key KEY
+//               (or TPR_GATEWAY_SHARD_API_KEY): how it reaches secured shards
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -19,6 +21,7 @@
 #include "common/server_lifecycle.h"
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
+#include "tpr/client.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"tpr-gateway: one tpr.v1.Indexer endpoint over sharded tpr-indexer processes"};
@@ -51,9 +54,26 @@ int main(int argc, char** argv) {
                  "On SIGTERM, how long in-flight calls may finish (ms)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  // How the gateway reaches the shards: the SDK's connection options.
+  tpr::client::ConnectionOptions shard_connection;
+  app.add_flag("--shard-tls", shard_connection.tls, "speak TLS to the shards");
+  app.add_option("--shard-tls-ca", shard_connection.tls_ca_file,
+                 "PEM authority the shards' certificates are checked against (default: the "
+                 "system's roots)");
+  app.add_option("--shard-tls-cert", shard_connection.tls_cert_file,
+                 "PEM client certificate for shards that demand mutual TLS (with "
+                 "--shard-tls-key)");
+  app.add_option("--shard-tls-key", shard_connection.tls_key_file,
+                 "PEM private key of --shard-tls-cert");
+  app.add_option("--shard-tls-server-name", shard_connection.tls_server_name,
+                 "name the shards' certificates carry, when not the host in their addresses");
+  app.add_option("--shard-api-key", shard_connection.api_key,
+                 "API key sent to the shards (role write, admin for backups); prefer the "
+                 "environment variable TPR_GATEWAY_SHARD_API_KEY, which ps does not show");
   tpr::common::ServerFlags ops_flags;
   tpr::common::AddServerFlags(app, &ops_flags);
-  tpr::common::ConfigSupport config = tpr::common::AddConfigSupport(app, "TPR_GATEWAY_");
+  tpr::common::ConfigSupport config =
+      tpr::common::AddConfigSupport(app, "TPR_GATEWAY_", {"shard-api-key"});
   CLI11_PARSE(app, argc, argv);
   if (std::optional<int> exit_code =
           tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
@@ -90,6 +110,21 @@ int main(int argc, char** argv) {
   }
   options.shards = std::move(*map);
   options.log = log;
+  {
+    grpc::ChannelArguments unused;  // the server name is passed on below
+    absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials =
+        tpr::client::MakeChannelCredentials(shard_connection, &unused);
+    if (!credentials.ok()) {
+      log(absl::StrCat("--shard-tls*: ", credentials.status().message()));
+      return 2;
+    }
+    options.shard_credentials = *std::move(credentials);
+    options.shard_tls_server_name = shard_connection.tls_server_name;
+    options.shard_api_key = shard_connection.api_key;
+  }
+  if (server_options.metrics != nullptr) {
+    options.on_shard_call = tpr::gateway::ShardCallMetrics(*server_options.metrics);
+  }
   for (size_t s = 0; s < options.shards.shards.size(); ++s) {
     const tpr::gateway::ShardAddresses& shard = options.shards.shards[s];
     std::string replicas;

@@ -377,6 +377,8 @@ size_t SignatureIndex::indexed() const {
 
 size_t SignatureIndex::buffered() const { return snapshot()->buffer.size(); }
 
+size_t SignatureIndex::tombstoned() const { return snapshot()->tombstones.size(); }
+
 size_t SignatureIndex::MemoryBytes() const {
   const std::shared_ptr<const Snapshot> s = snapshot();
   const TreePart& t = *s->tree;
@@ -502,6 +504,7 @@ void SignatureIndex::Rebuild() {
     }
   }
   snapshot_ = std::move(next);
+  rebuilds_.fetch_add(1, std::memory_order_relaxed);
 }
 
 // ---------------------------------------------------------------------------

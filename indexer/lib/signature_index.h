@@ -125,6 +125,12 @@ class SignatureIndex {
   size_t size() const;
   size_t indexed() const;
   size_t buffered() const;
+  // tombstoned returns the tree entries removed or replaced since the last
+  // rebuild (searches skip them; a rebuild drops them). O(1).
+  size_t tombstoned() const;
+  // rebuilds returns how many tree rebuilds completed since construction
+  // (background or called). O(1); thread-safe.
+  uint64_t rebuilds() const { return rebuilds_.load(std::memory_order_relaxed); }
   // MemoryBytes returns the heap bytes of the current snapshot: prepared
   // signatures, centroid table, VP-tree, ids and id map (an estimate for
   // the containers' node overheads). O(size()); thread-safe.
@@ -195,6 +201,7 @@ class SignatureIndex {
   bool background_running_ = false;               // guarded by mu_
   std::condition_variable background_done_;
   std::atomic<bool> cancel_{false};
+  std::atomic<uint64_t> rebuilds_{0};
 };
 
 }  // namespace tpr::index

@@ -196,6 +196,10 @@ class IndexerCore {
   // index returns the in-memory index (for tests and benchmarks).
   const tpr::index::SignatureIndex& index() const { return *index_; }
 
+  // engine_stats returns the store's RocksDB counters and sizes (metrics;
+  // Storage::engine_stats). Thread-safe.
+  EngineStats engine_stats() const { return storage_->engine_stats(); }
+
  private:
   IndexerCore(CoreOptions options, std::unique_ptr<Storage> storage);
   void Log(const std::string& message) const;

@@ -11,6 +11,7 @@
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
 #include "common/config.h"
+#include "common/metrics.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "indexer/service/indexer_core.h"
@@ -64,6 +65,37 @@ int main(int argc, char** argv) {
   core_options.data_dir = data_dir;
   core_options.max_k = max_k;
   core_options.log = log;
+  if (server_options.metrics != nullptr) {
+    // Storage latencies, as histograms (RocksDB's own are percentiles,
+    // which replicas cannot aggregate).
+    prometheus::Registry& registry = server_options.metrics->registry();
+    prometheus::Histogram* write_seconds =
+        &prometheus::BuildHistogram()
+             .Name("tpr_indexer_storage_write_duration_seconds")
+             .Help("Each durable model write: lookups, RocksDB write with its log sync, "
+                   "acknowledgement record")
+             .Register(registry)
+             .Add({}, tpr::common::FineSecondsBuckets());
+    prometheus::Histogram* sync_seconds =
+        &prometheus::BuildHistogram()
+             .Name("tpr_indexer_storage_wal_sync_duration_seconds")
+             .Help("Each fsync of RocksDB's write-ahead log")
+             .Register(registry)
+             .Add({}, tpr::common::FineSecondsBuckets());
+    core_options.storage.on_write = [write_seconds](double s) { write_seconds->Observe(s); };
+    core_options.storage.on_wal_sync = [sync_seconds](double s) { sync_seconds->Observe(s); };
+  }
+  // While the data directory opens (a store scan, possibly a tree build),
+  // the port already answers health checks: alive, not ready; other calls
+  // get UNAVAILABLE. The real server then takes the same port over.
+  absl::StatusOr<std::unique_ptr<tpr::common::LoadingServer>> loading =
+      tpr::common::StartLoadingServer(server_options, "loading the data directory");
+  if (!loading.ok()) {
+    log(loading.status().ToString());
+    return 1;
+  }
+  server_options.listen_address =
+      tpr::common::ListenAddressWithPort(server_options.listen_address, (*loading)->port);
   absl::StatusOr<std::unique_ptr<tpr::indexer::IndexerCore>> core =
       tpr::indexer::IndexerCore::Open(core_options);
   if (!core.ok()) {
@@ -73,6 +105,40 @@ int main(int argc, char** argv) {
   if (server_options.metrics != nullptr) {
     const tpr::indexer::IndexerCore* c = core->get();
     tpr::common::Metrics& m = *server_options.metrics;
+    const tpr::index::SignatureIndex* index = &c->index();
+    m.AddGaugeCallback("tpr_indexer_tombstoned", "Deleted or replaced entries still in the VP-tree",
+                       [index] { return static_cast<double>(index->tombstoned()); });
+    m.AddCounterCallback("tpr_indexer_tree_rebuilds_total", "VP-tree rebuilds completed",
+                         [index] { return static_cast<double>(index->rebuilds()); });
+    m.AddGaugeCallback("tpr_indexer_memory_bytes", "Heap bytes of the in-memory index",
+                       [index] { return static_cast<double>(index->MemoryBytes()); });
+    // RocksDB's counters and sizes (one read per series at each scrape; each
+    // is a few property reads).
+    auto engine = [c](uint64_t tpr::indexer::EngineStats::*field) {
+      return [c, field] { return static_cast<double>(c->engine_stats().*field); };
+    };
+    using tpr::indexer::EngineStats;
+    m.AddCounterCallback("tpr_indexer_storage_stall_seconds_total",
+                         "Time RocksDB delayed or stopped writes (STALL_MICROS)", [c] {
+                           return static_cast<double>(c->engine_stats().stall_micros) / 1e6;
+                         });
+    m.AddCounterCallback("tpr_indexer_storage_delayed_stalls_total",
+                         "Times RocksDB entered the delayed-write condition",
+                         engine(&EngineStats::delayed_stalls));
+    m.AddCounterCallback("tpr_indexer_storage_stopped_stalls_total",
+                         "Times RocksDB entered the stopped-write condition",
+                         engine(&EngineStats::stopped_stalls));
+    m.AddCounterCallback("tpr_indexer_storage_wal_syncs_total",
+                         "Syncs of RocksDB's write-ahead log", engine(&EngineStats::wal_syncs));
+    m.AddGaugeCallback("tpr_indexer_storage_live_data_bytes",
+                       "RocksDB's estimate of its live data (rocksdb.estimate-live-data-size)",
+                       engine(&EngineStats::live_data_bytes));
+    m.AddGaugeCallback("tpr_indexer_storage_sst_bytes",
+                       "RocksDB table files (rocksdb.total-sst-files-size)",
+                       engine(&EngineStats::sst_bytes));
+    m.AddGaugeCallback("tpr_indexer_storage_memtable_bytes",
+                       "RocksDB memtables (rocksdb.cur-size-all-mem-tables)",
+                       engine(&EngineStats::memtable_bytes));
     m.AddGaugeCallback("tpr_indexer_models", "Models stored",
                        [c] { return static_cast<double>(c->Stats().models()); });
     m.AddGaugeCallback("tpr_indexer_indexed", "Models in the VP-tree proper",
@@ -93,6 +159,7 @@ int main(int argc, char** argv) {
     log(started.status().ToString());
     return 1;
   }
+  loading->reset();  // the real server holds the port now
   const int code = tpr::common::ServeUntilSignal(*started, server_options);
   started->server.reset();
   (*core)->Close();

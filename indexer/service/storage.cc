@@ -7,6 +7,7 @@
 #include <unordered_map>
 #include <cstring>
 #include <filesystem>
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
@@ -21,7 +22,9 @@
 #include "rocksdb/db.h"
 #include "rocksdb/env.h"
 #include "rocksdb/filter_policy.h"
+#include "rocksdb/listener.h"
 #include "rocksdb/options.h"
+#include "rocksdb/statistics.h"
 #include "rocksdb/table.h"
 #include "rocksdb/write_batch.h"
 
@@ -214,6 +217,35 @@ std::vector<rocksdb::ColumnFamilyDescriptor> Families() {
   return {{rocksdb::kDefaultColumnFamilyName, meta_options}, {kModelsFamily, models_options}};
 }
 
+// Counts write stalls and times the write-ahead log's syncs for metrics
+// (StorageOptions::on_wal_sync, EngineStats). File-I/O notifications are
+// needed for the syncs; RocksDB then also reports reads and writes, which
+// this listener ignores (a timestamp pair per I/O).
+class EngineListener final : public rocksdb::EventListener {
+ public:
+  explicit EngineListener(std::function<void(double)> on_wal_sync)
+      : on_wal_sync_(std::move(on_wal_sync)) {}
+
+  void OnStallConditionsChanged(const rocksdb::WriteStallInfo& info) override {
+    if (info.condition.cur == rocksdb::WriteStallCondition::kDelayed) ++delayed;
+    if (info.condition.cur == rocksdb::WriteStallCondition::kStopped) ++stopped;
+  }
+  void OnFileSyncFinish(const rocksdb::FileOperationInfo& info) override {
+    // Write-ahead logs are the *.log files (table files are *.sst).
+    if (on_wal_sync_ && info.path.size() > 4 &&
+        info.path.compare(info.path.size() - 4, 4, ".log") == 0) {
+      on_wal_sync_(std::chrono::duration<double>(info.duration).count());
+    }
+  }
+  bool ShouldBeNotifiedOnFileIO() override { return static_cast<bool>(on_wal_sync_); }
+
+  std::atomic<uint64_t> delayed{0};
+  std::atomic<uint64_t> stopped{0};
+
+ private:
+  const std::function<void(double)> on_wal_sync_;
+};
+
 }  // namespace
 
 struct Storage::Impl {
@@ -222,6 +254,9 @@ struct Storage::Impl {
   std::unique_ptr<rocksdb::DB> db;
   rocksdb::ColumnFamilyHandle* meta = nullptr;    // "default"
   rocksdb::ColumnFamilyHandle* models = nullptr;  // "models"
+  // RocksDB's statistics and our listener (EngineStats), read-write open.
+  std::shared_ptr<rocksdb::Statistics> statistics;
+  std::shared_ptr<EngineListener> listener;
   // Sequence numbers are assigned under this mutex so that the order of
   // numbers equals the order of the RocksDB writes that carry them; the
   // model count and the ACKNOWLEDGED record follow the same order.
@@ -330,7 +365,15 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
     TPR_RETURN_IF_ERROR(checked);
   }
 
-  rocksdb::Status s = rocksdb::DB::Open(db_options, dir, Families(), &handles, &raw);
+  // Statistics (tickers only: no timers, whose clock reads cost on every
+  // operation) and the listener, on the serving open.
+  rocksdb::Options serving_options = db_options;
+  serving_options.statistics = rocksdb::CreateDBStatistics();
+  serving_options.statistics->set_stats_level(rocksdb::StatsLevel::kExceptHistogramOrTimers);
+  impl->statistics = serving_options.statistics;
+  impl->listener = std::make_shared<EngineListener>(options.on_wal_sync);
+  serving_options.listeners.push_back(impl->listener);
+  rocksdb::Status s = rocksdb::DB::Open(serving_options, dir, Families(), &handles, &raw);
   if (!s.ok()) return open_failed(s);
   impl->db.reset(raw);
   impl->meta = handles[0];
@@ -377,6 +420,7 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   std::lock_guard<std::mutex> lock(impl_->write_mu);
   uint64_t seq = impl_->last_seq.load();
   int64_t models = static_cast<int64_t>(impl_->model_count.load());
+  const auto started = std::chrono::steady_clock::now();
   // Whether each id is stored, as of this batch's earlier writes: the model
   // count changes by puts of new ids and deletes of stored ones.
   std::unordered_map<std::string, bool> present;
@@ -425,6 +469,10 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   // close, after the flush.
   if (impl_->options.sync_writes) {
     TPR_RETURN_IF_ERROR(impl_->ack->Record({writes_after, static_cast<uint64_t>(models)}));
+  }
+  if (impl_->options.on_write) {
+    impl_->options.on_write(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
   }
   return absl::OkStatus();
 }
@@ -583,6 +631,32 @@ int64_t Storage::DiskBytes() const {
     }
   }
   return total;
+}
+
+EngineStats Storage::engine_stats() const {
+  EngineStats stats;
+  if (impl_->statistics) {
+    stats.stall_micros = impl_->statistics->getTickerCount(rocksdb::STALL_MICROS);
+    stats.wal_syncs = impl_->statistics->getTickerCount(rocksdb::WAL_FILE_SYNCED);
+  }
+  if (impl_->listener) {
+    stats.delayed_stalls = impl_->listener->delayed.load();
+    stats.stopped_stalls = impl_->listener->stopped.load();
+  }
+  for (rocksdb::ColumnFamilyHandle* family : {impl_->meta, impl_->models}) {
+    if (family == nullptr) continue;
+    uint64_t value = 0;
+    if (impl_->db->GetIntProperty(family, "rocksdb.estimate-live-data-size", &value)) {
+      stats.live_data_bytes += value;
+    }
+    if (impl_->db->GetIntProperty(family, "rocksdb.total-sst-files-size", &value)) {
+      stats.sst_bytes += value;
+    }
+    if (impl_->db->GetIntProperty(family, "rocksdb.cur-size-all-mem-tables", &value)) {
+      stats.memtable_bytes += value;
+    }
+  }
+  return stats;
 }
 
 }  // namespace tpr::indexer

@@ -61,6 +61,33 @@ struct StorageOptions {
   bool sync_writes = true;
   // Create the directory and database when missing. Default true.
   bool create_if_missing = true;
+  // Observers for metrics: the duration in seconds of each Write (existence
+  // lookups, the RocksDB write with its log sync, the ACKNOWLEDGED record;
+  // called on the writing thread after a successful write) and of each
+  // fsync of RocksDB's write-ahead log (called on the thread RocksDB syncs
+  // on). Must be thread-safe and quick. Default none.
+  std::function<void(double seconds)> on_write;
+  std::function<void(double seconds)> on_wal_sync;
+};
+
+// EngineStats: RocksDB's own counters (its statistics and an event
+// listener) and sizes (its properties), for metrics.
+struct EngineStats {
+  // Time writes spent delayed or stopped by RocksDB's write controller
+  // (ticker STALL_MICROS), in microseconds.
+  uint64_t stall_micros = 0;
+  // Times a column family entered the delayed or the stopped write
+  // condition (too many memtables or level-0 files, pending compaction).
+  uint64_t delayed_stalls = 0;
+  uint64_t stopped_stalls = 0;
+  // Syncs of the write-ahead log (ticker WAL_FILE_SYNCED).
+  uint64_t wal_syncs = 0;
+  // Sum over both column families of the properties
+  // rocksdb.estimate-live-data-size, rocksdb.total-sst-files-size and
+  // rocksdb.cur-size-all-mem-tables.
+  uint64_t live_data_bytes = 0;
+  uint64_t sst_bytes = 0;
+  uint64_t memtable_bytes = 0;
 };
 
 // PersistedTree: the VP-tree bytes of the last persist and the write
@@ -154,6 +181,10 @@ class Storage {
   // DiskBytes returns the bytes the data directory occupies on disk (sum of
   // its files' sizes). Cost: one directory listing. Thread-safe.
   int64_t DiskBytes() const;
+
+  // engine_stats returns RocksDB's counters and sizes (see EngineStats).
+  // Cost: a few property reads. Thread-safe.
+  EngineStats engine_stats() const;
 
  private:
   struct Impl;

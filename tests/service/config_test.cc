@@ -115,6 +115,26 @@ TEST(ConfigTest, DeployExamplesLoad) {
                             "tpr-extractor.toml --print-config"));
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_EQ(ParseConfig(r.out)["listen"], "\"0.0.0.0:7001\"") << r.out;
+  r = RunShell(absl::StrCat(BinaryPath("tpr-gateway"), " --config ", deploy,
+                            "tpr-gateway.toml --print-config"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(ParseConfig(r.out)["shard-map"], "\"/etc/tpr/shards.txt\"") << r.out;
+  EXPECT_EQ(ParseConfig(r.out)["metrics-listen"], "\"0.0.0.0:9103\"") << r.out;
+}
+
+TEST(ConfigTest, GatewayTakesEnvironmentAndMasksItsShardKey) {
+  // The shard key from the environment, masked; a flag beats the
+  // environment, which beats the default.
+  const ShellResult r = RunShell(absl::StrCat(
+      "TPR_GATEWAY_SHARD_API_KEY=tpr_verysecret TPR_GATEWAY_HEALTH_INTERVAL_MS=250 "
+      "TPR_GATEWAY_LOG_FORMAT=json ",
+      BinaryPath("tpr-gateway"), " --shard 127.0.0.1:1 --log-format text --print-config"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("verysecret"), std::string::npos) << r.out;
+  std::map<std::string, std::string> config = ParseConfig(r.out);
+  EXPECT_EQ(config["shard-api-key"], "\"***\"") << r.out;
+  EXPECT_EQ(config["health-interval-ms"], "250") << r.out;
+  EXPECT_EQ(config["log-format"], "\"text\"") << r.out;
 }
 
 TEST(ConfigTest, PrintConfigMasksSecrets) {

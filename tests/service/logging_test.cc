@@ -4,7 +4,10 @@
 // log line; a missing or malformed one is replaced by a generated id; the
 // API key never reaches the log. Liveness ("") and readiness
 // ("tpr.v1.Indexer") are SERVING once the binary serves; in-process, the
-// readiness check drives the per-service status and draining turns it off.
+// readiness check drives the per-service status and draining turns it off;
+// while a service loads, a stand-in on its port reports alive-not-ready and
+// refuses calls with UNAVAILABLE, and the real server takes the port over
+// without closing it.
 #include <atomic>
 #include <mutex>
 #include <string>
@@ -122,6 +125,48 @@ TEST(LoggingTest, BinaryReportsLivenessAndReadiness) {
   EXPECT_EQ(HealthStatus(i, "").value_or(-1), 1);
   EXPECT_EQ(HealthStatus(i, "tpr.v1.Indexer").value_or(-1), 1);
   EXPECT_EQ(HealthStatus(i, "tpr.v1.Nothing").status().code(), absl::StatusCode::kNotFound);
+  // The indexer answered health checks while it loaded, on the same port.
+  EXPECT_NE(ReadText(dir.path() + "/i.log")
+                .find(absl::StrCat("not ready: loading the data directory; health answers on port ",
+                                   indexer.address().substr(indexer.address().rfind(':') + 1))),
+            std::string::npos)
+      << ReadText(dir.path() + "/i.log");
+}
+
+TEST(LoggingTest, WhileLoadingAliveNotReadyAndThePortIsHandedOver) {
+  common::ServerOptions options;
+  options.readiness_service = "tpr.v1.Indexer";
+  options.log_name = "loading-test";
+  absl::StatusOr<std::unique_ptr<common::LoadingServer>> loading =
+      common::StartLoadingServer(options, "loading the data directory");
+  ASSERT_TRUE(loading.ok()) << loading.status();
+  const std::string address = absl::StrCat("127.0.0.1:", (*loading)->port);
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  EXPECT_EQ(HealthStatus(channel, "").value_or(-1), 1) << "alive";
+  EXPECT_EQ(HealthStatus(channel, "tpr.v1.Indexer").value_or(-1), 2) << "not ready";
+  auto stub = tpr::v1::Indexer::NewStub(channel);
+  {
+    grpc::ClientContext context;
+    tpr::v1::StatsResponse stats;
+    const grpc::Status status = stub->Stats(&context, {}, &stats);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
+    EXPECT_EQ(status.error_message(), "loading-test is not ready: loading the data directory");
+  }
+  // The real server binds the same port while the stand-in still holds it.
+  options.listen_address = common::ListenAddressWithPort("127.0.0.1:0", (*loading)->port);
+  EXPECT_EQ(options.listen_address, address);
+  absl::StatusOr<common::StartedServer> started = common::StartServer(options, {});
+  ASSERT_TRUE(started.ok()) << started.status();
+  EXPECT_EQ(started->port, (*loading)->port);
+  loading->reset();
+  // From now on the same address (same channel, reconnecting) is ready.
+  bool ready = false;
+  for (int i = 0; i < 200 && !ready; ++i) {
+    ready = HealthStatus(channel, "tpr.v1.Indexer").value_or(-1) == 1;
+    if (!ready) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(ready);
+  common::ShutdownGracefully(*started, options);
 }
 
 TEST(LoggingTest, ReadinessFollowsTheCheckAndDrainingEndsIt) {

@@ -1,13 +1,15 @@
 // Helpers for the operations tests (config, logging, auth, TLS, metrics):
 // a health check for a named service, running a command and capturing its
-// output, reading a file.
+// output, reading a file, test certificates, scraping /metrics.
 #ifndef TPR_TESTS_SERVICE_OPS_TESTING_H_
 #define TPR_TESTS_SERVICE_OPS_TESTING_H_
 
 #include <sys/wait.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <memory>
 #include <sstream>
@@ -22,7 +24,10 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/string_view.h"
 
 namespace tpr::testing {
 
@@ -87,6 +92,66 @@ inline ShellResult RunShell(const std::string& command) {
   const int status = pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return result;
+}
+
+// Makes, under `dir`: ca1 and ca2 (self-signed authorities), server1 (for
+// localhost/127.0.0.1, signed by ca1), server2 (same names, signed by ca2),
+// client1 (signed by ca1), client2 (signed by ca2). Each X has X.pem, X.key.
+inline bool MakeCertificates(const std::string& dir) {
+  const std::string ec = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
+  std::string script = absl::StrCat(
+      "set -e; cd ", dir, "; ",
+      "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > san.ext; ",
+      "printf 'extendedKeyUsage=clientAuth\\n' > client.ext; ");
+  for (const char* ca : {"ca1", "ca2"}) {
+    absl::StrAppend(&script, "openssl req -x509 ", ec, " -keyout ", ca, ".key -out ", ca,
+                    ".pem -days 2 -subj /CN=tpr-test-", ca, " 2>/dev/null; ");
+  }
+  for (const char* who : {"server1", "server2", "client1", "client2"}) {
+    const std::string ca = "ca" + std::string(who).substr(std::string(who).size() - 1);
+    const bool server = std::string(who).rfind("server", 0) == 0;
+    absl::StrAppend(&script, "openssl req ", ec, " -keyout ", who, ".key -out ", who,
+                    ".csr -subj /CN=", server ? "localhost" : who, " 2>/dev/null; ",
+                    "openssl x509 -req -in ", who, ".csr -CA ", ca, ".pem -CAkey ", ca,
+                    ".key -CAcreateserial -days 2 -out ", who, ".pem -extfile ",
+                    server ? "san.ext" : "client.ext", " 2>/dev/null; ");
+  }
+  return RunShell(script).exit_code == 0;
+}
+
+// The value of the sample `name` whose labels include every one of
+// `labels` ("code=\"OK\""), or NaN when absent.
+inline double Sample(const std::string& scrape, const std::string& name,
+              const std::vector<std::string>& labels = {}) {
+  for (absl::string_view line : absl::StrSplit(scrape, '\n')) {
+    if (line.empty() || line[0] == '#') continue;
+    const size_t space = line.rfind(' ');
+    if (space == absl::string_view::npos) continue;
+    absl::string_view series = line.substr(0, space);
+    const absl::string_view bare = series.substr(0, series.find('{'));
+    if (bare != name) continue;
+    bool all = true;
+    for (const std::string& label : labels) {
+      if (series.find(label) == absl::string_view::npos) all = false;
+    }
+    if (!all) continue;
+    double value;
+    if (absl::SimpleAtod(line.substr(space + 1), &value)) return value;
+  }
+  return std::nan("");
+}
+
+// The port from the "metrics: http://HOST:PORT/metrics" log line, or 0.
+inline int MetricsPort(const std::string& log) {
+  const size_t at = log.find("metrics: http://");
+  if (at == std::string::npos) return 0;
+  const size_t colon = log.find(':', at + 16);
+  return colon == std::string::npos ? 0 : std::atoi(log.c_str() + colon + 1);
+}
+
+// ScrapeMetrics fetches http://127.0.0.1:PORT/metrics with curl.
+inline ShellResult ScrapeMetrics(int port) {
+  return RunShell(absl::StrCat("curl -sf http://127.0.0.1:", port, "/metrics"));
 }
 
 }  // namespace tpr::testing

@@ -5,12 +5,16 @@
 // to the SearchStats the client received, the stage histograms to the
 // response's timings, the upload histogram to the bytes sent, and the
 // scrape-time gauges to the index's size. A busy or bad metrics address is
-// refused at start.
+// refused at start. The index and storage metrics follow a known history:
+// a batch past the rebuild threshold (one tree rebuild), then overwrites
+// and deletes of tree entries (tombstones), each write timed and synced.
 #include <sys/socket.h>
 
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -19,65 +23,40 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
 #include "tests/service/extsvc_test_util.h"
+#include "tests/service/indexer_testing.h"
 #include "tests/service/ops_testing.h"
 #include "tpr/client.h"
 
 namespace tpr::testing {
 namespace {
 
-// The value of the sample `name` whose labels include every one of
-// `labels` ("code=\"OK\""), or NaN when absent.
-double Sample(const std::string& scrape, const std::string& name,
-              const std::vector<std::string>& labels = {}) {
-  for (absl::string_view line : absl::StrSplit(scrape, '\n')) {
-    if (line.empty() || line[0] == '#') continue;
-    const size_t space = line.rfind(' ');
-    if (space == absl::string_view::npos) continue;
-    absl::string_view series = line.substr(0, space);
-    const absl::string_view bare = series.substr(0, series.find('{'));
-    if (bare != name) continue;
-    bool all = true;
-    for (const std::string& label : labels) {
-      if (series.find(label) == absl::string_view::npos) all = false;
-    }
-    if (!all) continue;
-    double value;
-    if (absl::SimpleAtod(line.substr(space + 1), &value)) return value;
-  }
-  return std::nan("");
-}
-
-// The port from the "metrics: http://HOST:PORT/metrics" log line, or 0.
-int MetricsPort(const std::string& log) {
-  const size_t at = log.find("metrics: http://");
-  if (at == std::string::npos) return 0;
-  const size_t colon = log.find(':', at + 16);
-  return colon == std::string::npos ? 0 : std::atoi(log.c_str() + colon + 1);
-}
-
 std::string Scrape(int port) {
-  const ShellResult r = RunShell(absl::StrCat("curl -sf http://127.0.0.1:", port, "/metrics"));
+  const ShellResult r = ScrapeMetrics(port);
   EXPECT_EQ(r.exit_code, 0) << r.out;
   return r.out;
+}
+
+// Starts `binary` (with `args`) serving metrics on a free port, logging to
+// DIR/NAME.log; returns the metrics port, 0 when it did not start.
+int StartWithMetrics(ServiceProcess* process, const std::string& binary,
+                     std::vector<std::string> args, const TempDir& dir, const std::string& name) {
+  args.push_back("--metrics-listen");
+  args.push_back("127.0.0.1:0");
+  const std::string log = dir.path() + "/" + name + ".log";
+  const absl::Status started = process->Start(BinaryPath(binary), args, log);
+  EXPECT_TRUE(started.ok()) << started << ReadText(log);
+  return started.ok() ? MetricsPort(ReadText(log)) : 0;
 }
 
 TEST(MetricsTest, ScrapedValuesMatchKnownActions) {
   TempDir dir;
   ServiceProcess extractor;
-  ASSERT_TRUE(extractor
-                  .Start(BinaryPath("tpr-extractor"), {"--metrics-listen", "127.0.0.1:0"},
-                         dir.path() + "/extractor.log")
-                  .ok());
+  const int extractor_port = StartWithMetrics(&extractor, "tpr-extractor", {}, dir, "extractor");
   ServiceProcess indexer;
-  ASSERT_TRUE(indexer
-                  .Start(BinaryPath("tpr-indexer"),
-                         {"--data-dir", dir.path() + "/data", "--metrics-listen", "127.0.0.1:0"},
-                         dir.path() + "/indexer.log")
-                  .ok());
-  const int extractor_port = MetricsPort(ReadText(extractor.log_path()));
-  const int indexer_port = MetricsPort(ReadText(indexer.log_path()));
-  ASSERT_GT(extractor_port, 0) << ReadText(extractor.log_path());
-  ASSERT_GT(indexer_port, 0) << ReadText(indexer.log_path());
+  const int indexer_port =
+      StartWithMetrics(&indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir, "indexer");
+  ASSERT_GT(extractor_port, 0);
+  ASSERT_GT(indexer_port, 0);
 
   // Nothing yet: no call counted, no model.
   std::string before = Scrape(indexer_port);
@@ -160,6 +139,84 @@ TEST(MetricsTest, ScrapedValuesMatchKnownActions) {
         << stage;
   }
   EXPECT_EQ(Sample(e, "tpr_extractor_admitted_calls"), 0);
+}
+
+// Waits up to 30 s for `name` to reach `value` in the scrape of `port`;
+// returns the last scrape.
+std::string ScrapeUntil(int port, const std::string& name, double value) {
+  std::string m;
+  for (int i = 0; i < 300; ++i) {
+    m = Scrape(port);
+    if (Sample(m, name) == value) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return m;
+}
+
+TEST(MetricsTest, IndexAndStorageMetricsFollowKnownWrites) {
+  TempDir dir;
+  ServiceProcess indexer;
+  const int port =
+      StartWithMetrics(&indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir, "indexer");
+  ASSERT_GT(port, 0);
+  std::string m = Scrape(port);
+  EXPECT_EQ(Sample(m, "tpr_indexer_tree_rebuilds_total"), 0) << m;
+  EXPECT_EQ(Sample(m, "tpr_indexer_tombstoned"), 0);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_write_duration_seconds_count"), 0);
+
+  // 600 models in one batch: past the index's rebuild threshold (512
+  // buffered), so exactly one background rebuild puts them all in the tree.
+  absl::StatusOr<client::IndexerClient> ix = client::IndexerClient::Connect(indexer.address());
+  ASSERT_TRUE(ix.ok());
+  const std::vector<indexer::testing::TestModel> models =
+      indexer::testing::MakeModels(600, 6, 11);
+  std::unique_ptr<client::BatchUpsertWriter> batch = ix->BatchUpsert();
+  for (const indexer::testing::TestModel& t : models) {
+    ASSERT_TRUE(batch->Write(indexer::testing::ToRequest(t).model(), false));
+  }
+  ASSERT_TRUE(batch->Finish().ok());
+  m = ScrapeUntil(port, "tpr_indexer_indexed", 600);
+  EXPECT_EQ(Sample(m, "tpr_indexer_tree_rebuilds_total"), 1) << m;
+  EXPECT_EQ(Sample(m, "tpr_indexer_indexed"), 600);
+  EXPECT_EQ(Sample(m, "tpr_indexer_buffered"), 0);
+  EXPECT_EQ(Sample(m, "tpr_indexer_tombstoned"), 0);
+  EXPECT_GT(Sample(m, "tpr_indexer_memory_bytes"), 0);
+  EXPECT_GT(Sample(m, "tpr_indexer_storage_memtable_bytes") +
+                Sample(m, "tpr_indexer_storage_sst_bytes"),
+            0);
+  const double writes_before = Sample(m, "tpr_indexer_storage_write_duration_seconds_count");
+  const double syncs_before = Sample(m, "tpr_indexer_storage_wal_sync_duration_seconds_count");
+  EXPECT_GE(writes_before, 3) << "600 models in groups of at most 256";
+  EXPECT_GE(syncs_before, writes_before);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_wal_syncs_total"), syncs_before) << m;
+
+  // Two overwrites and three deletes of tree entries: five tombstones (an
+  // overwrite's new version waits in the buffer), five synced writes.
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(ix->Upsert(indexer::testing::ToRequest(models[static_cast<size_t>(i)]).model(),
+                           /*overwrite=*/true)
+                    .ok());
+  }
+  for (int i = 2; i < 5; ++i) ASSERT_TRUE(ix->Delete(models[static_cast<size_t>(i)].id).ok());
+  m = Scrape(port);
+  EXPECT_EQ(Sample(m, "tpr_indexer_tombstoned"), 5) << m;
+  EXPECT_EQ(Sample(m, "tpr_indexer_indexed"), 595);
+  EXPECT_EQ(Sample(m, "tpr_indexer_buffered"), 2);
+  EXPECT_EQ(Sample(m, "tpr_indexer_models"), 597);
+  EXPECT_EQ(Sample(m, "tpr_indexer_tree_rebuilds_total"), 1);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_write_duration_seconds_count"), writes_before + 5);
+  EXPECT_GT(Sample(m, "tpr_indexer_storage_write_duration_seconds_sum"), 0);
+  // One log sync per write; the background tree persister may add one.
+  const double syncs = Sample(m, "tpr_indexer_storage_wal_sync_duration_seconds_count");
+  EXPECT_GE(syncs, syncs_before + 5);
+  EXPECT_LE(syncs, syncs_before + 6);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_wal_sync_duration_seconds_bucket", {"le=\"+Inf\""}),
+            syncs);
+  // No stall at this size; the counters exist and are zero.
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_stall_seconds_total"), 0);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_delayed_stalls_total"), 0);
+  EXPECT_EQ(Sample(m, "tpr_indexer_storage_stopped_stalls_total"), 0);
+  EXPECT_NE(m.find("# TYPE tpr_indexer_tree_rebuilds_total counter"), std::string::npos);
 }
 
 TEST(MetricsTest, UnusableAddressIsRefusedAtStart) {

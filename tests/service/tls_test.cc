@@ -23,31 +23,6 @@ namespace {
 using client::ConnectionOptions;
 using client::IndexerClient;
 
-// Makes, under `dir`: ca1 and ca2 (self-signed authorities), server1 (for
-// localhost/127.0.0.1, signed by ca1), server2 (same names, signed by ca2),
-// client1 (signed by ca1), client2 (signed by ca2). Each X has X.pem, X.key.
-bool MakeCertificates(const std::string& dir) {
-  const std::string ec = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
-  std::string script = absl::StrCat(
-      "set -e; cd ", dir, "; ",
-      "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > san.ext; ",
-      "printf 'extendedKeyUsage=clientAuth\\n' > client.ext; ");
-  for (const char* ca : {"ca1", "ca2"}) {
-    absl::StrAppend(&script, "openssl req -x509 ", ec, " -keyout ", ca, ".key -out ", ca,
-                    ".pem -days 2 -subj /CN=tpr-test-", ca, " 2>/dev/null; ");
-  }
-  for (const char* who : {"server1", "server2", "client1", "client2"}) {
-    const std::string ca = "ca" + std::string(who).substr(std::string(who).size() - 1);
-    const bool server = std::string(who).rfind("server", 0) == 0;
-    absl::StrAppend(&script, "openssl req ", ec, " -keyout ", who, ".key -out ", who,
-                    ".csr -subj /CN=", server ? "localhost" : who, " 2>/dev/null; ",
-                    "openssl x509 -req -in ", who, ".csr -CA ", ca, ".pem -CAkey ", ca,
-                    ".key -CAcreateserial -days 2 -out ", who, ".pem -extfile ",
-                    server ? "san.ext" : "client.ext", " 2>/dev/null; ");
-  }
-  return RunShell(script).exit_code == 0;
-}
-
 class TlsTest : public ::testing::Test {
  protected:
   void SetUp() override {

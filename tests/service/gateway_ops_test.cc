@@ -1,0 +1,327 @@
+// tpr-gateway's operations part (issue 11) through the real binaries on
+// loopback: two tpr-indexer shards that demand TLS and API keys, a
+// tpr-gateway that serves TLS and checks keys itself and reaches the shards
+// with its own client TLS options and key (--shard-tls, --shard-tls-ca,
+// TPR_GATEWAY_SHARD_API_KEY). Checked: the caller's key codes at the gateway
+// (none, unknown, too low a role, enough), a plaintext caller refused, a
+// gateway without a shard key getting the shards' UNAUTHENTICATED; the
+// request id of a call (the caller's or a generated one) returned in the
+// gateway's trailing metadata and found in the JSON log lines of the
+// gateway and of the shards that served it; and the gateway's /metrics
+// after known calls (per-shard latency counts equal to the calls each shard
+// got, per-shard errors with their code).
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "common/auth.h"
+#include "indexer/gateway/shard_map.h"
+#include "tests/service/extsvc_test_util.h"
+#include "tests/service/indexer_testing.h"
+#include "tests/service/ops_testing.h"
+#include "tpr/client.h"
+
+namespace tpr::testing {
+namespace {
+
+using common::Role;
+
+constexpr int kShards = 2;
+
+std::string TrailingRequestId(const grpc::ClientContext& context) {
+  auto it = context.GetServerTrailingMetadata().find("x-request-id");
+  if (it == context.GetServerTrailingMetadata().end()) return "";
+  return std::string(it->second.data(), it->second.size());
+}
+
+// The JSON log lines of `log` that carry `request_id`.
+std::vector<std::string> LinesWith(const std::string& log, const std::string& request_id) {
+  std::vector<std::string> out;
+  for (absl::string_view line : absl::StrSplit(log, '\n')) {
+    if (line.find(absl::StrCat("\"request_id\":\"", request_id, "\"")) !=
+        absl::string_view::npos) {
+      out.emplace_back(line);
+    }
+  }
+  return out;
+}
+
+class GatewayOpsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ASSERT_TRUE(MakeCertificates(dir_.path())) << "openssl failed";
+    for (Role role : {Role::kRead, Role::kWrite, Role::kAdmin}) {
+      absl::StatusOr<std::string> key = common::NewApiKey();
+      ASSERT_TRUE(key.ok());
+      keys_[role] = *key;
+    }
+    std::string text;
+    for (const auto& [role, key] : keys_) {
+      absl::StrAppend(&text, common::KeyFileLine(key, role, "test"), "\n");
+    }
+    WriteFile(Path("keys"), text);
+    for (int s = 0; s < kShards; ++s) {
+      ASSERT_TRUE(shards_[s]
+                      .Start(BinaryPath("tpr-indexer"),
+                             {"--data-dir", Path(absl::StrCat("shard", s)), "--api-keys",
+                              Path("keys"), "--tls-cert", Path("server1.pem"), "--tls-key",
+                              Path("server1.key"), "--log-format", "json"},
+                             ShardLog(s))
+                      .ok())
+          << ReadText(ShardLog(s));
+    }
+  }
+
+  std::string Path(const std::string& name) const { return dir_.path() + "/" + name; }
+  std::string ShardLog(int s) const { return Path(absl::StrCat("shard", s, ".log")); }
+
+  // Starts a gateway over the shards with `shard_key` (none when empty) in
+  // its environment; TLS and keys on its own port, metrics on a free port.
+  void StartGateway(ServiceProcess* gateway, const std::string& name,
+                    const std::string& shard_key) {
+    std::vector<std::string> args;
+    for (int s = 0; s < kShards; ++s) {
+      args.push_back("--shard");
+      args.push_back(shards_[s].address());
+    }
+    for (const char* a : {"--shard-tls", "--log-format", "json", "--metrics-listen",
+                          "127.0.0.1:0", "--health-interval-ms", "200"}) {
+      args.emplace_back(a);
+    }
+    for (const std::string& a :
+         {std::string("--shard-tls-ca"), Path("ca1.pem"), std::string("--api-keys"),
+          Path("keys"), std::string("--tls-cert"), Path("server1.pem"),
+          std::string("--tls-key"), Path("server1.key")}) {
+      args.push_back(a);
+    }
+    // The key reaches the child through its environment, as in production
+    // (a flag would show in ps).
+    if (shard_key.empty()) {
+      unsetenv("TPR_GATEWAY_SHARD_API_KEY");
+    } else {
+      setenv("TPR_GATEWAY_SHARD_API_KEY", shard_key.c_str(), 1);
+    }
+    const std::string log = Path(name + ".log");
+    absl::Status started = gateway->Start(BinaryPath("tpr-gateway"), args, log);
+    unsetenv("TPR_GATEWAY_SHARD_API_KEY");
+    ASSERT_TRUE(started.ok()) << started << ReadText(log);
+    logs_[gateway] = log;
+  }
+
+  // An SDK client of `gateway` over TLS with `key` (none when empty).
+  client::IndexerClient Client(const ServiceProcess& gateway, const std::string& key) {
+    client::ConnectionOptions connection;
+    connection.tls = true;
+    connection.tls_ca_file = Path("ca1.pem");
+    connection.api_key = key;
+    client::CallOptions defaults;
+    defaults.max_attempts = 1;
+    absl::StatusOr<client::IndexerClient> c =
+        client::IndexerClient::Connect(gateway.address(), connection, defaults);
+    EXPECT_TRUE(c.ok()) << c.status();
+    return *c;
+  }
+
+  // A raw stub of `gateway` over TLS (for metadata of our own).
+  std::unique_ptr<v1::Indexer::Stub> Stub(const ServiceProcess& gateway) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ReadText(Path("ca1.pem"));
+    return v1::Indexer::NewStub(
+        grpc::CreateChannel(gateway.address(), grpc::SslCredentials(ssl)));
+  }
+
+  std::vector<v1::Model> Models(int n) {
+    std::vector<v1::Model> out;
+    for (const indexer::testing::TestModel& m : indexer::testing::MakeModels(n, 3, 5)) {
+      out.push_back(indexer::testing::ToRequest(m).model());
+    }
+    return out;
+  }
+
+  TempDir dir_;
+  std::map<Role, std::string> keys_;
+  ServiceProcess shards_[kShards];
+  std::map<const ServiceProcess*, std::string> logs_;
+};
+
+TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
+  ServiceProcess gateway;
+  StartGateway(&gateway, "gateway", keys_[Role::kWrite]);
+  const std::vector<v1::Model> models = Models(8);
+
+  // The caller's key, checked by the gateway itself.
+  EXPECT_EQ(Client(gateway, "").Stats().status().code(), absl::StatusCode::kUnauthenticated);
+  absl::StatusOr<std::string> stranger = common::NewApiKey();
+  ASSERT_TRUE(stranger.ok());
+  EXPECT_EQ(Client(gateway, *stranger).Stats().status().code(),
+            absl::StatusCode::kUnauthenticated);
+  client::IndexerClient reader = Client(gateway, keys_[Role::kRead]);
+  EXPECT_EQ(reader.Upsert(models[0], true).status().code(), absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(reader.Delete(models[0].id()).code(), absl::StatusCode::kPermissionDenied);
+  client::IndexerClient writer = Client(gateway, keys_[Role::kWrite]);
+  for (const v1::Model& m : models) {
+    absl::StatusOr<bool> created = writer.Upsert(m, true);
+    ASSERT_TRUE(created.ok()) << created.status();
+  }
+  absl::StatusOr<v1::StatsResponse> stats = reader.Stats();
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  EXPECT_EQ(stats->models(), static_cast<int64_t>(models.size()));
+  ASSERT_EQ(stats->shards_size(), kShards);
+  for (int s = 0; s < kShards; ++s) {
+    int64_t want = 0;
+    for (const v1::Model& m : models) want += gateway::ShardOf(m.id(), kShards) == s;
+    EXPECT_EQ(stats->shards(s).stats().models(), want) << "shard " << s;
+  }
+
+  // A plaintext caller against the TLS gateway: refused, no hang.
+  client::CallOptions once;
+  once.max_attempts = 1;
+  absl::StatusOr<client::IndexerClient> plain =
+      client::IndexerClient::Connect(gateway.address(), client::ConnectionOptions{}, once);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(plain->Stats().status().code(), absl::StatusCode::kUnavailable);
+
+  // A gateway without a key of its own: the shards refuse it, and the
+  // caller learns which shard said what.
+  ServiceProcess keyless;
+  StartGateway(&keyless, "keyless", "");
+  absl::StatusOr<v1::StatsResponse> refused = Client(keyless, keys_[Role::kAdmin]).Stats();
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kUnauthenticated) << refused.status();
+  EXPECT_NE(refused.status().message().find("shard 0"), absl::string_view::npos)
+      << refused.status();
+  // Its metrics count the shard's refusal per shard and code.
+  const int port = MetricsPort(ReadText(logs_[&keyless]));
+  ASSERT_GT(port, 0);
+  const ShellResult m = ScrapeMetrics(port);
+  ASSERT_EQ(m.exit_code, 0) << m.out;
+  EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_errors_total",
+                   {"shard=\"0\"", "method=\"/tpr.v1.Indexer/Stats\"",
+                    "code=\"UNAUTHENTICATED\""}),
+            1)
+      << m.out;
+}
+
+TEST_F(GatewayOpsTest, RequestIdTravelsToTheShardsAndBack) {
+  ServiceProcess gateway;
+  StartGateway(&gateway, "gateway", keys_[Role::kWrite]);
+  const std::vector<v1::Model> models = Models(6);
+  client::IndexerClient writer = Client(gateway, keys_[Role::kWrite]);
+  for (const v1::Model& m : models) ASSERT_TRUE(writer.Upsert(m, true).ok());
+  std::unique_ptr<v1::Indexer::Stub> stub = Stub(gateway);
+
+  // The caller's id, on a search (every shard gets a stream).
+  const std::string id = "gw-ops-test-1234";
+  {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + keys_[Role::kRead]);
+    context.AddMetadata("x-request-id", id);
+    v1::SearchRequest request;
+    request.set_id(models[0].id());
+    request.set_k(3);
+    auto reader = stub->Search(&context, request);
+    v1::SearchResponse item;
+    int neighbours = 0;
+    while (reader->Read(&item)) neighbours += item.has_neighbor();
+    const grpc::Status status = reader->Finish();
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_EQ(neighbours, 3);
+    EXPECT_EQ(TrailingRequestId(context), id);
+  }
+  // A generated id, on a Get (one shard: the owner).
+  std::string generated;
+  const int owner = gateway::ShardOf(models[1].id(), kShards);
+  {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + keys_[Role::kRead]);
+    v1::GetRequest request;
+    request.set_id(models[1].id());
+    v1::Model model;
+    const grpc::Status status = stub->Get(&context, request, &model);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    generated = TrailingRequestId(context);
+    EXPECT_FALSE(generated.empty());
+    EXPECT_NE(generated, id);
+  }
+
+  // Log lines are written when calls end; the shards' streams end before
+  // the gateway's answer, but allow the files a moment.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const std::vector<std::string> at_gateway = LinesWith(ReadText(logs_[&gateway]), id);
+  ASSERT_EQ(at_gateway.size(), 1u) << ReadText(logs_[&gateway]);
+  EXPECT_NE(at_gateway[0].find("\"rpc\":\"/tpr.v1.Indexer/Search\""), std::string::npos)
+      << at_gateway[0];
+  // The search by id: a Get on the owner, then a Search on every shard.
+  int searches = 0;
+  for (int s = 0; s < kShards; ++s) {
+    for (const std::string& line : LinesWith(ReadText(ShardLog(s)), id)) {
+      searches += line.find("\"rpc\":\"/tpr.v1.Indexer/Search\"") != std::string::npos;
+    }
+    EXPECT_FALSE(LinesWith(ReadText(ShardLog(s)), id).empty()) << "shard " << s;
+  }
+  EXPECT_EQ(searches, kShards);
+  EXPECT_EQ(LinesWith(ReadText(logs_[&gateway]), generated).size(), 1u);
+  EXPECT_EQ(LinesWith(ReadText(ShardLog(owner)), generated).size(), 1u)
+      << ReadText(ShardLog(owner));
+  EXPECT_TRUE(LinesWith(ReadText(ShardLog(1 - owner)), generated).empty());
+  // No key ever reaches a log.
+  for (const std::string& log : {ReadText(logs_[&gateway]), ReadText(ShardLog(0))}) {
+    for (const auto& [role, key] : keys_) EXPECT_EQ(log.find(key), std::string::npos);
+  }
+}
+
+TEST_F(GatewayOpsTest, MetricsCountEachShardsCalls) {
+  ServiceProcess gateway;
+  StartGateway(&gateway, "gateway", keys_[Role::kWrite]);
+  const std::vector<v1::Model> models = Models(10);
+  client::IndexerClient writer = Client(gateway, keys_[Role::kWrite]);
+  std::vector<int> upserts(kShards, 0);
+  for (const v1::Model& m : models) {
+    ASSERT_TRUE(writer.Upsert(m, true).ok());
+    ++upserts[static_cast<size_t>(gateway::ShardOf(m.id(), kShards))];
+  }
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(writer.Stats().ok());
+  EXPECT_EQ(writer.Get("no/such/model").status().code(), absl::StatusCode::kNotFound);
+
+  const int port = MetricsPort(ReadText(logs_[&gateway]));
+  ASSERT_GT(port, 0) << ReadText(logs_[&gateway]);
+  const ShellResult m = ScrapeMetrics(port);
+  ASSERT_EQ(m.exit_code, 0) << m.out;
+  for (int s = 0; s < kShards; ++s) {
+    const std::string shard = absl::StrCat("shard=\"", s, "\"");
+    EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_duration_seconds_count",
+                     {shard, "method=\"/tpr.v1.Indexer/Upsert\""}),
+              upserts[static_cast<size_t>(s)])
+        << m.out;
+    EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_duration_seconds_count",
+                     {shard, "method=\"/tpr.v1.Indexer/Stats\""}),
+              3);
+    EXPECT_GT(Sample(m.out, "tpr_gateway_shard_duration_seconds_sum",
+                     {shard, "method=\"/tpr.v1.Indexer/Stats\""}),
+              0);
+  }
+  const int owner = gateway::ShardOf("no/such/model", kShards);
+  EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_errors_total",
+                   {absl::StrCat("shard=\"", owner, "\""), "code=\"NOT_FOUND\""}),
+            1);
+  EXPECT_TRUE(std::isnan(Sample(m.out, "tpr_gateway_shard_errors_total",
+                                {"code=\"UNAUTHENTICATED\""})));
+  // The gateway's own calls, as every service counts them.
+  EXPECT_EQ(Sample(m.out, "tpr_rpc_requests_total",
+                   {"method=\"/tpr.v1.Indexer/Upsert\"", "code=\"OK\""}),
+            static_cast<double>(models.size()));
+  EXPECT_EQ(m.out.find("no/such/model"), std::string::npos) << "no per-id labels";
+}
+
+}  // namespace
+}  // namespace tpr::testing
