@@ -39,6 +39,10 @@ std::optional<Acknowledged> DecodeSlot(absl::string_view bytes) {
 }
 
 absl::Status IoError(absl::string_view what) {
+  if (errno == ENOSPC) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(what, " ", AckFile::kName, ": the disk is full"));
+  }
   return absl::UnavailableError(
       absl::StrCat(what, " ", AckFile::kName, ": ", std::strerror(errno)));
 }

@@ -189,6 +189,16 @@ class IndexerCore {
   // after Close still work but their tree changes are not persisted.
   void Close();
 
+  // WriteReadiness returns "" while writes are accepted, else the reason
+  // (the disk is full: Storage::WriteState, which also retries recovery).
+  // For the readiness check (ServerOptions::readiness_check): the service
+  // reports NOT_SERVING while writes would fail; reads keep working.
+  // Cost: O(1), or one recovery attempt a second. Thread-safe.
+  std::string WriteReadiness() {
+    absl::Status s = storage_->WriteState();
+    return s.ok() ? std::string() : std::string(s.message());
+  }
+
   // WaitForRebuild blocks until no background index rebuild runs (tests and
   // benchmarks use it for a settled tree).
   void WaitForRebuild() { index_->WaitForRebuild(); }

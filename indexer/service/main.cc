@@ -148,6 +148,9 @@ int main(int argc, char** argv) {
     m.AddGaugeCallback("tpr_indexer_disk_bytes", "Size of the data directory, bytes",
                        [c] { return static_cast<double>(c->Stats().disk_bytes()); });
   }
+  // Readiness: NOT_SERVING while writes fail for lack of disk space (it
+  // turns back by itself once space is freed).
+  server_options.readiness_check = [c = core->get()] { return c->WriteReadiness(); };
   tpr::indexer::ServiceOptions service_options;
   service_options.max_concurrent_searches = max_searches;
   service_options.log = log;

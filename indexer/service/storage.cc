@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <cstdarg>
 #include <cstdio>
 #include <optional>
 #include <unordered_map>
@@ -61,6 +63,12 @@ absl::Status FromRocks(const rocksdb::Status& s, absl::string_view what,
   std::string message = absl::StrCat(what, ": ", s.ToString());
   if (!dir.empty()) message = absl::StrReplaceAll(message, {{dir + "/", ""}});
   if (s.IsCorruption()) return absl::DataLossError(message);
+  // Disk full: RESOURCE_EXHAUSTED, which clients do not retry (UNAVAILABLE
+  // they do, and would hammer a full disk); Storage::WriteState recovers.
+  if (s.IsNoSpace()) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(message, " (the disk is full; writes resume once space is freed)"));
+  }
   if (s.IsNotFound()) return absl::NotFoundError(message);
   if (s.IsIOError() && s.ToString().find("lock") != std::string::npos) {
     return absl::UnavailableError(message);
@@ -187,8 +195,26 @@ absl::Status CheckAgainstAcknowledged(const Acknowledged& ack, const Counters& d
 //   list, so Open first opens read-only (which deletes nothing) and checks
 //   the counters against ACKNOWLEDGED; a refused database keeps every file
 //   for the recovery procedure.
+// RocksDB's own diagnostics go to stderr, warnings and errors only, not to
+// a LOG file in the data directory: on a full disk that file's writer fails
+// too, and RocksDB (7.8, built with assertions as Debian ships it) aborts
+// the process on its next log line (WritableFileWriter's "previous error"
+// assertion, seen in indexer_disk_full_test). A diagnostic must not take
+// the indexer down, nor compete with the data for the last bytes.
+class StderrLogger : public rocksdb::Logger {
+ public:
+  StderrLogger() : rocksdb::Logger(rocksdb::InfoLogLevel::WARN_LEVEL) {}
+  using rocksdb::Logger::Logv;
+  void Logv(const char* format, va_list ap) override {
+    char line[1024];
+    std::vsnprintf(line, sizeof(line), format, ap);
+    std::fprintf(stderr, "rocksdb: %s\n", line);
+  }
+};
+
 rocksdb::Options DbOptions(const StorageOptions& options) {
   rocksdb::Options db_options;
+  db_options.info_log = std::make_shared<StderrLogger>();
   db_options.create_if_missing = options.create_if_missing;
   db_options.create_missing_column_families = true;
   db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
@@ -265,6 +291,12 @@ struct Storage::Impl {
   std::atomic<uint64_t> model_count{0};
   std::atomic<uint64_t> writes{0};
   std::unique_ptr<AckFile> ack;
+  // Set when a write failed for lack of space: RocksDB then refuses writes
+  // until DB::Resume() succeeds (a background error). Cleared by Resume.
+  std::atomic<bool> no_space{false};
+  std::mutex resume_mu;
+  std::chrono::steady_clock::time_point last_resume;  // guarded by resume_mu
+  std::string no_space_reason;                        // guarded by resume_mu
 
   ~Impl() {
     if (db) {
@@ -287,6 +319,13 @@ struct Storage::Impl {
       if (models) db->DestroyColumnFamilyHandle(models);
       db->Close().PermitUncheckedError();
     }
+  }
+
+  void MarkNoSpace(const absl::Status& status) {
+    std::lock_guard<std::mutex> lock(resume_mu);
+    no_space_reason = std::string(status.message());
+    last_resume = std::chrono::steady_clock::now();
+    no_space = true;
   }
 
   rocksdb::WriteOptions WriteOpts() const {
@@ -417,6 +456,7 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
 
 absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   if (writes.empty()) return absl::OkStatus();
+  if (impl_->no_space.load()) TPR_RETURN_IF_ERROR(WriteState());
   std::lock_guard<std::mutex> lock(impl_->write_mu);
   uint64_t seq = impl_->last_seq.load();
   int64_t models = static_cast<int64_t>(impl_->model_count.load());
@@ -460,7 +500,11 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   const uint64_t writes_after = impl_->writes.load() + 1;
   batch.Put(impl_->meta, kWriteCountKey, EncodeSeq(writes_after));
   rocksdb::Status s = impl_->db->Write(impl_->WriteOpts(), &batch);
-  if (!s.ok()) return FromRocks(s, "cannot write models", impl_->dir);
+  if (!s.ok()) {
+    absl::Status st = FromRocks(s, "cannot write models", impl_->dir);
+    if (absl::IsResourceExhausted(st)) impl_->MarkNoSpace(st);
+    return st;
+  }
   impl_->last_seq = seq;
   impl_->writes = writes_after;
   impl_->model_count = static_cast<uint64_t>(models);
@@ -583,7 +627,9 @@ absl::Status Storage::SaveTree(const std::string& tree_bytes, uint64_t seq) {
   batch.Put(impl_->meta, kTreeSeqKey, EncodeSeq(seq));
   rocksdb::WriteOptions w;
   w.sync = true;
-  return FromRocks(impl_->db->Write(w, &batch), "cannot persist the VP-tree");
+  absl::Status st = FromRocks(impl_->db->Write(w, &batch), "cannot persist the VP-tree", impl_->dir);
+  if (absl::IsResourceExhausted(st)) impl_->MarkNoSpace(st);
+  return st;
 }
 
 absl::StatusOr<PersistedTree> Storage::LoadTree() const {
@@ -607,6 +653,34 @@ absl::StatusOr<PersistedTree> Storage::LoadTree() const {
 }
 
 uint64_t Storage::last_seq() const { return impl_->last_seq.load(); }
+
+absl::Status Storage::WriteState() {
+  if (!impl_->no_space.load()) return absl::OkStatus();
+  std::lock_guard<std::mutex> lock(impl_->resume_mu);
+  if (!impl_->no_space.load()) return absl::OkStatus();
+  const auto now = std::chrono::steady_clock::now();
+  if (now - impl_->last_resume >= std::chrono::seconds(1)) {
+    impl_->last_resume = now;
+    // Resume clears RocksDB's background error once its recovery (a new
+    // write-ahead log, a flush) succeeds, i.e. once space is back. RocksDB
+    // resumes by itself only from background (flush, compaction) errors
+    // and with an SstFileManager; a failed log write needs this call.
+    rocksdb::Status s = impl_->db->Resume();
+    if (s.ok()) {
+      impl_->no_space = false;
+      impl_->no_space_reason.clear();
+      return absl::OkStatus();
+    }
+    // Busy: RocksDB's own recovery (SstFileManager) is under way; the
+    // original reason still says more than "Resource busy".
+    if (!s.IsBusy()) {
+      impl_->no_space_reason = FromRocks(s, "cannot resume writes", impl_->dir).ToString();
+    }
+  }
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "writes are refused until space is freed on the data directory's disk: ",
+      impl_->no_space_reason));
+}
 
 uint64_t Storage::model_count() const { return impl_->model_count.load(); }
 

@@ -132,7 +132,8 @@ class Storage {
   // the batch and keeps the model count (a delete of an absent id changes
   // nothing), then records both counts in ACKNOWLEDGED. Returns UNAVAILABLE/INTERNAL on an
   // I/O error (then nothing was written, unless only the ACKNOWLEDGED
-  // record failed). Cost: one point lookup per id (Bloom-filtered), one
+  // record failed); RESOURCE_EXHAUSTED when the disk is full (see
+  // WriteState). Cost: one point lookup per id (Bloom-filtered), one
   // fsync of the log and one of ACKNOWLEDGED, plus O(total bytes).
   // Thread-safe.
   absl::Status Write(const std::vector<ModelWrite>& writes);
@@ -169,6 +170,16 @@ class Storage {
   // last_seq returns the sequence number of the last model write (0 when
   // none). Thread-safe.
   uint64_t last_seq() const;
+
+  // WriteState returns OK while writes are accepted. After a write failed
+  // because the disk is full, writes fail fast with RESOURCE_EXHAUSTED
+  // (which clients do not retry); WriteState then tries RocksDB's
+  // DB::Resume, at most once a second, and returns OK again once it
+  // succeeds, i.e. once space was freed: no restart is needed. Readiness
+  // polls it (IndexerCore::WriteReadiness); Write calls it first while
+  // writes are refused. Cost: O(1), or one Resume attempt (a flush).
+  // Thread-safe.
+  absl::Status WriteState();
 
   // model_count returns the number of stored models. Thread-safe.
   uint64_t model_count() const;

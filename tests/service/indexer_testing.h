@@ -216,9 +216,14 @@ class InProcessIndexer {
     core_ = std::move(*core);
     service_ = std::make_unique<IndexerService>(core_.get(), service_options);
     server_options_.shutdown_grace_ms = 2000;
+    // Readiness as in indexer/service/main.cc, polled faster for tests.
+    server_options_.readiness_service = "tpr.v1.Indexer";
+    server_options_.readiness_check = [c = core_.get()] { return c->WriteReadiness(); };
+    server_options_.readiness_poll_ms = 100;
     absl::StatusOr<tpr::common::StartedServer> started =
         tpr::common::StartServer(server_options_, {service_.get()});
     if (!started.ok()) return started.status();
+    readiness_ = std::move(started->readiness);
     server_ = std::move(started->server);
     port_ = started->port;
     channel_ = grpc::CreateChannel(absl::StrCat("127.0.0.1:", port_),
@@ -228,6 +233,7 @@ class InProcessIndexer {
   }
 
   void Stop() {
+    readiness_.reset();  // before the server it watches
     if (server_) tpr::common::ShutdownGracefully(*server_, server_options_);
     stub_.reset();
     channel_.reset();
@@ -249,6 +255,7 @@ class InProcessIndexer {
   std::unique_ptr<IndexerCore> core_;
   std::unique_ptr<IndexerService> service_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<tpr::common::ReadinessMonitor> readiness_;
   int port_ = 0;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<tpr::v1::Indexer::Stub> stub_;
