@@ -65,9 +65,22 @@ string_view StripComment(string_view line) {
   return hash == string_view::npos ? line : line.substr(0, hash);
 }
 
+namespace {
+
+// StripPlusSign removes one leading '+' (std::from_chars takes only '-')
+// and returns false when what is left cannot be a number: empty, or a
+// second sign ("+-1", "++1"), which strtod refuses too. Without the second
+// check "+-0.866" was read as -0.866 (fuzz finding, tests/fuzz/findings).
+bool StripPlusSign(string_view* token) {
+  if (token->empty() || (*token)[0] != '+') return !token->empty();
+  token->remove_prefix(1);
+  return !token->empty() && (*token)[0] != '+' && (*token)[0] != '-';
+}
+
+}  // namespace
+
 bool ParseDouble(string_view token, double* value) {
-  if (!token.empty() && token[0] == '+') token.remove_prefix(1);
-  if (token.empty()) return false;
+  if (!StripPlusSign(&token)) return false;
   auto result =
       std::from_chars(token.data(), token.data() + token.size(), *value);
   if (result.ec == std::errc::result_out_of_range &&
@@ -81,8 +94,7 @@ bool ParseDouble(string_view token, double* value) {
 }
 
 bool ParseInt(string_view token, int64_t* value) {
-  if (!token.empty() && token[0] == '+') token.remove_prefix(1);
-  if (token.empty()) return false;
+  if (!StripPlusSign(&token)) return false;
   auto result =
       std::from_chars(token.data(), token.data() + token.size(), *value);
   return result.ec == std::errc() && result.ptr == token.data() + token.size();
@@ -136,13 +148,13 @@ absl::Status CheckCoordinateValue(string_view format, string_view where,
 absl::Status ParseCoordinate(string_view format, int64_t line, int64_t vertex,
                              string_view token, double* value) {
   string_view digits = token;
-  if (!digits.empty() && digits[0] == '+') digits.remove_prefix(1);
+  const bool signed_ok = StripPlusSign(&digits);
   float f = 0.0f;
   auto result =
       std::from_chars(digits.data(), digits.data() + digits.size(), f);
   const bool whole = result.ptr == digits.data() + digits.size();
   double d = f;
-  if (digits.empty() || !whole ||
+  if (!signed_ok || !whole ||
       (result.ec != std::errc() &&
        result.ec != std::errc::result_out_of_range)) {
     return InvalidAt(format, line,

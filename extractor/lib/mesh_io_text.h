@@ -70,12 +70,13 @@ void SplitTokens(absl::string_view line, std::vector<absl::string_view>* tokens,
 // StripComment returns `line` up to its first '#'.
 absl::string_view StripComment(absl::string_view line);
 
-// ParseDouble accepts what strtod accepts ("nan" and "inf" included, so
-// that they can be reported as non-finite rather than as garbage); an
-// overflow gives an infinity, an underflow 0 or a subnormal.
+// ParseDouble accepts what strtod accepts (one optional sign; "nan" and
+// "inf" included, so that they can be reported as non-finite rather than as
+// garbage); an overflow gives an infinity, an underflow 0 or a subnormal.
 bool ParseDouble(absl::string_view token, double* value);
 
-// ParseInt accepts an optional sign and decimal digits.
+// ParseInt accepts one optional sign and decimal digits ("+-1" is refused,
+// as strtol refuses it).
 bool ParseInt(absl::string_view token, int64_t* value);
 
 // Quote returns the token in single quotes, cut to 40 characters, with

@@ -565,6 +565,60 @@ TEST(MeshIoTest, HugeCoordinatesNameTheVertexAndLine) {
               HasSubstr("the coordinates reach 1e+12 but span only"));
 }
 
+// Fuzz finding (tests/fuzz/findings/README.md, fuzz_mesh_obj): a sign
+// after '+' ("+-0.866") was read as a negative number although strtod, and
+// every other reader, refuses it; the scanner dropped the '+' and handed
+// "-0.866" to std::from_chars. Every number a text reader parses (OBJ and
+// OFF coordinates, face indices and counts, PLY values) refuses it now and
+// names the line; a single leading '+' is still a sign.
+TEST(MeshIoTest, PlusFollowedByASignIsNotANumber) {
+  const std::string tetra_obj =
+      "# tetrahedron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 +1\n"
+      "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  auto m = LoadMeshFromBuffer(tetra_obj, MeshFormat::kObj, "", {});
+  ASSERT_TRUE(m.ok()) << m.status();
+  EXPECT_EQ(m->mesh.positions.size(), 4u);
+  struct Case {
+    MeshFormat format;
+    std::string bytes;
+    std::string message;
+  };
+  const Case cases[] = {
+      // The fuzzer's input, cut to the line at fault.
+      {MeshFormat::kObj,
+       "# tetrahedron\nv 0 0 0\nv -0.5000000000000004 +-0.8660254037844384 "
+       "0.0\n"
+       "v 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+       "OBJ line 3: vertex 1: expected a coordinate, got "
+       "'+-0.8660254037844384'"},
+      {MeshFormat::kObj,
+       "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+       "f 1 3 2\nf 1 2 4\nf 1 4 +-1\nf 2 3 4\n",
+       "OBJ line 7: face 2: expected a vertex index (1-based), got '+-1'"},
+      {MeshFormat::kOff,
+       "OFF\n4 4 0\n0 0 0\n1 0 0\n0 +-1 0\n0 0 1\n"
+       "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n",
+       "OFF line 5: vertex 2: expected a coordinate, got '+-1'"},
+      {MeshFormat::kOff,
+       "OFF\n+-4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+       "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n",
+       "OFF line 2"},
+      {MeshFormat::kPly,
+       "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n"
+       "property float y\nproperty float z\nelement face 4\n"
+       "property list uchar int vertex_indices\nend_header\n"
+       "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 +-2\n3 1 2 3\n",
+       "PLY line 16"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.bytes);
+    m = LoadMeshFromBuffer(c.bytes, c.format, "", {});
+    EXPECT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument)
+        << m.status();
+    EXPECT_THAT(m.status().message(), HasSubstr(c.message));
+  }
+}
+
 TEST(ComputeMeshStatsTest, SingleTriangle) {
   Mesh mesh;
   mesh.positions = {{0, 0, 0}, {2, 0, 0}, {0, 2, 0}};
