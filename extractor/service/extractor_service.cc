@@ -14,6 +14,7 @@
 #include "absl/synchronization/mutex.h"
 #include "common/grpc_status.h"
 #include "common/status_macros.h"
+#include "common/stream_messages.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/service/convert.h"
@@ -181,7 +182,7 @@ namespace {
 // that is OnReadDone or, for an expired upload, the watchdog; each claims
 // the call by leaving kUploading under mu_, so the other then does
 // nothing. Once the upload is complete (kQueued) only the worker finishes.
-class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> {
+class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
   ExtractReactor(ExtractorService::State* state, grpc::CallbackServerContext* context,
                  v1::ExtractResponse* response)
@@ -191,7 +192,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> 
         response_(response),
         admitted_(Clock::now()),
         last_message_(admitted_) {
-    StartRead(&request_);
+    StartRead(&raw_);
     // After StartRead: the watchdog may finish the call from now on.
     state_->watchdog.Add(this);
   }
@@ -215,6 +216,10 @@ class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> 
       return;
     }
     last_message_ = Clock::now();
+    if (absl::Status bad = parser_.Parse(&raw_, &request_); !bad.ok()) {
+      FinishLocked(ToGrpcStatus(bad));
+      return;
+    }
     if (!got_first_) {
       got_first_ = true;
       header_.set_format(request_.format());
@@ -246,7 +251,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> 
       FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
       return;
     }
-    StartRead(&request_);
+    StartRead(&raw_);
   }
 
   void OnCancel() override { cancelled_.store(true); }
@@ -318,6 +323,8 @@ class ExtractReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> 
   absl::Mutex mu_;
   Phase phase_ ABSL_GUARDED_BY(mu_) = Phase::kUploading;
   Clock::time_point last_message_ ABSL_GUARDED_BY(mu_);
+  grpc::ByteBuffer raw_;  // the message being read, parsed by parser_
+  common::StreamParser<v1::ExtractRequest> parser_{"Extract"};
   v1::ExtractRequest request_;
   v1::ExtractRequest header_;
   // Written under mu_ while uploading; the worker owns it once kQueued.
@@ -363,7 +370,7 @@ void UploadWatchdog::Loop() {
 }
 
 // Answers a call refused at admission without reading it.
-class RejectReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> {
+class RejectReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
   explicit RejectReactor(int limit) {
     Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
@@ -375,12 +382,28 @@ class RejectReactor final : public grpc::ServerReadReactor<v1::ExtractRequest> {
 
 }  // namespace
 
+// The index of Extract among tpr.v1.Extractor's methods (extractor.proto).
+constexpr int kExtractMethod = 0;
+
 ExtractorService::ExtractorService(const ServiceOptions& options)
-    : state_(std::make_unique<State>(options)) {}
+    : state_(std::make_unique<State>(options)) {
+  // The generated handler reads tpr.v1.ExtractRequest, and gRPC's typed
+  // reader ends the stream on a message that does not parse; this one reads
+  // raw bytes (common/stream_messages.h).
+  MarkMethodCallback(
+      kExtractMethod,
+      common::RawCallbackClientStreamHandler<v1::ExtractRequest,
+                                             v1::ExtractResponse>(
+          GetHandler(kExtractMethod), "Extract",
+          [this](grpc::CallbackServerContext* context,
+                 v1::ExtractResponse* response) {
+            return ExtractRaw(context, response);
+          }));
+}
 
 ExtractorService::~ExtractorService() = default;
 
-grpc::ServerReadReactor<v1::ExtractRequest>* ExtractorService::Extract(
+grpc::ServerReadReactor<grpc::ByteBuffer>* ExtractorService::ExtractRaw(
     grpc::CallbackServerContext* context, v1::ExtractResponse* response) {
   if (state_->in_flight.fetch_add(1) >= state_->options.max_concurrent) {
     state_->in_flight.fetch_sub(1);

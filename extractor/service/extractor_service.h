@@ -99,9 +99,13 @@ class ExtractorService final : public v1::Extractor::CallbackService {
 
   // Extract: see extractor.proto. Client-streaming upload; the reactor
   // buffers chunks (refusing stalled or crawling uploads, see
-  // ServiceOptions), then queues the extraction on the worker pool.
-  grpc::ServerReadReactor<v1::ExtractRequest>* Extract(
-      grpc::CallbackServerContext* context, v1::ExtractResponse* response) override;
+  // ServiceOptions), then queues the extraction on the worker pool. The
+  // stream is read as raw bytes (common/stream_messages.h): the constructor
+  // registers this handler in place of the generated typed one, so that a
+  // message that does not parse is INVALID_ARGUMENT naming it rather than
+  // taken for the end of the upload.
+  grpc::ServerReadReactor<grpc::ByteBuffer>* ExtractRaw(
+      grpc::CallbackServerContext* context, v1::ExtractResponse* response);
 
   // InFlight returns the number of admitted calls not yet done. Thread-safe.
   int InFlight() const;

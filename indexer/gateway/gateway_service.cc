@@ -18,6 +18,7 @@
 #include "common/call_interceptor.h"
 #include "common/grpc_status.h"
 #include "common/metrics.h"
+#include "common/stream_messages.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace tpr::gateway {
@@ -269,7 +270,15 @@ void Shards::Loop() {
 // GatewayService: plumbing.
 
 GatewayService::GatewayService(GatewayOptions options)
-    : options_(std::move(options)), shards_(options_) {}
+    : options_(std::move(options)), shards_(options_) {
+  constexpr int kBatchUpsertMethod = 1;  // its position in indexer.proto
+  MarkMethodStreamed(
+      kBatchUpsertMethod,
+      tpr::common::RawClientStreamHandler<tpr::v1::Indexer::Service,
+                                          tpr::v1::UpsertRequest>(
+          GetHandler(kBatchUpsertMethod), "BatchUpsert", this,
+          &GatewayService::BatchUpsertRaw));
+}
 
 absl::Status GatewayService::FromShard(int shard, const std::string& address,
                                        const grpc::Status& status) const {
@@ -328,9 +337,9 @@ grpc::Status GatewayService::Delete(grpc::ServerContext* context,
   return Finish("Delete", FromShard(shard, primary.address, status));
 }
 
-grpc::Status GatewayService::BatchUpsert(grpc::ServerContext* context,
-                                         grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
-                                         tpr::v1::BatchUpsertResponse* response) {
+grpc::Status GatewayService::BatchUpsertRaw(
+    grpc::ServerContext* context, grpc::ServerReader<grpc::ByteBuffer>* reader,
+    tpr::v1::BatchUpsertResponse* response) {
   // One BatchUpsert stream per shard primary, opened when the shard gets its
   // first model; each shard groups and syncs its own writes.
   struct ShardBatch {
@@ -340,8 +349,15 @@ grpc::Status GatewayService::BatchUpsert(grpc::ServerContext* context,
     bool broken = false;
   };
   std::vector<ShardBatch> batches(static_cast<size_t>(shards_.count()));
+  tpr::common::StreamParser<tpr::v1::UpsertRequest> parser("BatchUpsert");
+  grpc::ByteBuffer raw;
   tpr::v1::UpsertRequest request;
-  while (reader->Read(&request)) {
+  absl::Status first_error;
+  while (reader->Read(&raw)) {
+    // A message that does not parse ends the reading; the shards' streams
+    // are finished below (the models before it are kept), then it fails.
+    first_error = parser.Parse(&raw, &request);
+    if (!first_error.ok()) break;
     const int shard = ShardOf(request.model().id(), shards_.count());
     ShardBatch& batch = batches[static_cast<size_t>(shard)];
     if (batch.writer == nullptr) {
@@ -358,7 +374,6 @@ grpc::Status GatewayService::BatchUpsert(grpc::ServerContext* context,
   }
   // Every shard's answer is collected even after a failure: what a shard
   // acknowledged is durable there, and only a full set of OKs is an OK.
-  absl::Status first_error;
   for (size_t s = 0; s < batches.size(); ++s) {
     ShardBatch& batch = batches[s];
     if (batch.writer == nullptr) continue;

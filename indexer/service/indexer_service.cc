@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/grpc_status.h"
+#include "common/stream_messages.h"
 
 namespace tpr::indexer {
 namespace {
@@ -18,8 +19,22 @@ absl::Status CancelledStatus(grpc::ServerContext* context) {
 
 }  // namespace
 
+// The index of BatchUpsert among tpr.v1.Indexer's methods (their order in
+// indexer.proto, as the generated code numbers them).
+constexpr int kBatchUpsertMethod = 1;
+
 IndexerService::IndexerService(IndexerCore* core, ServiceOptions options)
-    : core_(core), options_(std::move(options)) {}
+    : core_(core), options_(std::move(options)) {
+  // The generated handler reads tpr.v1.UpsertRequest, and gRPC's typed
+  // reader ends the stream on a message that does not parse; this one reads
+  // raw bytes (common/stream_messages.h).
+  MarkMethodStreamed(
+      kBatchUpsertMethod,
+      tpr::common::RawClientStreamHandler<tpr::v1::Indexer::Service,
+                                          tpr::v1::UpsertRequest>(
+          GetHandler(kBatchUpsertMethod), "BatchUpsert", this,
+          &IndexerService::BatchUpsertRaw));
+}
 
 grpc::Status IndexerService::Finish(const char* method, const absl::Status& status) const {
   if (options_.log && !status.ok()) {
@@ -46,12 +61,20 @@ grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
   return Finish("Upsert", created.status());
 }
 
-grpc::Status IndexerService::BatchUpsert(grpc::ServerContext* context,
-                                         grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
-                                         tpr::v1::BatchUpsertResponse* response) {
+grpc::Status IndexerService::BatchUpsertRaw(
+    grpc::ServerContext* context, grpc::ServerReader<grpc::ByteBuffer>* reader,
+    tpr::v1::BatchUpsertResponse* response) {
   BatchWriter batch(core_);
+  tpr::common::StreamParser<tpr::v1::UpsertRequest> parser("BatchUpsert");
+  grpc::ByteBuffer raw;
   tpr::v1::UpsertRequest request;
-  while (reader->Read(&request)) {
+  while (reader->Read(&raw)) {
+    if (absl::Status bad = parser.Parse(&raw, &request); !bad.ok()) {
+      // As for any other bad request in the stream: the models before it
+      // are written (the proto's promise), then the call fails.
+      absl::StatusOr<tpr::v1::BatchUpsertResponse> before = batch.Finish();
+      return Finish("BatchUpsert", before.ok() ? bad : before.status());
+    }
     absl::Status st = batch.Add(std::move(request));
     if (!st.ok()) return Finish("BatchUpsert", st);
     request.Clear();

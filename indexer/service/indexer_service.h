@@ -38,9 +38,13 @@ class IndexerService final : public tpr::v1::Indexer::Service {
 
   grpc::Status Upsert(grpc::ServerContext* context, const tpr::v1::UpsertRequest* request,
                       tpr::v1::UpsertResponse* response) override;
-  grpc::Status BatchUpsert(grpc::ServerContext* context,
-                           grpc::ServerReader<tpr::v1::UpsertRequest>* reader,
-                           tpr::v1::BatchUpsertResponse* response) override;
+  // BatchUpsert reads its stream as raw bytes (common/stream_messages.h):
+  // the constructor registers this handler in place of the generated typed
+  // one, so that a message that does not parse is INVALID_ARGUMENT naming
+  // it, not taken for the end of the stream.
+  grpc::Status BatchUpsertRaw(grpc::ServerContext* context,
+                              grpc::ServerReader<grpc::ByteBuffer>* reader,
+                              tpr::v1::BatchUpsertResponse* response);
   grpc::Status Delete(grpc::ServerContext* context, const tpr::v1::DeleteRequest* request,
                       tpr::v1::DeleteResponse* response) override;
   grpc::Status Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,

@@ -182,6 +182,40 @@ TEST_F(ExtractorServiceTest, EachMalformedMeshOfTheCorpusIsInvalidArgumentWithIt
   EXPECT_TRUE(ok.ok()) << ok.status();
 }
 
+// Issue 12: bytes that do not parse in the middle of an upload were taken
+// for the end of the stream (gRPC's typed reader reports both the same
+// way), so the chunks before them were extracted as if they were the whole
+// mesh and the call answered OK. Now it fails with INVALID_ARGUMENT naming
+// the message. Raw bytes go on the wire as another client could send them.
+TEST_F(ExtractorServiceTest, MalformedMessageInTheUploadIsAnError) {
+  v1::ExtractRequest first;
+  first.set_file_name("a.off");
+  first.set_data(GeneratedOff("biped_adult", 0, 1000));  // a whole mesh
+  v1::ExtractRequest more;
+  more.set_data("\n");
+  const std::string method = "/tpr.v1.Extractor/Extract";
+  grpc::Status s = ::tpr::testing::RawClientStream(
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()), method,
+      {first.SerializeAsString(), std::string("\xff\xff\xff\xff", 4),
+       more.SerializeAsString()});
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+      << s.error_message();
+  EXPECT_NE(s.error_message().find("Extract: message 2 of the stream"),
+            std::string::npos)
+      << s.error_message();
+  EXPECT_NE(s.error_message().find("tpr.v1.ExtractRequest"), std::string::npos)
+      << s.error_message();
+  // The same raw path extracts a well-formed upload.
+  std::string answer;
+  s = ::tpr::testing::RawClientStream(
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()), method,
+      {first.SerializeAsString(), more.SerializeAsString()}, &answer);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  v1::ExtractResponse response;
+  ASSERT_TRUE(response.ParseFromString(answer));
+  EXPECT_GT(response.signature().mesh().vertices(), 0);
+}
+
 TEST_F(ExtractorServiceTest, EmptyUploadIsInvalidArgument) {
   absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes("", "empty.off");
   ASSERT_FALSE(r.ok());

@@ -35,6 +35,7 @@
 #include <grpcpp/impl/codegen/client_unary_call.h>
 #include <grpcpp/impl/codegen/rpc_method.h>
 #include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/sync_stream.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -191,6 +192,42 @@ inline void WriteFile(const std::string& path, const std::string& bytes) {
 inline absl::StatusOr<int> HealthCheck(const std::shared_ptr<grpc::Channel>& channel) {
   absl::StatusOr<int> status = HealthStatus(channel, "");
   if (!status.ok()) return absl::UnavailableError(status.status().message());
+  return status;
+}
+
+// RawClientStream calls client-streaming `method` ("/tpr.v1.Indexer/
+// BatchUpsert") with each of `messages` sent as raw bytes, as a client in
+// another language (or a fuzzer) could; returns the call's status and the
+// response's bytes in *response (when given). A Write the server no longer
+// reads is ignored: the status tells what happened.
+inline grpc::Status RawClientStream(
+    const std::shared_ptr<grpc::Channel>& channel, const std::string& method,
+    const std::vector<std::string>& messages, std::string* response = nullptr) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(30));
+  grpc::ByteBuffer answer;
+  const grpc::internal::RpcMethod rpc(
+      method.c_str(), grpc::internal::RpcMethod::CLIENT_STREAMING);
+  std::unique_ptr<grpc::ClientWriter<grpc::ByteBuffer>> writer(
+      grpc::internal::ClientWriterFactory<grpc::ByteBuffer>::Create(
+          channel.get(), rpc, &context, &answer));
+  for (const std::string& bytes : messages) {
+    grpc::Slice slice(bytes.data(), bytes.size());
+    grpc::ByteBuffer request(&slice, 1);
+    if (!writer->Write(request)) break;
+  }
+  writer->WritesDone();
+  grpc::Status status = writer->Finish();
+  if (response != nullptr) {
+    response->clear();
+    std::vector<grpc::Slice> slices;
+    if (status.ok() && answer.Dump(&slices).ok()) {
+      for (const grpc::Slice& s : slices) {
+        response->append(reinterpret_cast<const char*>(s.begin()), s.size());
+      }
+    }
+  }
   return status;
 }
 

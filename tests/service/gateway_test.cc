@@ -83,8 +83,9 @@ class GatewayTest : public ::testing::Test {
         tpr::common::StartServer(server_options_, {service_.get()});
     ASSERT_TRUE(started.ok()) << started.status();
     server_ = std::move(started->server);
+    gateway_address_ = absl::StrCat("127.0.0.1:", started->port);
     gateway_ = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
-        absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+        gateway_address_, grpc::InsecureChannelCredentials()));
 
     // The corpus: generated models, plus exact copies of some under other
     // ids (ties at equal distance, spread over the shards by their ids).
@@ -161,6 +162,7 @@ class GatewayTest : public ::testing::Test {
   tpr::common::ServerOptions server_options_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<tpr::v1::Indexer::Stub> gateway_;
+  std::string gateway_address_;
   std::vector<TestModel> models_;
   std::set<std::string> deleted_;
 };
@@ -307,6 +309,36 @@ TEST_F(GatewayTest, UnaryCallsAnswerAsOneIndexer) {
   tpr::v1::BatchUpsertResponse counts;
   EXPECT_EQ(Ingest(gateway_.get(), batch, &counts).error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+// Issue 12: a message that does not parse in a BatchUpsert stream was taken
+// for its end (OK for a truncated batch). Through the gateway it fails with
+// INVALID_ARGUMENT naming the message; the models before it are on their
+// shards, none after it.
+TEST_F(GatewayTest, MalformedMessageInABatchUpsertStreamIsAnError) {
+  const std::vector<TestModel> batch = MakeModels(8, 2, 5, "raw");
+  std::vector<std::string> messages;
+  for (size_t i = 0; i < batch.size(); ++i) {
+    messages.push_back(i == 3 ? std::string("\xff\xff\xff\xff", 4)
+                              : ToRequest(batch[i]).SerializeAsString());
+  }
+  grpc::Status s = ::tpr::testing::RawClientStream(
+      grpc::CreateChannel(gateway_address_, grpc::InsecureChannelCredentials()),
+      "/tpr.v1.Indexer/BatchUpsert", messages);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+      << s.error_message();
+  EXPECT_NE(s.error_message().find("BatchUpsert: message 4 of the stream"),
+            std::string::npos)
+      << s.error_message();
+  for (size_t i = 0; i < batch.size(); ++i) {
+    if (i == 3) continue;
+    grpc::ClientContext context;
+    tpr::v1::GetRequest get;
+    get.set_id(batch[i].id);
+    tpr::v1::Model model;
+    const grpc::Status got = gateway_->Get(&context, get, &model);
+    EXPECT_EQ(got.ok(), i < 3) << batch[i].id << ": " << got.error_message();
+  }
 }
 
 TEST_F(GatewayTest, ListMergesShardsInIdOrder) {

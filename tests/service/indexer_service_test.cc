@@ -545,6 +545,63 @@ TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
   TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[39].signature, kept, 50));
 }
 
+// Issue 12: bytes that do not parse in the middle of a BatchUpsert stream
+// were taken for the end of the stream (gRPC's typed reader reports both
+// the same way): the call answered OK with the models before them written
+// and the rest silently dropped. Now the call fails with INVALID_ARGUMENT
+// naming the message; the models before it are kept (as for any error in
+// the stream), none after it is read.
+TEST_F(IndexerServiceTest, MalformedMessageInABatchUpsertStreamIsAnError) {
+  const std::vector<TestModel> models = MakeModels(8, 2, 57);
+  std::vector<std::string> stream;
+  for (size_t i = 0; i < 3; ++i)
+    stream.push_back(ToRequest(models[i]).SerializeAsString());
+  // A request whose id is not UTF-8 (same length, so the framing holds),
+  // and plain garbage.
+  tpr::v1::UpsertRequest bad_utf8 = ToRequest(models[3]);
+  bad_utf8.mutable_model()->set_id("ID-TO-REPLACE");
+  std::string bad_bytes = bad_utf8.SerializeAsString();
+  bad_bytes.replace(bad_bytes.find("ID-TO-REPLACE"), 13,
+                    std::string("bad\xff\xfe-id-utf8", 13));
+  const std::string method = "/tpr.v1.Indexer/BatchUpsert";
+  for (const std::string& garbage :
+       {std::string("\xff\xff\xff\xff\xff\xff", 6), bad_bytes}) {
+    std::vector<std::string> messages = stream;
+    messages.push_back(garbage);
+    for (size_t i = 4; i < 8; ++i)
+      messages.push_back(ToRequest(models[i]).SerializeAsString());
+    grpc::Status s =
+        ::tpr::testing::RawClientStream(server_->channel(), method, messages);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("BatchUpsert: message 4 of the stream"),
+              std::string::npos)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("tpr.v1.UpsertRequest"), std::string::npos)
+        << s.error_message();
+  }
+  // The three before the bad message are stored, none after it.
+  for (size_t i = 0; i < 8; ++i) {
+    grpc::ClientContext c;
+    tpr::v1::Model m;
+    tpr::v1::GetRequest get;
+    get.set_id(models[i].id);
+    grpc::Status s = server_->stub()->Get(&c, get, &m);
+    EXPECT_EQ(s.ok(), i < 3) << models[i].id << ": " << s.error_message();
+  }
+  // The same raw path takes a well-formed stream, and its counts are right.
+  std::vector<std::string> good;
+  for (size_t i = 3; i < 8; ++i)
+    good.push_back(ToRequest(models[i]).SerializeAsString());
+  std::string answer;
+  grpc::Status s = ::tpr::testing::RawClientStream(server_->channel(), method,
+                                                   good, &answer);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  tpr::v1::BatchUpsertResponse counts;
+  ASSERT_TRUE(counts.ParseFromString(answer));
+  EXPECT_EQ(counts.written(), 5);
+}
+
 TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
   const std::vector<TestModel> base = MakeModels(60, 3, 61);
   AddAll(base);
