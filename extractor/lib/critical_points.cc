@@ -12,36 +12,6 @@
 
 namespace tpr::extract {
 
-VertexLinks VertexLinks::Build(const Mesh& mesh) {
-  VertexLinks links;
-  const int32_t n = static_cast<int32_t>(mesh.positions.size());
-  links.link_offsets_.assign(n + 1, 0);
-  for (const auto& t : mesh.triangles) {
-    for (int32_t c : t) ++links.link_offsets_[c + 1];
-  }
-  for (int32_t v = 0; v < n; ++v) links.link_offsets_[v + 1] += links.link_offsets_[v];
-  links.link_.resize(2 * links.link_offsets_[n]);
-  std::vector<int64_t> fill(links.link_offsets_.begin(), links.link_offsets_.end() - 1);
-  for (const auto& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) {
-      const int64_t slot = fill[t[k]]++;
-      links.link_[2 * slot] = t[(k + 1) % 3];
-      links.link_[2 * slot + 1] = t[(k + 2) % 3];
-    }
-  }
-  // Neighbours: the distinct vertices of the link, sorted per vertex.
-  links.nbr_offsets_.assign(n + 1, 0);
-  std::vector<int32_t> scratch;
-  for (int32_t v = 0; v < n; ++v) {
-    scratch.assign(links.link_begin(v), links.link_end(v));
-    std::sort(scratch.begin(), scratch.end());
-    scratch.erase(std::unique(scratch.begin(), scratch.end()), scratch.end());
-    links.nbr_.insert(links.nbr_.end(), scratch.begin(), scratch.end());
-    links.nbr_offsets_[v + 1] = static_cast<int64_t>(links.nbr_.size());
-  }
-  return links;
-}
-
 absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     const MeshGraph& graph, const VertexLinks& links, int32_t source,
     const CriticalPointOptions& options) {
@@ -52,11 +22,12 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
                      " vertices, graph has ", n));
   }
   if (source < 0 || source >= n) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("critical points: source ", source, " out of range [0, ", n, ")"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "critical points: source ", source, " out of range [0, ", n, ")"));
   }
   if (options.cycle_min_vertices < 0) {
-    return absl::InvalidArgumentError("critical points: cycle_min_vertices must be >= 0");
+    return absl::InvalidArgumentError(
+        "critical points: cycle_min_vertices must be >= 0");
   }
   if (options.search_hops < options.cycle_min_vertices + 1) {
     return absl::InvalidArgumentError(
@@ -102,7 +73,8 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     // S; on a boundary ring (a path) the same formula holds.
     const int32_t deg = links.degree(v);
     int32_t settled_count = 0;
-    for (const int32_t* p = links.neighbors_begin(v); p != links.neighbors_end(v); ++p) {
+    for (const int32_t* p = links.neighbors_begin(v);
+         p != links.neighbors_end(v); ++p) {
       settled_count += settled[*p];
     }
     if (deg > 0 && settled_count == deg) {
@@ -110,10 +82,12 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
       continue;
     }
     int32_t settled_edges = 0;
-    for (const int32_t* p = links.link_begin(v); p != links.link_end(v); p += 2) {
+    for (const int32_t* p = links.link_begin(v); p != links.link_end(v);
+         p += 2) {
       settled_edges += settled[p[0]] & settled[p[1]];
     }
-    if (settled_count - settled_edges < 2) continue;  // Front does not meet itself.
+    if (settled_count - settled_edges < 2)
+      continue;  // Front does not meet itself.
 
     // Saddle candidate: C(l_s)^+ around v by a search on the heap vertices
     // (unsettled with a finite tentative distance), split into cycles by
@@ -122,7 +96,8 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     const int32_t id = candidate_id++;
     cycle_sizes.clear();
     queue.clear();
-    for (const int32_t* p = links.neighbors_begin(v); p != links.neighbors_end(v); ++p) {
+    for (const int32_t* p = links.neighbors_begin(v);
+         p != links.neighbors_end(v); ++p) {
       const int32_t seed = *p;
       if (settled[seed] || stamp[seed] == id) continue;
       const int32_t cycle = static_cast<int32_t>(cycle_sizes.size());
@@ -137,7 +112,8 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
         ++cycle_sizes[cycle];
         ++out.search_visits;
         if (depth[u] >= options.search_hops) continue;
-        for (const int32_t* q = links.neighbors_begin(u); q != links.neighbors_end(u); ++q) {
+        for (const int32_t* q = links.neighbors_begin(u);
+             q != links.neighbors_end(u); ++q) {
           const int32_t w = *q;
           ++out.search_visits;
           if (settled[w] || dist[w] == kUnreachable || stamp[w] == id) continue;
@@ -163,7 +139,8 @@ absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     // tip's maximum (seen on a 6-arm star: the arm opposite the source had
     // no maximum). tests/extractor/critical_points_test.cc covers both.
     for (int32_t u : queue) {
-      if (valid == 0 || cycle_sizes[cycle_of[u]] <= options.cycle_min_vertices) {
+      if (valid == 0 ||
+          cycle_sizes[cycle_of[u]] <= options.cycle_min_vertices) {
         disallowed[u] = 1;
       }
     }

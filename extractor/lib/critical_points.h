@@ -2,9 +2,9 @@
 // Set Diagram [14] traced by a Dijkstra wavefront from one source, with the
 // cycle-based proximity filter applied at every saddle candidate.
 //
-//   VertexLinks links = VertexLinks::Build(mesh);               // once per mesh
-//   absl::StatusOr<CriticalPoints> cp =
-//       AnalyzeCriticalPoints(graph, links, source, CriticalPointOptions{});
+//   MeshGraph graph = MeshGraph::Build(mesh);  // once per mesh
+//   absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(
+//       graph, graph.links(), source, CriticalPointOptions{});
 #ifndef TPR_EXTRACTOR_LIB_CRITICAL_POINTS_H_
 #define TPR_EXTRACTOR_LIB_CRITICAL_POINTS_H_
 
@@ -14,41 +14,9 @@
 #include "absl/status/statusor.h"
 #include "extractor/lib/geodesic.h"
 #include "extractor/lib/mesh.h"
+#include "extractor/lib/vertex_links.h"
 
 namespace tpr::extract {
-
-// VertexLinks is, per vertex, its 1-ring as the mesh's triangles give it:
-// the neighbour vertices and the link edges (the edge opposite the vertex
-// in each incident triangle). The arcs of a vertex's ring whose vertices
-// the wavefront has passed decide whether the wavefront meets itself there
-// (4.2, 4.3). Built from the triangles, not from MeshGraph, because the
-// graph may carry unfolded shortcut edges that are not part of the 1-ring.
-// Immutable after Build; thread-safe to share.
-class VertexLinks {
- public:
-  // Build returns the links of `mesh`. Precondition: every index in range
-  // (intake guarantees it). Cost O(f) time and memory.
-  static VertexLinks Build(const Mesh& mesh);
-
-  int32_t num_vertices() const {
-    return static_cast<int32_t>(nbr_offsets_.empty() ? 0 : nbr_offsets_.size() - 1);
-  }
-  // Distinct mesh-edge neighbours of v, sorted.
-  const int32_t* neighbors_begin(int32_t v) const { return nbr_.data() + nbr_offsets_[v]; }
-  const int32_t* neighbors_end(int32_t v) const { return nbr_.data() + nbr_offsets_[v + 1]; }
-  int32_t degree(int32_t v) const {
-    return static_cast<int32_t>(nbr_offsets_[v + 1] - nbr_offsets_[v]);
-  }
-  // Link edges of v as vertex pairs (a, b): triangle (v, a, b).
-  const int32_t* link_begin(int32_t v) const { return link_.data() + 2 * link_offsets_[v]; }
-  const int32_t* link_end(int32_t v) const { return link_.data() + 2 * link_offsets_[v + 1]; }
-
- private:
-  std::vector<int64_t> nbr_offsets_;
-  std::vector<int32_t> nbr_;
-  std::vector<int64_t> link_offsets_;
-  std::vector<int32_t> link_;  // Pairs.
-};
 
 // CriticalPointOptions controls the filter of 4.3.
 struct CriticalPointOptions {
@@ -78,7 +46,7 @@ struct CriticalPoints {
   // (kUnreachable off the source's component).
   std::vector<double> distances;
   // Bookkeeping for tests and the cost model of Table 4.
-  int saddle_candidates = 0;          // lambda_s
+  int saddle_candidates = 0;           // lambda_s
   int candidates_one_valid_cycle = 0;  // Table 1, row "1"
   int candidates_no_valid_cycle = 0;   // Table 1, row "0" (became maxima)
   int64_t search_visits = 0;           // n_v + n_e summed over candidates
@@ -94,12 +62,12 @@ struct CriticalPoints {
 // connectivity; cycles with > cycle_min_vertices vertices are valid. > 1
 // valid: saddle; 1: no critical point, the invalid cycles of C(l_s)^+
 // disallowed (the paper disallows all of C(l_s)^+; see the .cc for why the
-// valid cycle is spared); 0: v becomes a maximum, C(l_s)^+ disallowed. A vertex all of whose neighbours are settled
-// before it is a maximum unless disallowed. Disallowed vertices never become
-// critical points.
-// Returns INVALID_ARGUMENT when source is out of range, links and graph
-// disagree in size, or the options are out of range. Cost: one Dijkstra
-// sweep plus O(lambda_s * search_hops^2). Thread-safe (no shared state).
+// valid cycle is spared); 0: v becomes a maximum, C(l_s)^+ disallowed. A vertex
+// all of whose neighbours are settled before it is a maximum unless disallowed.
+// Disallowed vertices never become critical points. Returns INVALID_ARGUMENT
+// when source is out of range, links and graph disagree in size, or the options
+// are out of range. Cost: one Dijkstra sweep plus O(lambda_s * search_hops^2).
+// Thread-safe (no shared state).
 absl::StatusOr<CriticalPoints> AnalyzeCriticalPoints(
     const MeshGraph& graph, const VertexLinks& links, int32_t source,
     const CriticalPointOptions& options);

@@ -115,7 +115,7 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
 
   // Stage: mesh graph, 1-ring links and angle defects.
   TPR_ASSIGN_OR_RETURN(MeshGraph graph, MeshGraph::Create(mesh, options.geodesic));
-  const VertexLinks links = VertexLinks::Build(mesh);
+  const VertexLinks& links = graph.links();  // built with the graph
   const std::vector<double> defects = AngleDefects(mesh, links);
   const int32_t main_component = graph.largest_component();
   const double area = main_component >= 0 ? graph.component_areas()[main_component] : 0.0;

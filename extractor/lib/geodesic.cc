@@ -1,13 +1,12 @@
 #include "extractor/lib/geodesic.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cassert>
 #include <cmath>
 #include <cstring>
 #include <string>
 #include <utility>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -73,85 +72,6 @@ void InsertionSort(T* first, T* last, Less less) {
       --j;
     }
     *j = value;
-  }
-}
-
-// BuildOneRings fills, per vertex, its mesh neighbours in fan order. Each
-// triangle (a, b, c) says that around a, b is followed by c (and so on
-// cyclically); chaining these links walks the fan. Fans are small (about 6),
-// so the per-vertex work is a quadratic scan over a few links.
-void BuildOneRings(const Mesh& mesh, std::vector<int64_t>* offsets,
-                   std::vector<int32_t>* targets) {
-  const int32_t n = static_cast<int32_t>(mesh.positions.size());
-  std::vector<int64_t> link_offsets(static_cast<size_t>(n) + 1, 0);
-  for (const auto& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) ++link_offsets[t[k] + 1];
-  }
-  for (int32_t v = 0; v < n; ++v) link_offsets[v + 1] += link_offsets[v];
-  std::vector<std::pair<int32_t, int32_t>> links(link_offsets[n]);
-  std::vector<int64_t> fill(link_offsets.begin(), link_offsets.end() - 1);
-  for (const auto& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) {
-      links[fill[t[k]]++] = {t[(k + 1) % 3], t[(k + 2) % 3]};
-    }
-  }
-  offsets->assign(static_cast<size_t>(n) + 1, 0);
-  targets->clear();
-  targets->reserve(links.size() + 16);
-  std::vector<char> used;
-  for (int32_t v = 0; v < n; ++v) {
-    const int64_t begin = link_offsets[v];
-    const int64_t count = link_offsets[v + 1] - begin;
-    used.assign(count, 0);
-    const size_t out_begin = targets->size();
-    auto emit = [&](int32_t u) {
-      if (u == v) return;
-      for (size_t i = out_begin; i < targets->size(); ++i) {
-        if ((*targets)[i] == u) return;
-      }
-      targets->push_back(u);
-    };
-    int64_t remaining = count;
-    while (remaining > 0) {
-      // Start at a link whose `from` is no link's `to` (a boundary edge),
-      // else at the first unused link.
-      int64_t start = -1;
-      for (int64_t i = 0; i < count && start < 0; ++i) {
-        if (used[i]) continue;
-        bool is_target = false;
-        for (int64_t j = 0; j < count; ++j) {
-          if (!used[j] && links[begin + j].second == links[begin + i].first) {
-            is_target = true;
-            break;
-          }
-        }
-        if (!is_target) start = i;
-      }
-      if (start < 0) {
-        for (int64_t i = 0; i < count; ++i) {
-          if (!used[i]) {
-            start = i;
-            break;
-          }
-        }
-      }
-      int64_t cur = start;
-      emit(links[begin + cur].first);
-      while (cur >= 0) {
-        used[cur] = 1;
-        --remaining;
-        const int32_t to = links[begin + cur].second;
-        emit(to);
-        cur = -1;
-        for (int64_t j = 0; j < count; ++j) {
-          if (!used[j] && links[begin + j].first == to) {
-            cur = j;
-            break;
-          }
-        }
-      }
-    }
-    (*offsets)[v + 1] = static_cast<int64_t>(targets->size());
   }
 }
 
@@ -264,7 +184,7 @@ MeshGraph MeshGraph::Build(const Mesh& mesh, const GeodesicOptions& options) {
     g.offsets_[v + 1] = static_cast<int64_t>(g.targets_.size());
   }
 
-  BuildOneRings(mesh, &g.ring_offsets_, &g.ring_targets_);
+  g.links_ = VertexLinks::Build(mesh);
 
   // Components by breadth-first search over the rows.
   g.component_.assign(n, -1);
@@ -312,9 +232,9 @@ absl::StatusOr<MeshGraph> MeshGraph::Create(const Mesh& mesh,
     for (int k = 0; k < 3; ++k) {
       const int32_t i = mesh.triangles[f][k];
       if (i < 0 || static_cast<size_t>(i) >= n) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "triangle ", f, " refers to vertex ", i, ", out of range [0, ", n,
-            ")"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("triangle ", f, " refers to vertex ", i,
+                         ", out of range [0, ", n, ")"));
       }
     }
   }

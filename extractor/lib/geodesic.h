@@ -5,7 +5,7 @@
 //
 //   MeshGraph graph = MeshGraph::Build(mesh);          // once per mesh
 //   DijkstraSolver solver(graph);                       // once per thread
-//   const std::vector<double>& d = solver.Run(source);  // per sweep, buffers reused
+//   const std::vector<double>& d = solver.Run(source);  // buffers reused
 #ifndef TPR_EXTRACTOR_LIB_GEODESIC_H_
 #define TPR_EXTRACTOR_LIB_GEODESIC_H_
 
@@ -16,6 +16,7 @@
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
 #include "extractor/lib/mesh.h"
+#include "extractor/lib/vertex_links.h"
 
 namespace tpr::extract {
 
@@ -34,11 +35,12 @@ struct GeodesicOptions {
   // geodesic (tests/extractor/geodesic_test.cc): unit icospheres of 162 to
   // 10k vertices, mean relative error 6-8% -> 0.6-1.5%, max 21-22% -> 3-5%;
   // open tube, mean 10% -> 2.3%, max 18% -> 4.6%. Cost: twice the arcs,
-  // about 1.6x the time per sweep (BM_Dijkstra vs BM_DijkstraPlainEdges).
+  // so more time per sweep (BM_Dijkstra against BM_DijkstraPlainEdges;
+  // figures in docs/benchmarks.md).
   // The paper uses plain Dijkstra (4.2); the zig-zag error depends on edge
   // directions, hence on tessellation and pose, and removing most of it
-  // from G, ring lengths and geodesic bands is worth the sweep cost. Only distances change: one_ring() never includes
-  // these arcs. Default true.
+  // from G, ring lengths and geodesic bands is worth the sweep cost. Only
+  // distances change: one_ring() never includes these arcs. Default true.
   bool unfold_opposite_edges = true;
 };
 
@@ -82,18 +84,17 @@ class MeshGraph {
                                offsets_[v + 1] - offsets_[v]);
   }
 
+  // links returns the mesh's 1-ring structure (vertex_links.h): link edges,
+  // sorted neighbours and fans, mesh edges only (never the unfolded
+  // shortcuts). Built once with the graph; the extraction's stages share it.
+  const VertexLinks& links() const { return links_; }
+
   // one_ring returns v's mesh-edge neighbours only (never the unfolded
-  // shortcuts), in the cyclic order of v's triangle fan: counter-clockwise
-  // seen from outside for consistently oriented triangles. For a boundary
-  // vertex the sequence starts at a boundary edge and is open (its last and
-  // first entries are not adjacent). This is the neighbourhood for level-set
-  // work (cross-edges, sign changes around a saddle, 4.2-4.3); use
-  // neighbors() for distances. For a fan that is not a single disk or
-  // half-disk (intake rejects these) each neighbour still appears once.
-  absl::Span<const int32_t> one_ring(int32_t v) const {
-    return absl::MakeConstSpan(ring_targets_.data() + ring_offsets_[v],
-                               ring_offsets_[v + 1] - ring_offsets_[v]);
-  }
+  // shortcuts), in the cyclic order of v's triangle fan: links().fan(v)
+  // (see VertexLinks for boundary and non-manifold fans). This is the
+  // neighbourhood for level-set work (cross-edges, sign changes around a
+  // saddle, 4.2-4.3); use neighbors() for distances.
+  absl::Span<const int32_t> one_ring(int32_t v) const { return links_.fan(v); }
 
   // vertex_areas: per vertex, one third of the area of its triangles. Their
   // sum is total_area().
@@ -105,7 +106,9 @@ class MeshGraph {
   const std::vector<int32_t>& component() const { return component_; }
   int32_t num_components() const { return num_components_; }
   // component_areas: total vertex area per component.
-  const std::vector<double>& component_areas() const { return component_areas_; }
+  const std::vector<double>& component_areas() const {
+    return component_areas_;
+  }
   // largest_component: the component with the largest area (lowest id on
   // ties); -1 for an empty graph.
   int32_t largest_component() const;
@@ -117,8 +120,7 @@ class MeshGraph {
   std::vector<int64_t> offsets_;
   std::vector<int32_t> targets_;
   std::vector<double> lengths_;
-  std::vector<int64_t> ring_offsets_;
-  std::vector<int32_t> ring_targets_;
+  VertexLinks links_;
   std::vector<double> vertex_areas_;
   double total_area_ = 0.0;
   std::vector<int32_t> component_;
