@@ -5,18 +5,15 @@
 include_guard(GLOBAL)
 
 # tpr_folder_library(<target> <dir> [PUBLIC libs...] [PRIVATE libs...])
-# Creates <target> from <dir>/*.cc (mains excluded). Header-only folders get
-# an INTERFACE-like static library with LINKER_LANGUAGE CXX.
+# Creates <target> from <dir>/*.cc and *.h (mains excluded); a folder with
+# no source is a configuration error, not an empty target.
 function(tpr_folder_library target dir)
   cmake_parse_arguments(ARG "" "" "PUBLIC;PRIVATE" ${ARGN})
   file(GLOB srcs CONFIGURE_DEPENDS ${dir}/*.cc)
   file(GLOB hdrs CONFIGURE_DEPENDS ${dir}/*.h)
   list(FILTER srcs EXCLUDE REGEX "(/main\\.cc|_main\\.cc)$")
-  if(NOT srcs AND NOT hdrs)
-    # Nothing written yet: an empty interface target keeps dependents linking.
-    add_library(${target} INTERFACE)
-    target_link_libraries(${target} INTERFACE tpr_common ${ARG_PUBLIC})
-    return()
+  if(NOT srcs)
+    message(FATAL_ERROR "${target}: no sources in ${dir}")
   endif()
   add_library(${target} STATIC ${srcs} ${hdrs})
   set_target_properties(${target} PROPERTIES LINKER_LANGUAGE CXX)
@@ -27,9 +24,7 @@ endfunction()
 # tpr_folder_executable(<exe-name> <main.cc> LIBS libs...)
 function(tpr_folder_executable name main)
   cmake_parse_arguments(ARG "" "" "LIBS" ${ARGN})
-  if(EXISTS ${main})
-    add_executable(${name} ${main})
-    target_compile_options(${name} PRIVATE ${TPR_WARNINGS})
-    target_link_libraries(${name} PRIVATE ${ARG_LIBS})
-  endif()
+  add_executable(${name} ${main})
+  target_compile_options(${name} PRIVATE ${TPR_WARNINGS})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS})
 endfunction()
