@@ -23,12 +23,47 @@ namespace {
 
 using absl::string_view;
 
+// The readers, one row per format. A new format is a reader
+// (mesh_io_<format>.cc, declared in mesh_io_readers.h), its MeshFormat
+// value (mesh_io.h) and a row here; recognising its bytes without a file
+// name (GuessFormat below) is optional.
+struct Reader {
+  MeshFormat format;
+  const char* name;       // in messages and MeshFormatName
+  const char* extension;  // lower case, with the dot
+  absl::StatusOr<PolygonSoup> (*read)(string_view bytes,
+                                      const IntakeOptions& options);
+};
+constexpr Reader kReaders[] = {
+    {MeshFormat::kOff, "OFF", ".off", ReadOff},
+    {MeshFormat::kObj, "OBJ", ".obj", ReadObj},
+    {MeshFormat::kPly, "PLY", ".ply", ReadPly},
+    {MeshFormat::kStl, "STL", ".stl", ReadStl},
+};
+
+const Reader* FindReader(MeshFormat format) {
+  for (const Reader& r : kReaders) {
+    if (r.format == format) return &r;
+  }
+  return nullptr;
+}
+
+// "OFF, OBJ, PLY or STL".
+std::string ReaderNames() {
+  std::string out;
+  const size_t n = std::size(kReaders);
+  for (size_t i = 0; i < n; ++i) {
+    absl::StrAppend(&out, i == 0 ? "" : i + 1 == n ? " or " : ", ",
+                    kReaders[i].name);
+  }
+  return out;
+}
+
 MeshFormat GuessFormat(string_view bytes, string_view file_name) {
   const std::string lower = absl::AsciiStrToLower(file_name);
-  if (absl::EndsWith(lower, ".off")) return MeshFormat::kOff;
-  if (absl::EndsWith(lower, ".obj")) return MeshFormat::kObj;
-  if (absl::EndsWith(lower, ".ply")) return MeshFormat::kPly;
-  if (absl::EndsWith(lower, ".stl")) return MeshFormat::kStl;
+  for (const Reader& r : kReaders) {
+    if (absl::EndsWith(lower, r.extension)) return r.format;
+  }
   if (absl::StartsWith(bytes, "ply\n") || absl::StartsWith(bytes, "ply\r")) {
     return MeshFormat::kPly;
   }
@@ -61,19 +96,8 @@ MeshFormat GuessFormat(string_view bytes, string_view file_name) {
 }  // namespace
 
 const char* MeshFormatName(MeshFormat format) {
-  switch (format) {
-    case MeshFormat::kOff:
-      return "OFF";
-    case MeshFormat::kObj:
-      return "OBJ";
-    case MeshFormat::kPly:
-      return "PLY";
-    case MeshFormat::kStl:
-      return "STL";
-    case MeshFormat::kUnknown:
-      break;
-  }
-  return "unknown";
+  const Reader* reader = FindReader(format);
+  return reader != nullptr ? reader->name : "unknown";
 }
 
 absl::StatusOr<LoadedMesh> BuildMesh(
@@ -96,25 +120,13 @@ absl::StatusOr<LoadedMesh> LoadMeshFromBuffer(absl::string_view bytes,
     return absl::InvalidArgumentError(
         absl::StrCat(MeshFormatName(format), ": the file is empty"));
   }
-  absl::StatusOr<PolygonSoup> soup;
-  switch (format) {
-    case MeshFormat::kOff:
-      soup = ReadOff(bytes, options);
-      break;
-    case MeshFormat::kObj:
-      soup = ReadObj(bytes, options);
-      break;
-    case MeshFormat::kPly:
-      soup = ReadPly(bytes, options);
-      break;
-    case MeshFormat::kStl:
-      soup = ReadStl(bytes, options);
-      break;
-    case MeshFormat::kUnknown:
-      return absl::InvalidArgumentError(
-          "cannot tell the mesh format from the name or the bytes (expected "
-          "OFF, OBJ, PLY or STL)");
+  const Reader* reader = FindReader(format);
+  if (reader == nullptr) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "cannot tell the mesh format from the name or the bytes (expected ",
+        ReaderNames(), ")"));
   }
+  absl::StatusOr<PolygonSoup> soup = reader->read(bytes, options);
   if (!soup.ok()) return soup.status();
   return CleanPolygonSoup(*std::move(soup), options);
 }

@@ -2,8 +2,8 @@
 // PolygonSoup (mesh_clean.h), which CleanPolygonSoup turns into a Mesh.
 // LoadMeshFromBuffer (mesh_io.h) picks the reader; fuzz targets and tests
 // may call one directly. To add a format: write mesh_io_<format>.cc with a
-// Read<Format> declared here, and add it to MeshFormat and the dispatch in
-// mesh_io.cc.
+// Read<Format> declared here, add a MeshFormat value (mesh_io.h) and a row
+// to kReaders in mesh_io.cc.
 //
 // Every reader parses the bytes exactly once and checks what it reads as it
 // goes: declared counts against the bytes left (a lying header never
