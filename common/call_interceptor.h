@@ -43,8 +43,9 @@ struct CallInterceptorOptions {
 
 // MakeCallInterceptorFactory returns the factory to hand to
 // grpc::ServerBuilder::experimental().SetInterceptorCreators. The options
-// are copied. Thread-safe; the interceptor costs about a microsecond per
-// call plus the log line.
+// are copied. Thread-safe. Cost per call: O(1) beyond reading the request
+// id from the metadata, plus the log line and the observers (measured with
+// metrics on by bench_service BM_SecurityAndMetricsOverhead).
 std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
 MakeCallInterceptorFactory(CallInterceptorOptions options);
 

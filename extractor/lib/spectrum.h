@@ -29,7 +29,8 @@ struct SpectrumOptions {
   // (tests/extractor/spectrum_test.cc, DecimationIsStable, and BM_Spectrum):
   // on the 10k-vertex biped the first 50 scaled eigenvalues computed at
   // 3000 vertices differ from the full mesh's by at most a few percent,
-  // and the spectrum costs well under the 100 ms. Default 3000.
+  // and the cost stays within the budget (BM_Spectrum against
+  // BM_SpectrumFullMesh; figures in docs/benchmarks.md). Default 3000.
   int max_vertices = 3000;
   // Shift sigma of the shift-invert Lanczos iteration, in the scaled units
   // of the result (lambda * A / (4 pi)); must be negative so that

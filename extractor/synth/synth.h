@@ -89,10 +89,10 @@ absl::StatusOr<Skeleton> PoseSkeleton(absl::string_view class_name,
 // vertices. Deterministic in (class, pose_index, options).
 // Errors: as PoseSkeleton; INTERNAL if the polygonizer cannot produce a
 // genus-0 surface (not seen for the built-in classes).
-// Thread-safe. Cost: about 0.1-0.2 s of CPU for 10k vertices (the classes
-// with the thinnest parts, ant and octopus, are the slowest); grows about
-// linearly with target_vertices above ~5k (below that the grid the thinnest
-// bone needs dominates).
+// Thread-safe. Cost: grows about linearly with target_vertices above ~5k
+// (below that the grid the thinnest bone needs dominates); the classes with
+// the thinnest parts, ant and octopus, are the slowest (BM_GenerateShape;
+// figures in docs/benchmarks.md).
 absl::StatusOr<extract::Mesh> GenerateShape(absl::string_view class_name,
                                             int pose_index,
                                             const ShapeOptions& options);

@@ -46,10 +46,8 @@ class EmdSolver {
   // from Prepare with the same options, so 1 <= size() <= kMaxFeatures.
   // Cost: the n x m ground-distance matrix plus about 1.5 (n + m) simplex
   // pivots in practice, each O(cycle + moved subtree), one vectorized
-  // O(n m) pricing pass every 3 to 5 pivots (BM_Emd: about 2.8, 18 and
-  // 69 us CPU at n = m = 10, 30, 60 on the busy 2-core build machine,
-  // 0.37, 0.28 and 0.30 of LEMON's time in the same run; the matrix alone
-  // is about 0.9, 5 and 22 us of that).
+  // O(n m) pricing pass every 3 to 5 pivots (BM_Emd beside LEMON's
+  // network simplex, BM_EmdLemon; figures in docs/benchmarks.md).
   double Distance(const PreparedSignature& a, const PreparedSignature& b);
 
   // RelaxedBound returns the relaxed transport bound RelaxedTransportBound
