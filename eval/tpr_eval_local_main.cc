@@ -23,7 +23,6 @@
 #include <sstream>
 #include <string>
 #include <thread>
-#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -180,20 +179,6 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   return key.str();
 }
 
-// Vertex and face counts from an OFF file's header, for cache entries of
-// format v1 that did not record them; (0, 0) for other formats.
-std::pair<int64_t, int64_t> OffHeaderCounts(const std::string& path) {
-  std::ifstream in(path);
-  std::string token;
-  if (!(in >> token) || token.rfind("OFF", 0) != 0) return {0, 0};
-  int64_t v = 0, f = 0;
-  if (token.size() > 3) {  // "OFF" glued to nothing else is the usual case
-    return {0, 0};
-  }
-  if (!(in >> v >> f)) return {0, 0};
-  return {v, f};
-}
-
 Described Describe(const Model& model, const Config& config, size_t index) {
   Described out;
   std::string key;
@@ -206,9 +191,6 @@ Described Describe(const Model& model, const Config& config, size_t index) {
       out.rings = cached.rings;
       out.vertices = cached.vertices;
       out.faces = cached.faces;
-      if (out.vertices == 0 && !model.path.empty()) {
-        std::tie(out.vertices, out.faces) = OffHeaderCounts(model.path);
-      }
       out.d2 = std::move(cached.d2);
       out.extract_ms = cached.extract_ms;
       out.stage_ms = std::move(cached.stage_ms);

@@ -12,8 +12,10 @@
 namespace tpr::eval {
 namespace {
 
-constexpr char kMagicV1[] = "tpr-eval-cache-v1";
-constexpr char kMagicV2[] = "tpr-eval-cache-v2";  // v1 plus vertex and face counts
+// Format v1 (no vertex and face counts) is not read: its entries were all
+// written under feature-code versions older than any key built today, so
+// they could only ever miss.
+constexpr char kMagicV2[] = "tpr-eval-cache-v2";  // v2: vertex and face counts
 constexpr char kMagic[] = "tpr-eval-cache-v3";    // v2 plus the spectrum
 
 void WriteVector(std::ostream& out, const std::vector<double>& v) {
@@ -55,14 +57,15 @@ bool LoadCached(const std::string& dir, const std::string& key,
   if (!in) return false;
   std::string magic, stored_key;
   if (!std::getline(in, magic) ||
-      (magic != kMagic && magic != kMagicV2 && magic != kMagicV1)) {
+      (magic != kMagic && magic != kMagicV2)) {
     return false;
   }
   if (!std::getline(in, stored_key) || stored_key != key) return false;
   CachedDescription d;
   size_t stages = 0, features = 0;
-  if (!(in >> d.points >> d.rings >> d.extract_ms >> stages)) return false;
-  if (magic != kMagicV1 && !(in >> d.vertices >> d.faces)) return false;
+  if (!(in >> d.points >> d.rings >> d.extract_ms >> stages >> d.vertices >> d.faces)) {
+    return false;
+  }
   for (size_t i = 0; i < stages; ++i) {
     std::string name;
     double ms = 0.0;

@@ -27,7 +27,7 @@ struct CachedDescription {
   index::Signature signature;
   int points = 0;
   int rings = 0;
-  // The mesh's vertex and face counts (0 when read from a v1 entry).
+  // The mesh's vertex and face counts.
   int64_t vertices = 0;
   int64_t faces = 0;
   // D2 histogram of the same mesh (the baseline).

@@ -61,5 +61,34 @@ TEST(SignatureCacheTest, RoundTripIncludingSpectrumAndMisses) {
   std::filesystem::remove_all(dir);
 }
 
+// Format v1 (no vertex and face counts) is no longer read: an entry in it,
+// key and all, is a miss; the same entry in v2 (counts, no spectrum) reads.
+TEST(SignatureCacheTest, VersionOneEntryIsAMissVersionTwoReads) {
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / "tpr-cache-test.XXXXXX").string();
+  ASSERT_NE(mkdtemp(pattern.data()), nullptr);
+  const std::string dir = pattern;
+  const std::filesystem::path file = std::filesystem::path(dir) / CacheFileName("k");
+  const std::string body = "1\n0.5 0.25\n1 1\n1 4\n1 5\nend\n";
+  {
+    std::ofstream out(file);
+    out << "tpr-eval-cache-v1\nk\n1 0 7.5 0\n1 0.5\n" << body;
+  }
+  CachedDescription d;
+  EXPECT_FALSE(LoadCached(dir, "k", &d));
+  {
+    std::ofstream out(file);
+    out << "tpr-eval-cache-v2\nk\n1 0 7.5 0 10 16\n1 0.5\n" << body;
+  }
+  ASSERT_TRUE(LoadCached(dir, "k", &d));
+  EXPECT_EQ(d.vertices, 10);
+  EXPECT_EQ(d.faces, 16);
+  ASSERT_EQ(d.signature.features.size(), 1u);
+  EXPECT_EQ(d.signature.features[0].weight, 0.5);
+  EXPECT_EQ(d.signature.features[0].distance, (std::vector<double>{5}));
+  EXPECT_TRUE(d.signature.spectrum.empty());
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace tpr::eval
