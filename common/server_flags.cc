@@ -8,6 +8,23 @@
 
 namespace tpr::common {
 
+void AddListenFlags(CLI::App& app, ServerOptions* options) {
+  app.add_option("--listen", options->listen_address,
+                 "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
+      ->capture_default_str();
+  app.add_option("--shutdown-grace-ms", options->shutdown_grace_ms,
+                 "on SIGTERM/SIGINT, how long in-flight calls may finish (ms)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+}
+
+void AddServerThreadsFlag(CLI::App& app, ServerFlags* flags) {
+  app.add_option("--threads", flags->server_threads,
+                 "upper bound on server threads (0: gRPC's default)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+}
+
 void AddServerFlags(CLI::App& app, ServerFlags* flags) {
   app.add_option("--log-format", flags->log_format,
                  "log lines as 'text' or 'json' (time, level, service, rpc, peer, status, "
@@ -39,6 +56,7 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
+  if (flags.server_threads > 0) options->max_threads = flags.server_threads + 2;
   const TlsServerOptions& tls = flags.tls;
   if (!tls.cert_file.empty() || !tls.key_file.empty() || !tls.client_ca_file.empty()) {
     absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =

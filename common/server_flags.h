@@ -4,8 +4,9 @@
 // API keys, TLS and metrics in a few lines:
 //
 //   tpr::common::ServerFlags ops;
-//   tpr::common::AddServerFlags(app, &ops);
+//   tpr::common::AddListenFlags(app, &server_options);  // --listen, --shutdown-grace-ms
 //   ... the service's own options ...
+//   tpr::common::AddServerFlags(app, &ops);
 //   auto config = tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
 //   CLI11_PARSE(app, argc, argv);
 //   if (std::optional<int> exit_code =
@@ -43,7 +44,22 @@ struct ServerFlags {
   // --metrics-listen HOST:PORT: serve Prometheus /metrics there; empty:
   // no metrics. Default empty.
   std::string metrics_listen;
+  // --threads of the indexer and the gateway (AddServerThreadsFlag): an
+  // upper bound on gRPC's handler threads; 0: gRPC's default. Default 0.
+  int server_threads = 0;
 };
+
+// AddListenFlags adds the two flags every service has, bound to `*options`
+// (which must outlive parsing; its current values are the defaults shown):
+// --listen HOST:PORT (options->listen_address; port 0 picks a free one,
+// logged) and --shutdown-grace-ms (options->shutdown_grace_ms).
+void AddListenFlags(CLI::App& app, ServerOptions* options);
+
+// AddServerThreadsFlag adds --threads as an upper bound on the server's
+// handler threads (flags->server_threads; ApplyServerFlags turns it into
+// ServerOptions::max_threads). For services whose --threads means nothing
+// else (tpr-extractor's --threads sizes its worker pool instead).
+void AddServerThreadsFlag(CLI::App& app, ServerFlags* flags);
 
 // AddServerFlags adds the shared flags to `app`, storing into `*flags`
 // (which must outlive parsing). Call before AddConfigSupport so that the
@@ -51,7 +67,9 @@ struct ServerFlags {
 void AddServerFlags(CLI::App& app, ServerFlags* flags);
 
 // ApplyServerFlags sets the process-wide log format and fills the matching
-// fields of `*options` (opening the keys file). Returns INVALID_ARGUMENT or
+// fields of `*options` (opening the keys file; max_threads = server_threads
+// + 2 when server_threads > 0, since gRPC needs a few threads of its own
+// besides the handlers). Returns INVALID_ARGUMENT or
 // NOT_FOUND naming the flag and the file or line at fault.
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
 

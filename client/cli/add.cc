@@ -105,7 +105,7 @@ int RunAdd(const Globals& g, const AddFlags& flags) {
   if (!outcomes.ok()) return Fail("listing the index", outcomes.status());
 
   int added = 0, updated = 0, skipped = 0;
-  std::vector<std::pair<std::string, std::string>> failures;
+  Failures failures;
   for (size_t i = 0; i < items->size(); ++i) {
     const AddOutcome& o = (*outcomes)[i];
     switch (o.kind) {
@@ -125,17 +125,12 @@ int RunAdd(const Globals& g, const AddFlags& flags) {
   }
   std::sort(failures.begin(), failures.end());
   if (g.json) {
-    std::string f;
-    for (const auto& [id, why] : failures) {
-      absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
-                      ",\"error\":", JsonString(why), "}");
-    }
     std::printf(
         "{\"files\":%zu,\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%"
         "zu,"
-        "\"seconds\":%.3f,\"failures\":[%s]}\n",
+        "\"seconds\":%.3f,\"failures\":%s}\n",
         items->size(), added, updated, skipped, failures.size(),
-        progress.Elapsed(), f.c_str());
+        progress.Elapsed(), FailuresJson(failures).c_str());
   } else {
     std::printf(
         "%zu files: %d added, %d updated, %d skipped (already present), %zu "
@@ -143,10 +138,7 @@ int RunAdd(const Globals& g, const AddFlags& flags) {
         "in %.1f s\n",
         items->size(), added, updated, skipped, failures.size(),
         progress.Elapsed());
-    for (const auto& [id, why] : failures) {
-      std::printf("  failed %s: %s\n", TextField(id).c_str(),
-                  TextField(why).c_str());
-    }
+    PrintFailures(failures);
   }
   return failures.empty() ? 0 : 1;
 }

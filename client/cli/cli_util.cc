@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
 namespace tpr::cli {
@@ -14,6 +15,21 @@ int Fail(const std::string& what, const absl::Status& status) {
   std::fprintf(stderr, "tpr: %s: %s\n", TextField(what).c_str(),
                TextField(status.ToString()).c_str());
   return 1;
+}
+
+std::string FailuresJson(const Failures& failures) {
+  std::string out = "[";
+  for (const auto& [id, why] : failures) {
+    absl::StrAppend(&out, out.size() > 1 ? "," : "", "{\"id\":", JsonString(id),
+                    ",\"error\":", JsonString(why), "}");
+  }
+  return out + "]";
+}
+
+void PrintFailures(const Failures& failures) {
+  for (const auto& [id, why] : failures) {
+    std::printf("  failed %s: %s\n", TextField(id).c_str(), TextField(why).c_str());
+  }
 }
 
 int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind) {

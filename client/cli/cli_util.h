@@ -2,8 +2,8 @@
 // escapers (from eval/lib/report.h), and the progress bar.
 //
 //   Progress progress(items.size(), "adding");
-//   ParallelFor(items.size(), jobs, [&](size_t i) { ...; progress.Step(id,
-//   "added"); }); if (!status.ok()) return Fail("add", status);
+//   ParallelFor(items.size(), jobs, [&](size_t i) { progress.Step(id, "added"); });
+//   if (!status.ok()) return Fail("add", status);
 #ifndef TPR_CLIENT_CLI_CLI_UTIL_H_
 #define TPR_CLIENT_CLI_CLI_UTIL_H_
 
@@ -13,6 +13,8 @@
 #include <cstddef>
 #include <mutex>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
@@ -31,6 +33,15 @@ using tpr::eval::TextField;
 
 // Fail prints "tpr: WHAT: STATUS" on stderr and returns exit code 1.
 int Fail(const std::string& what, const absl::Status& status);
+
+// Failures: (id, reason) of each item a command could not handle.
+using Failures = std::vector<std::pair<std::string, std::string>>;
+
+// FailuresJson returns `failures` as a JSON array of {"id","error"} objects.
+std::string FailuresJson(const Failures& failures);
+
+// PrintFailures prints one line "  failed ID: REASON" per failure on stdout.
+void PrintFailures(const Failures& failures);
 
 // CountKind returns the number of features of `kind` in `signature`.
 int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);

@@ -103,7 +103,7 @@ int RunEval(const Globals& g, const std::string& dataset,
   if (!outcomes.ok()) return Fail("listing the index", outcomes.status());
   const double add_seconds = add_progress.Elapsed();
 
-  std::vector<std::pair<std::string, std::string>> failures;  // id, reason
+  Failures failures;
   std::vector<int> evaluated;  // indices into *items
   int added = 0, updated = 0, skipped = 0;
   for (size_t i = 0; i < items->size(); ++i) {
@@ -196,20 +196,15 @@ int RunEval(const Globals& g, const std::string& dataset,
 
   // 4. Report.
   if (g.json) {
-    std::string f;
-    for (const auto& [id, why] : failures) {
-      absl::StrAppend(&f, f.empty() ? "" : ",", "{\"id\":", JsonString(id),
-                      ",\"error\":", JsonString(why), "}");
-    }
     std::printf(
         "{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":%s,\"files\":%zu,"
         "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
-        "\"failures\":[%s],"
+        "\"failures\":%s,"
         "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
         evaluated.size(), models_per_class.size(),
         eval::MetricsJsonFields(scores.overall).c_str(),
         eval::PerClassJson(scores, models_per_class).c_str(), items->size(),
-        added, updated, skipped, failures.size(), f.c_str(), add_seconds,
+        added, updated, skipped, failures.size(), FailuresJson(failures).c_str(), add_seconds,
         query_seconds,
         evaluable && pictures.ok() ? JsonString(out_dir).c_str() : "null");
   } else {
@@ -221,10 +216,7 @@ int RunEval(const Globals& g, const std::string& dataset,
         failures.size(), add_seconds, query_seconds);
     if (evaluable)
       std::fputs(eval::ScoresTable(scores, models_per_class).c_str(), stdout);
-    for (const auto& [id, why] : failures) {
-      std::printf("  failed %s: %s\n", TextField(id).c_str(),
-                  TextField(why).c_str());
-    }
+    PrintFailures(failures);
     if (evaluable && pictures.ok())
       std::printf("\nwrote %s\n", written.c_str());
   }

@@ -24,9 +24,7 @@ int main(int argc, char** argv) {
   server_options.log_name = "tpr-extractor";
 
   CLI::App app{"tpr-extractor: stateless gRPC service turning meshes into TPR signatures"};
-  app.add_option("--listen", server_options.listen_address,
-                 "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
-      ->capture_default_str();
+  tpr::common::AddListenFlags(app, &server_options);
   app.add_option("--threads", service_options.worker_threads,
                  "worker threads running intake + extraction; more calls queue")
       ->capture_default_str()
@@ -58,10 +56,6 @@ int main(int argc, char** argv) {
                  "cap on ExtractOptions.threads a client may request")
       ->capture_default_str()
       ->check(CLI::Range(1, 256));
-  app.add_option("--shutdown-grace-ms", server_options.shutdown_grace_ms,
-                 "on SIGTERM/SIGINT, how long in-flight calls may finish")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
   tpr::common::ServerFlags ops_flags;
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =

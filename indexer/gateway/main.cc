@@ -31,10 +31,9 @@ int main(int argc, char** argv) {
   tpr::gateway::GatewayOptions options;
   std::vector<std::string> shard_flags;
   std::string shard_map_path;
-  int threads = 0;
-  app.add_option("--listen", server_options.listen_address,
-                 "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
-      ->capture_default_str();
+  tpr::common::ServerFlags ops_flags;
+  tpr::common::AddListenFlags(app, &server_options);
+  tpr::common::AddServerThreadsFlag(app, &ops_flags);
   app.add_option("--shard", shard_flags,
                  "One shard, in shard order: PRIMARY[,REPLICA...] (repeat per shard)");
   app.add_option("--shard-map", shard_map_path,
@@ -46,13 +45,6 @@ int main(int argc, char** argv) {
   app.add_option("--health-timeout-ms", options.health_timeout_ms,
                  "Deadline of one health check")
       ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--threads", threads, "Upper bound on server threads (0: gRPC's default)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  app.add_option("--shutdown-grace-ms", server_options.shutdown_grace_ms,
-                 "On SIGTERM, how long in-flight calls may finish (ms)")
-      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   // How the gateway reaches the shards: the SDK's connection options.
   tpr::client::ConnectionOptions shard_connection;
@@ -70,7 +62,6 @@ int main(int argc, char** argv) {
   app.add_option("--shard-api-key", shard_connection.api_key,
                  "API key sent to the shards (role write, admin for backups); prefer the "
                  "environment variable TPR_GATEWAY_SHARD_API_KEY, which ps does not show");
-  tpr::common::ServerFlags ops_flags;
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_GATEWAY_", {"shard-api-key"});
@@ -83,7 +74,6 @@ int main(int argc, char** argv) {
   // draining: a gateway can always answer, if need be with UNAVAILABLE
   // naming the shard that cannot.
   server_options.readiness_service = "tpr.v1.Indexer";
-  if (threads > 0) server_options.max_threads = threads + 2;
 
   const std::string name = server_options.log_name;
   auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };

@@ -23,17 +23,13 @@ int main(int argc, char** argv) {
   server_options.listen_address = "127.0.0.1:7002";
   server_options.log_name = "tpr-indexer";
   std::string data_dir;
-  int threads = 0;
   int max_searches = 16;
   int max_k = 10000;
-  app.add_option("--listen", server_options.listen_address, "HOST:PORT to listen on")
-      ->capture_default_str();
+  tpr::common::ServerFlags ops_flags;
+  tpr::common::AddListenFlags(app, &server_options);
   app.add_option("--data-dir", data_dir, "Directory of the RocksDB store (created if missing)")
       ->required();
-  app.add_option("--threads", threads,
-                 "Upper bound on server threads (0: gRPC's default)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
+  tpr::common::AddServerThreadsFlag(app, &ops_flags);
   app.add_option("--max-concurrent-searches", max_searches,
                  "Searches running at once; more get RESOURCE_EXHAUSTED")
       ->check(CLI::PositiveNumber)
@@ -41,11 +37,6 @@ int main(int argc, char** argv) {
   app.add_option("--max-k", max_k, "Largest k a search may ask for")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--shutdown-grace-ms", server_options.shutdown_grace_ms,
-                 "On SIGTERM, how long in-flight calls may finish (ms)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  tpr::common::ServerFlags ops_flags;
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
@@ -55,8 +46,6 @@ int main(int argc, char** argv) {
     return *exit_code;
   }
   server_options.readiness_service = "tpr.v1.Indexer";
-  // gRPC needs a few threads of its own besides the handlers.
-  if (threads > 0) server_options.max_threads = threads + 2;
 
   const std::string name = server_options.log_name;
   auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };

@@ -37,96 +37,23 @@
 #include "indexer/service/batch_writer.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
-#include "tests/indexer/signature_testing.h"
-#include "tests/service/indexer_testing.h"
+#include "tests/bench/bench_indexer_setup.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
 namespace tpr::gateway {
 namespace {
 
+using bench::Ingest;
+using bench::Percentile;
+using bench::UpsertRequests;
 using indexer::BatchWriter;
-using indexer::CoreOptions;
 using indexer::IndexerCore;
-using indexer::IndexerService;
-using indexer::testing::ToWire;
 
 constexpr int kShards = 4;
 
-std::vector<tpr::v1::UpsertRequest> Requests(int n, uint64_t seed, const std::string& prefix) {
-  tpr::index::testing::SignatureGeneratorOptions o;
-  o.seed = seed;
-  o.classes = 20;
-  tpr::index::testing::SignatureGenerator gen(o);
-  std::vector<tpr::v1::UpsertRequest> out(static_cast<size_t>(n));
-  for (int i = 0; i < n; ++i) {
-    tpr::v1::Model* m = out[static_cast<size_t>(i)].mutable_model();
-    m->set_id(absl::StrCat(prefix, i));
-    m->set_label(absl::StrCat("class", i % 20));
-    *m->mutable_signature() = ToWire(gen.Next());
-  }
-  return out;
-}
+using Indexer = bench::ServedIndexer;
 
-// Directories made by this process, removed at exit (the cached k-NN
-// set-ups live until then).
-std::vector<std::string>* MadeDirs() {
-  static std::vector<std::string>* dirs = [] {
-    auto* d = new std::vector<std::string>;
-    std::atexit([] {
-      for (const std::string& dir : *MadeDirs()) {
-        std::error_code ec;
-        std::filesystem::remove_all(dir, ec);
-      }
-    });
-    return d;
-  }();
-  return dirs;
-}
-
-std::string FreshDir(const std::string& tag) {
-  std::string pattern =
-      (std::filesystem::temp_directory_path() / ("tpr-bench-gw-" + tag + ".XXXXXX")).string();
-  if (mkdtemp(pattern.data()) == nullptr) std::abort();
-  MadeDirs()->push_back(pattern);
-  return pattern;
-}
-
-// One served indexer (IndexerCore + IndexerService on a loopback port).
-struct Indexer {
-  std::string dir;
-  std::unique_ptr<IndexerCore> core;
-  std::unique_ptr<IndexerService> service;
-  tpr::common::ServerOptions server_options;
-  tpr::common::StartedServer server;
-
-  ~Indexer() {
-    if (server.server) tpr::common::ShutdownGracefully(server, server_options);
-    server.server.reset();
-    core.reset();
-    std::error_code ec;
-    std::filesystem::remove_all(dir, ec);
-  }
-  std::string address() const { return absl::StrCat("127.0.0.1:", server.port); }
-};
-
-std::unique_ptr<Indexer> StartIndexer(bool durable) {
-  auto x = std::make_unique<Indexer>();
-  x->dir = FreshDir("indexer");
-  CoreOptions options;
-  options.data_dir = x->dir;
-  options.persist_interval_ms = 0;
-  options.storage.sync_writes = durable;
-  absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(options);
-  if (!core.ok()) std::abort();
-  x->core = std::move(*core);
-  x->service = std::make_unique<IndexerService>(x->core.get(), indexer::ServiceOptions{});
-  x->server_options.shutdown_grace_ms = 1000;
-  absl::StatusOr<tpr::common::StartedServer> started =
-      tpr::common::StartServer(x->server_options, {x->service.get()});
-  if (!started.ok()) std::abort();
-  x->server = std::move(*started);
-  return x;
-}
+std::unique_ptr<Indexer> StartIndexer(bool durable) { return bench::ServeIndexer(durable); }
 
 // A gateway over `shards`, served on a loopback port.
 struct Gateway {
@@ -154,17 +81,11 @@ std::unique_ptr<Gateway> StartGateway(const std::vector<std::unique_ptr<Indexer>
   return g;
 }
 
-std::unique_ptr<tpr::v1::Indexer::Stub> StubTo(const Indexer& x) {
-  return tpr::v1::Indexer::NewStub(
-      grpc::CreateChannel(x.address(), grpc::InsecureChannelCredentials()));
-}
-
 // The k-NN set-up, built once per N: one indexer and 4 shards holding the
 // same N models (written in process, not durable: set-up only), settled
 // trees, a gateway over the shards.
 struct KnnSetup {
   std::unique_ptr<Indexer> single;
-  std::unique_ptr<tpr::v1::Indexer::Stub> single_stub;
   std::vector<std::unique_ptr<Indexer>> shards;
   std::unique_ptr<Gateway> gateway;
   std::vector<tpr::v1::SearchRequest> queries;
@@ -183,7 +104,7 @@ KnnSetup* KnnWith(int n) {
     BatchWriter single(s.single->core.get());
     std::vector<std::unique_ptr<BatchWriter>> parts;
     for (const auto& shard : s.shards) parts.push_back(std::make_unique<BatchWriter>(shard->core.get()));
-    for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
+    for (tpr::v1::UpsertRequest& r : UpsertRequests(n, 7, "m")) {
       const int owner = ShardOf(r.model().id(), kShards);
       if (!parts[static_cast<size_t>(owner)]->Add(r).ok()) std::abort();
       if (!single.Add(std::move(r)).ok()) std::abort();
@@ -195,21 +116,9 @@ KnnSetup* KnnWith(int n) {
   }
   s.single->core->WaitForRebuild();
   for (auto& shard : s.shards) shard->core->WaitForRebuild();
-  s.single_stub = StubTo(*s.single);
   s.gateway = StartGateway(s.shards);
-  for (tpr::v1::UpsertRequest& r : Requests(64, 99, "q")) {
-    tpr::v1::SearchRequest q;
-    *q.mutable_signature() = r.model().signature();
-    q.set_k(10);
-    s.queries.push_back(std::move(q));
-  }
+  s.queries = bench::KnnQueries();
   return slot.get();
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1))];
 }
 
 // Runs one streamed search; returns its wall time in ms and the neighbours.
@@ -237,7 +146,7 @@ void BM_Knn10SingleVsGateway(benchmark::State& state) {
     const size_t qi = i++ % s->queries.size();
     const tpr::v1::SearchRequest& q = s->queries[qi];
     int a = 0, b = 0;
-    single_ms.push_back(TimedSearch(s->single_stub.get(), q, &a, state));
+    single_ms.push_back(TimedSearch(s->single->stub.get(), q, &a, state));
     gateway_ms.push_back(TimedSearch(s->gateway->stub.get(), q, &b, state));
     if (a != 10 || b != 10) state.SkipWithError("fewer than 10 neighbours");
     if (i <= s->queries.size()) {
@@ -279,30 +188,15 @@ BENCHMARK(BM_Knn10SingleVsGateway)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// One durable streamed BatchUpsert of N models through `stub`.
-void Ingest(tpr::v1::Indexer::Stub* stub, const std::vector<tpr::v1::UpsertRequest>& requests,
-            benchmark::State& state) {
-  grpc::ClientContext context;
-  tpr::v1::BatchUpsertResponse response;
-  auto writer = stub->BatchUpsert(&context, &response);
-  for (const tpr::v1::UpsertRequest& r : requests) writer->Write(r);
-  writer->WritesDone();
-  if (!writer->Finish().ok() || response.written() != static_cast<int64_t>(requests.size())) {
-    state.SkipWithError("ingest failed");
-  }
-}
-
 void BM_IngestSingle(benchmark::State& state) {
   const std::vector<tpr::v1::UpsertRequest> requests =
-      Requests(static_cast<int>(state.range(0)), 11, "b");
+      UpsertRequests(static_cast<int>(state.range(0)), 11, "b");
   for (auto _ : state) {
     state.PauseTiming();
     auto single = StartIndexer(/*durable=*/true);
-    auto stub = StubTo(*single);
     state.ResumeTiming();
-    Ingest(stub.get(), requests, state);
+    Ingest(single->stub.get(), requests, state);
     state.PauseTiming();
-    stub.reset();
     single.reset();
     state.ResumeTiming();
   }
@@ -312,7 +206,7 @@ BENCHMARK(BM_IngestSingle)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond)
 
 void BM_IngestGateway(benchmark::State& state) {
   const std::vector<tpr::v1::UpsertRequest> requests =
-      Requests(static_cast<int>(state.range(0)), 11, "b");
+      UpsertRequests(static_cast<int>(state.range(0)), 11, "b");
   for (auto _ : state) {
     state.PauseTiming();
     std::vector<std::unique_ptr<Indexer>> shards;

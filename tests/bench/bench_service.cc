@@ -41,63 +41,21 @@
 #include "common/tls.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
-#include "tests/indexer/signature_testing.h"
-#include "tests/service/indexer_testing.h"
+#include "tests/bench/bench_indexer_setup.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
 namespace tpr::indexer {
 namespace {
 
-using testing::ToWire;
+using bench::FreshDir;
+using bench::Percentile;
+using bench::UpsertRequests;
 
-std::vector<tpr::v1::UpsertRequest> Requests(int n, uint64_t seed, const std::string& prefix) {
-  tpr::index::testing::SignatureGeneratorOptions o;
-  o.seed = seed;
-  o.classes = 20;
-  tpr::index::testing::SignatureGenerator gen(o);
-  std::vector<tpr::v1::UpsertRequest> out(static_cast<size_t>(n));
-  for (int i = 0; i < n; ++i) {
-    tpr::v1::Model* m = out[static_cast<size_t>(i)].mutable_model();
-    m->set_id(absl::StrCat(prefix, i));
-    m->set_label(absl::StrCat("class", i % 20));
-    *m->mutable_signature() = ToWire(gen.Next());
-  }
-  return out;
-}
-
-// Data dirs made by this process, removed at exit (the cached served
-// indexes live until then; 100k models take 1.5 GB).
-std::vector<std::string>* MadeDirs() {
-  static std::vector<std::string>* dirs = [] {
-    auto* d = new std::vector<std::string>;
-    std::atexit([] {
-      for (const std::string& dir : *MadeDirs()) {
-        std::error_code ec;
-        std::filesystem::remove_all(dir, ec);
-      }
-    });
-    return d;
-  }();
-  return dirs;
-}
-
-std::string FreshDir(const std::string& tag) {
-  std::string pattern =
-      (std::filesystem::temp_directory_path() / ("tpr-bench-" + tag + ".XXXXXX")).string();
-  if (mkdtemp(pattern.data()) == nullptr) return std::string();
-  MadeDirs()->push_back(pattern);
-  return pattern;
-}
-
-// A served IndexerCore holding N models with a settled tree, built once per
-// N and kept for the process (building 10k trees costs seconds).
+// The k-NN set-up, one served indexer holding N models with a settled
+// tree, built once per N and kept for the process (building 10k trees costs
+// seconds; 100k models take 1.5 GB).
 struct Served {
-  std::string dir;
-  std::unique_ptr<IndexerCore> core;
-  std::unique_ptr<IndexerService> service;
-  tpr::common::ServerOptions server_options;
-  std::unique_ptr<grpc::Server> server;
-  std::unique_ptr<tpr::v1::Indexer::Stub> stub;
+  std::unique_ptr<bench::ServedIndexer> indexer;
   std::vector<tpr::v1::SearchRequest> queries;
 };
 
@@ -106,37 +64,10 @@ Served* ServedWith(int n) {
   auto& slot = (*cache)[n];
   if (slot) return slot.get();
   slot = std::make_unique<Served>();
-  Served& s = *slot;
-  s.dir = FreshDir("knn");
-  CoreOptions options;
-  options.data_dir = s.dir;
-  options.persist_interval_ms = 0;
-  s.core = std::move(*IndexerCore::Open(options));
-  BatchWriter batch(s.core.get());
-  for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
-    if (!batch.Add(std::move(r)).ok()) std::abort();
-  }
-  if (!batch.Finish().ok()) std::abort();
-  s.core->WaitForRebuild();
-  s.service = std::make_unique<IndexerService>(s.core.get(), ServiceOptions{});
-  auto started = tpr::common::StartServer(s.server_options, {s.service.get()});
-  if (!started.ok()) std::abort();
-  s.server = std::move(started->server);
-  s.stub = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
-      absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
-  for (tpr::v1::UpsertRequest& r : Requests(64, 99, "q")) {
-    tpr::v1::SearchRequest q;
-    *q.mutable_signature() = r.model().signature();
-    q.set_k(10);
-    s.queries.push_back(std::move(q));
-  }
+  slot->indexer = bench::ServeIndexer(/*durable=*/false);
+  bench::Fill(slot->indexer->core.get(), UpsertRequests(n, 7, "m"));
+  slot->queries = bench::KnnQueries();
   return slot.get();
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1))];
 }
 
 void BM_KnnGrpcVsInProcess(benchmark::State& state) {
@@ -148,12 +79,12 @@ void BM_KnnGrpcVsInProcess(benchmark::State& state) {
   for (auto _ : state) {
     const tpr::v1::SearchRequest& q = s->queries[i++ % s->queries.size()];
     auto t0 = std::chrono::steady_clock::now();
-    auto session = s->core->StartSearch(q, nullptr);
+    auto session = s->indexer->core->StartSearch(q, nullptr);
     while (auto n = (*session)->Next()) benchmark::DoNotOptimize(n->distance());
     auto t1 = std::chrono::steady_clock::now();
     emds += (*session)->Stats().emd_computations();
     grpc::ClientContext context;
-    auto reader = s->stub->Search(&context, q);
+    auto reader = s->indexer->stub->Search(&context, q);
     tpr::v1::SearchResponse response;
     while (reader->Read(&response)) neighbours += response.has_neighbor() ? 1 : 0;
     if (!reader->Finish().ok()) state.SkipWithError("search failed");
@@ -179,39 +110,16 @@ BENCHMARK(BM_KnnGrpcVsInProcess)->Arg(10)->Arg(1000)->Arg(10000)->Unit(benchmark
 void BM_BatchUpsertIngest(benchmark::State& state) {
   const int n = static_cast<int>(state.range(0));
   const bool durable = state.range(1) != 0;
-  const std::vector<tpr::v1::UpsertRequest> requests = Requests(n, 11, "b");
+  const std::vector<tpr::v1::UpsertRequest> requests = UpsertRequests(n, 11, "b");
   int64_t items = 0;
   for (auto _ : state) {
     state.PauseTiming();
-    const std::string dir = FreshDir("ingest");
-    CoreOptions options;
-    options.data_dir = dir;
-    options.persist_interval_ms = 0;
-    options.storage.sync_writes = durable;
-    auto core = std::move(*IndexerCore::Open(options));
-    IndexerService service(core.get(), ServiceOptions{});
-    tpr::common::ServerOptions server_options;
-    auto started = tpr::common::StartServer(server_options, {&service});
-    if (!started.ok()) std::abort();
-    auto stub = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
-        absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+    std::unique_ptr<bench::ServedIndexer> indexer = bench::ServeIndexer(durable);
     state.ResumeTiming();
-
-    grpc::ClientContext context;
-    tpr::v1::BatchUpsertResponse response;
-    auto writer = stub->BatchUpsert(&context, &response);
-    for (const tpr::v1::UpsertRequest& r : requests) writer->Write(r);
-    writer->WritesDone();
-    if (!writer->Finish().ok() || response.written() != n) state.SkipWithError("ingest failed");
+    bench::Ingest(indexer->stub.get(), requests, state);
     items += n;
-
     state.PauseTiming();
-    stub.reset();
-    tpr::common::ShutdownGracefully(*started->server, server_options);
-    started->server.reset();
-    core.reset();
-    std::error_code ec;
-    std::filesystem::remove_all(dir, ec);
+    indexer.reset();
     state.ResumeTiming();
   }
   state.SetItemsProcessed(items);
@@ -238,7 +146,7 @@ std::string DataDirWith(int n) {
     constexpr int kChunk = 1000;
     for (int begin = 0; begin < n; begin += kChunk) {
       std::vector<tpr::v1::UpsertRequest> chunk =
-          Requests(std::min(kChunk, n - begin), 1000 + static_cast<uint64_t>(begin),
+          UpsertRequests(std::min(kChunk, n - begin), 1000 + static_cast<uint64_t>(begin),
                    absl::StrCat("r", begin, "-"));
       std::vector<ModelWrite> writes;
       for (tpr::v1::UpsertRequest& r : chunk) writes.push_back({r.model().id(), &r.model()});
@@ -310,14 +218,7 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
   core_options.data_dir = dir + "/data";
   core_options.persist_interval_ms = 0;
   auto core = std::move(*IndexerCore::Open(core_options));
-  {
-    BatchWriter batch(core.get());
-    for (tpr::v1::UpsertRequest& r : Requests(n, 7, "m")) {
-      if (!batch.Add(std::move(r)).ok()) std::abort();
-    }
-    if (!batch.Finish().ok()) std::abort();
-  }
-  core->WaitForRebuild();
+  bench::Fill(core.get(), UpsertRequests(n, 7, "m"));
 
   // Three services over the one core (a service serves one server).
   std::vector<std::unique_ptr<IndexerService>> services;
@@ -350,13 +251,7 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
     stubs.push_back(tpr::v1::Indexer::NewStub(grpc::CreateChannel(address, credentials)));
     servers.push_back(std::move(*started));
   }
-  std::vector<tpr::v1::SearchRequest> queries;
-  for (tpr::v1::UpsertRequest& r : Requests(64, 99, "q")) {
-    tpr::v1::SearchRequest q;
-    *q.mutable_signature() = r.model().signature();
-    q.set_k(10);
-    queries.push_back(std::move(q));
-  }
+  const std::vector<tpr::v1::SearchRequest> queries = bench::KnnQueries();
   auto search = [&](int config, const tpr::v1::SearchRequest& q) {
     grpc::ClientContext context;
     if (config == 1) context.AddMetadata("authorization", "Bearer " + key);

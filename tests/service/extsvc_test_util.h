@@ -381,18 +381,11 @@ inline CommandResult RunTpr(Cluster& cluster, const std::string& args) {
       absl::StrCat("TPR_EXTRACTOR=", cluster.extractor_addresses(),
                    " TPR_INDEXER=", cluster.indexer().address(), " ",
                    BinaryPath("tpr"), " ", args, " 2>", err_path);
+  const ShellResult run = RunCommand(command);
   CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  size_t n;
-  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) result.out.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(err_path);
-  std::stringstream err;
-  err << in.rdbuf();
-  result.err = err.str();
+  result.exit_code = run.exit_code;
+  result.out = run.out;
+  result.err = ReadText(err_path);
   return result;
 }
 

@@ -11,6 +11,7 @@
 #include "gtest/gtest.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
+#include "tests/service/ops_testing.h"
 
 namespace tpr::indexer::testing {
 namespace {
@@ -728,7 +729,7 @@ TEST_F(IndexerServiceTest, SearchSeesTheLabelsOfItsStartDespiteLaterWrites) {
 }
 
 TEST_F(IndexerServiceTest, HealthAnswersServing) {
-  absl::StatusOr<int> health = HealthStatus(server_->channel());
+  absl::StatusOr<int> health = tpr::testing::HealthStatus(server_->channel(), "");
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_EQ(*health, 1);  // SERVING
 }

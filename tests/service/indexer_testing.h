@@ -137,34 +137,6 @@ inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::Searc
   return result;
 }
 
-// HealthStatus calls grpc.health.v1.Health/Check for the whole server ("")
-// with raw bytes (Debian's gRPC ships no C++ health client stub). The request
-// is the empty HealthCheckRequest, sent as one empty slice (an ByteBuffer
-// with no slice at all is rejected by gRPC as an invalid message); the
-// answer SERVING (field 1 = 1) serializes as 0x08 0x01. Returns the status
-// enum value (1 SERVING, 2 NOT_SERVING).
-inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
-  grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-  grpc::Slice empty("");
-  grpc::ByteBuffer request(&empty, 1);
-  grpc::ByteBuffer response;
-  const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
-                                         grpc::internal::RpcMethod::NORMAL_RPC);
-  grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
-      channel.get(), method, &context, request, &response);
-  if (!s.ok()) return tpr::FromGrpcStatus(s);
-  std::vector<grpc::Slice> slices;
-  if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read the answer");
-  std::string bytes;
-  for (const grpc::Slice& slice : slices) {
-    bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
-  }
-  if (bytes.empty()) return 0;  // UNKNOWN, the default, encodes as nothing
-  if (bytes.size() == 2 && bytes[0] == 0x08) return static_cast<int>(bytes[1]);
-  return absl::InternalError("unexpected health answer");
-}
-
 // ReflectedServices asks the v1alpha reflection service for the server's
 // service list with raw bytes (no generated reflection client in Debian's
 // gRPC): the request sets list_services (field 7, string) to "", i.e. bytes

@@ -28,6 +28,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/string_view.h"
+#include "common/grpc_status.h"
 
 namespace tpr::testing {
 
@@ -53,9 +54,7 @@ inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& ch
                                          grpc::internal::RpcMethod::NORMAL_RPC);
   grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
       channel.get(), method, &context, request, &response);
-  if (!s.ok()) {
-    return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
-  }
+  if (!s.ok()) return tpr::FromGrpcStatus(s);
   std::vector<grpc::Slice> slices;
   if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read response");
   std::string answer;
@@ -78,13 +77,14 @@ inline std::string ReadText(const std::string& path) {
 // ShellResult: what one shell command printed and returned.
 struct ShellResult {
   int exit_code = -1;
-  std::string out;  // stdout and stderr together
+  std::string out;  // stdout (RunShell: stdout and stderr together)
 };
 
-// RunShell runs `command` with /bin/sh, stderr merged into stdout.
-inline ShellResult RunShell(const std::string& command) {
+// RunCommand runs `command` with /bin/sh and captures its stdout (stderr
+// goes where the command sends it).
+inline ShellResult RunCommand(const std::string& command) {
   ShellResult result;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  FILE* pipe = popen(command.c_str(), "r");
   if (pipe == nullptr) return result;
   char buffer[4096];
   size_t n;
@@ -92,6 +92,11 @@ inline ShellResult RunShell(const std::string& command) {
   const int status = pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return result;
+}
+
+// RunShell runs `command` with /bin/sh, stderr merged into stdout.
+inline ShellResult RunShell(const std::string& command) {
+  return RunCommand(command + " 2>&1");
 }
 
 // Makes, under `dir`: ca1 and ca2 (self-signed authorities), server1 (for
