@@ -1,6 +1,7 @@
 #include "client/cli/connection.h"
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cstdio>
 #include <string>
 
@@ -85,6 +86,28 @@ std::optional<tpr::client::IndexerClient> ConnectIndexer(const Globals& g) {
     return std::nullopt;
   }
   return *std::move(client);
+}
+
+std::optional<AdminTarget> ConnectAdmin(const Globals& g) {
+  if (g.indexer.find(',') != std::string::npos) {
+    Fail("--indexer", absl::InvalidArgumentError(
+                          "admin commands address one tpr-indexer; give a single HOST:PORT"));
+    return std::nullopt;
+  }
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      tpr::client::MakeChannel(g.indexer, ConnectionFor(g));
+  if (!channel.ok()) {
+    Fail("--indexer", channel.status());
+    return std::nullopt;
+  }
+  AdminTarget target;
+  target.stub = tpr::v1::IndexerAdmin::NewStub(*channel);
+  const double timeout_s = g.timeout_s;
+  target.prepare = [timeout_s](grpc::ClientContext* context) {
+    context->set_deadline(std::chrono::system_clock::now() +
+                          std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+  };
+  return target;
 }
 
 }  // namespace tpr::cli

@@ -11,10 +11,13 @@
 #ifndef TPR_CLIENT_CLI_CONNECTION_H_
 #define TPR_CLIENT_CLI_CONNECTION_H_
 
+#include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 
 #include "tpr/client.h"
+#include "tpr/v1/indexer.grpc.pb.h"
 
 namespace CLI {
 class App;
@@ -57,6 +60,20 @@ std::optional<tpr::client::ExtractorClient> ConnectExtractor(const Globals& g);
 
 // ConnectIndexer is ConnectExtractor for g.indexer.
 std::optional<tpr::client::IndexerClient> ConnectIndexer(const Globals& g);
+
+// AdminTarget: one tpr-indexer's IndexerAdmin stub (backup, restore,
+// promote) and the call deadline of `g`.
+struct AdminTarget {
+  std::unique_ptr<tpr::v1::IndexerAdmin::Stub> stub;
+  // Prepares a call: deadline from g.timeout_s, request-id reporting.
+  std::function<void(grpc::ClientContext*)> prepare;
+};
+
+// ConnectAdmin returns the admin stub of g.indexer, which must name exactly
+// one tpr-indexer (admin calls address one process: a shard's primary or a
+// follower, never a gateway or a replica list); prints the reason and
+// returns nullopt otherwise.
+std::optional<AdminTarget> ConnectAdmin(const Globals& g);
 
 }  // namespace tpr::cli
 

@@ -88,7 +88,7 @@ absl::Status CheckId(const std::string& id) {
 // Open and load.
 
 IndexerCore::IndexerCore(CoreOptions options, std::unique_ptr<Storage> storage)
-    : options_(std::move(options)), storage_(std::move(storage)) {}
+    : options_(std::move(options)), storage_(std::move(storage)), follow_(options_.follow) {}
 
 absl::StatusOr<std::unique_ptr<IndexerCore>> IndexerCore::Open(CoreOptions options) {
   if (options.data_dir.empty()) {
@@ -261,6 +261,7 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroup(
 absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
     std::vector<tpr::v1::UpsertRequest>& requests,
     std::vector<tpr::index::Signature>& signatures) {
+  TPR_RETURN_IF_ERROR(CheckWritable());
   std::vector<WriteOutcome> outcome(requests.size(), WriteOutcome::kSkipped);
   // Ids written earlier in this same group, with their time added.
   std::unordered_map<std::string, int64_t> in_group;
@@ -332,6 +333,7 @@ absl::StatusOr<bool> IndexerCore::Upsert(const tpr::v1::UpsertRequest& request) 
 absl::Status IndexerCore::Delete(const std::string& id) {
   TPR_RETURN_IF_ERROR(CheckId(id));
   absl::MutexLock lock(&write_mu_);
+  TPR_RETURN_IF_ERROR(CheckWritable());
   if (!table_.AddedTime(id).has_value()) {
     return absl::NotFoundError(absl::StrCat("no model with id '", id, "'"));
   }

@@ -83,6 +83,11 @@ struct CoreOptions {
   // Receives one line per notable event (open, tree persisted, errors of
   // the background persister). Default: none (silent).
   std::function<void(const std::string&)> log;
+  // When non-empty, this indexer is a read-only follower of the primary at
+  // this address (follower.h): writes fail with FAILED_PRECONDITION naming
+  // it, and ApplyReplicated brings the primary's writes in. Promote ends
+  // it. Default empty (a primary).
+  std::string follow;
 };
 
 // WriteOutcome: what a write group did with one request.
@@ -203,6 +208,30 @@ class IndexerCore {
   // benchmarks use it for a settled tree).
   void WaitForRebuild() { index_->WaitForRebuild(); }
 
+  // ApplyReplicated applies one batch of the primary's write-ahead log
+  // (`data` from replication.h ReadLog, first key at `sequence`) to the
+  // store (atomically with the new applied sequence, synced) and then to
+  // the index, label map and table, as WriteGroup does for local writes.
+  // Returns the new applied sequence. FAILED_PRECONDITION when this
+  // indexer is not a follower (promoted meanwhile); the errors of
+  // ApplyLoggedBatch. Cost: one fsync + O(batch). Thread-safe (serialized
+  // with every other write). Defined in indexer_core_replica.cc.
+  absl::StatusOr<uint64_t> ApplyReplicated(const std::string& data, uint64_t sequence);
+
+  // Promote makes a follower a primary: writes are accepted from then on
+  // and the store's applied-sequence record is removed. Returns the former
+  // primary's address ("" when already a primary: idempotent). Cost: one
+  // fsync. Thread-safe. Defined in indexer_core_replica.cc.
+  absl::StatusOr<std::string> Promote();
+
+  // following returns the primary's address while this is a follower, ""
+  // for a primary. Thread-safe.
+  std::string following() const;
+
+  // storage returns the durable store (backups, checkpoints and the
+  // write-ahead log read it: replication.h). Thread-safe as Storage is.
+  Storage& storage() const { return *storage_; }
+
   // index returns the in-memory index (for tests and benchmarks).
   const tpr::index::SignatureIndex& index() const { return *index_; }
 
@@ -227,6 +256,11 @@ class IndexerCore {
   // Serializes writes: storage write, then index, label map and table
   // updates. Order: write_mu_, then view_mu_.
   absl::Mutex write_mu_;
+  // The primary's address while a follower (CoreOptions::follow), else "".
+  mutable absl::Mutex follow_mu_;
+  std::string follow_ ABSL_GUARDED_BY(follow_mu_);
+  // The refusal of a write while following, or OK.
+  absl::Status CheckWritable() const;
   // Pairs index updates with label map updates: writers hold it across
   // both, a search start across taking both snapshots.
   mutable absl::Mutex view_mu_;

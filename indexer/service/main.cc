@@ -1,10 +1,19 @@
 // tpr-indexer: the stateful index service. Parses flags, opens the data
-// directory (IndexerCore), serves tpr.v1.Indexer with health and reflection,
-// and on SIGTERM/SIGINT finishes in-flight calls, persists the VP-tree and
-// exits 0.
+// directory (IndexerCore), serves tpr.v1.Indexer and tpr.v1.IndexerAdmin
+// (backups, replication) with health and reflection, and on SIGTERM/SIGINT
+// finishes in-flight calls, persists the VP-tree and exits 0.
 //
 //   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
+//   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f --follow 127.0.0.1:7002
+//
+// A follower (follower.h) that fell behind its primary's kept log re-executes
+// itself after a graceful stop, and copies the primary again at start.
+#include <unistd.h>
+
+#include <atomic>
+#include <csignal>
 #include <cstdlib>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -14,6 +23,8 @@
 #include "common/metrics.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
+#include "indexer/service/admin_service.h"
+#include "indexer/service/follower.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
 
@@ -27,6 +38,9 @@ int main(int argc, char** argv) {
   int max_k = 10000;
   tpr::common::ServerFlags ops_flags;
   tpr::common::AddListenFlags(app, &server_options);
+  std::string follow;
+  std::string follow_api_key;
+  tpr::indexer::StorageOptions storage_options;
   app.add_option("--data-dir", data_dir, "Directory of the RocksDB store (created if missing)")
       ->required();
   tpr::common::AddServerThreadsFlag(app, &ops_flags);
@@ -36,6 +50,18 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--max-k", max_k, "Largest k a search may ask for")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--follow", follow,
+                 "Be a read-only follower of the primary tpr-indexer at HOST:PORT "
+                 "(copies it into an empty --data-dir, then tails its write-ahead log)");
+  app.add_option("--follow-api-key", follow_api_key,
+                 "API key (admin role) this follower presents to its primary "
+                 "(or TPR_INDEXER_FOLLOW_API_KEY)");
+  app.add_option("--wal-keep-seconds", storage_options.wal_keep_seconds,
+                 "Keep closed write-ahead logs this long for followers (s)")
+      ->capture_default_str();
+  app.add_option("--wal-keep-mb", storage_options.wal_keep_mb,
+                 "Keep at most this many MB of closed write-ahead logs for followers")
       ->capture_default_str();
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
@@ -52,6 +78,8 @@ int main(int argc, char** argv) {
 
   tpr::indexer::CoreOptions core_options;
   core_options.data_dir = data_dir;
+  core_options.storage = storage_options;
+  core_options.follow = follow;
   core_options.max_k = max_k;
   core_options.log = log;
   if (server_options.metrics != nullptr) {
@@ -85,6 +113,19 @@ int main(int argc, char** argv) {
   }
   server_options.listen_address =
       tpr::common::ListenAddressWithPort(server_options.listen_address, (*loading)->port);
+  // A follower copies its primary first (health: alive, not ready).
+  tpr::indexer::FollowerOptions follower_options;
+  if (!follow.empty()) {
+    follower_options.primary = follow;
+    follower_options.data_dir = data_dir;
+    follower_options.api_key = follow_api_key;
+    follower_options.log = log;
+    if (absl::Status st = tpr::indexer::PrepareFollowerDir(follower_options); !st.ok()) {
+      log(absl::StrCat("cannot start as a follower: ", st.ToString()));
+      return 1;
+    }
+  }
+
   absl::StatusOr<std::unique_ptr<tpr::indexer::IndexerCore>> core =
       tpr::indexer::IndexerCore::Open(core_options);
   if (!core.ok()) {
@@ -144,17 +185,48 @@ int main(int argc, char** argv) {
   service_options.max_concurrent_searches = max_searches;
   service_options.log = log;
   tpr::indexer::IndexerService service(core->get(), service_options);
+  std::unique_ptr<tpr::indexer::Follower> follower;
+  std::atomic<bool> resync{false};
+  if (!follow.empty()) {
+    follower = std::make_unique<tpr::indexer::Follower>(core->get(), follower_options);
+    tpr::indexer::Follower* f = follower.get();
+    server_options.readiness_check = [f] { return f->Readiness(); };
+  }
+  tpr::indexer::AdminOptions admin_options;
+  admin_options.log = log;
+  tpr::indexer::IndexerAdminService admin(core->get(), follower.get(), admin_options);
 
   absl::StatusOr<tpr::common::StartedServer> started =
-      tpr::common::StartServer(server_options, {&service});
+      tpr::common::StartServer(server_options, {&service, &admin});
   if (!started.ok()) {
     log(started.status().ToString());
     return 1;
   }
   loading->reset();  // the real server holds the port now
-  const int code = tpr::common::ServeUntilSignal(*started, server_options);
+  if (follower != nullptr) {
+    // Fallen behind the primary's kept log: stop gracefully (as on SIGTERM),
+    // then start again, which copies the primary afresh.
+    follower->Start([&resync] {
+      resync = true;
+      std::raise(SIGTERM);
+    });
+  }
+  const int code = tpr::common::internal::ServeUntilSignalWith(
+      server_options, started->port, [&] {
+        admin.Stop();
+        if (follower != nullptr) follower->Stop();
+        tpr::common::ShutdownGracefully(*started, server_options);
+      });
   started->server.reset();
+  follower.reset();
   (*core)->Close();
+  core->reset();
   log("data directory closed");
+  if (resync) {
+    log("restarting to copy the primary afresh");
+    execv("/proc/self/exe", argv);
+    log("cannot restart; exiting with 75 (EX_TEMPFAIL) for the supervisor to restart");
+    return 75;
+  }
   return code;
 }

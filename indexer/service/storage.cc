@@ -224,6 +224,10 @@ rocksdb::Options DbOptions(const StorageOptions& options) {
   db_options.atomic_flush = true;
   // Two cores shared with the search threads: one flush, one compaction.
   db_options.IncreaseParallelism(2);
+  // Followers tail the write-ahead log (replication.h): closed logs are
+  // archived and kept this long / this large before deletion.
+  db_options.WAL_ttl_seconds = options.wal_keep_seconds;
+  db_options.WAL_size_limit_MB = options.wal_keep_mb;
   return db_options;
 }
 
@@ -691,6 +695,22 @@ absl::Status Storage::CheckScanned(uint64_t scanned) const {
       "the models family holds ", scanned, " models but ", recorded,
       " were recorded with the acknowledged writes: models were lost from ",
       DescribeFiles(impl_->dir), "; refusing to serve a smaller database (see docs/recovery.md)"));
+}
+
+RocksHandles Storage::rocks() const {
+  return {impl_->db.get(), impl_->meta, impl_->models};
+}
+
+const std::string& Storage::dir() const { return impl_->dir; }
+
+absl::Status Storage::ReloadCounters() {
+  std::lock_guard<std::mutex> lock(impl_->write_mu);
+  absl::StatusOr<Counters> counters = ReadCounters(impl_->db.get(), impl_->meta, impl_->dir);
+  if (!counters.ok()) return counters.status();
+  impl_->last_seq = counters->last_seq;
+  impl_->writes = counters->writes;
+  impl_->model_count = counters->models.value_or(impl_->model_count.load());
+  return impl_->ack->Record({impl_->writes.load(), impl_->model_count.load()});
 }
 
 int64_t Storage::DiskBytes() const {

@@ -1,6 +1,7 @@
 // Durable storage of tpr-indexer: the source of truth for the stored models
-// and the persisted VP-tree, in RocksDB under the --data-dir. This is the only
-// file of the project that includes RocksDB.
+// and the persisted VP-tree, in RocksDB under the --data-dir. With
+// replication.cc (backups, checkpoints, log tailing), the only files that
+// include RocksDB.
 //
 //   absl::StatusOr<std::unique_ptr<Storage>> db = Storage::Open(dir);
 //   TPR_RETURN_IF_ERROR((*db)->Write({{"cat/1", &model}}));   // synced
@@ -51,6 +52,11 @@
 #include "absl/status/statusor.h"
 #include "tpr/v1/indexer.pb.h"
 
+namespace rocksdb {
+class DB;
+class ColumnFamilyHandle;
+}  // namespace rocksdb
+
 namespace tpr::indexer {
 
 // StorageOptions: how Storage::Open configures RocksDB.
@@ -68,6 +74,13 @@ struct StorageOptions {
   // on). Must be thread-safe and quick. Default none.
   std::function<void(double seconds)> on_write;
   std::function<void(double seconds)> on_wal_sync;
+  // How long closed write-ahead log files are kept (archived) so that a
+  // follower can tail them (RocksDB WAL_ttl_seconds), in seconds, and at
+  // most how many MB of them (WAL_size_limit_MB). A follower further
+  // behind than the kept log starts again from a checkpoint. 0 and 0: no
+  // archive. Default 3600 s, 1024 MB.
+  uint64_t wal_keep_seconds = 3600;
+  uint64_t wal_keep_mb = 1024;
 };
 
 // EngineStats: RocksDB's own counters (its statistics and an event
@@ -88,6 +101,14 @@ struct EngineStats {
   uint64_t live_data_bytes = 0;
   uint64_t sst_bytes = 0;
   uint64_t memtable_bytes = 0;
+};
+
+// RocksHandles: the open database, for replication.cc (backups,
+// checkpoints, the write-ahead log). Owned by the Storage.
+struct RocksHandles {
+  rocksdb::DB* db = nullptr;
+  rocksdb::ColumnFamilyHandle* meta = nullptr;    // "default"
+  rocksdb::ColumnFamilyHandle* models = nullptr;  // "models"
 };
 
 // PersistedTree: the VP-tree bytes of the last persist and the write
@@ -188,6 +209,18 @@ class Storage {
   // found `scanned` models but model_count() were recorded; OK otherwise.
   // IndexerCore calls it after its scan at open. Thread-safe.
   absl::Status CheckScanned(uint64_t scanned) const;
+
+  // rocks returns the open database's handles (valid while the Storage
+  // lives) and dir the data directory. Thread-safe.
+  RocksHandles rocks() const;
+  const std::string& dir() const;
+
+  // ReloadCounters re-reads the sequence counter, the model count and the
+  // write count from the database after writes made outside Write (a
+  // follower applying its primary's batches, replication.h), and records
+  // them in ACKNOWLEDGED. Call under the caller's writer lock. Returns the
+  // store's error. Cost: three point lookups and one fsync. Thread-safe.
+  absl::Status ReloadCounters();
 
   // DiskBytes returns the bytes the data directory occupies on disk (sum of
   // its files' sizes). Cost: one directory listing. Thread-safe.

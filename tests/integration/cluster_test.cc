@@ -1,7 +1,8 @@
 // The scaled-out topology as real processes on 127.0.0.1 (free ports, PIDs
 // kept, every wait bounded, everything stopped on exit): 2 tpr-extractor
-// behind haproxy, 3 tpr-indexer shards, 1 tpr-gateway, and one more
-// tpr-indexer holding the same corpus alone as the reference. Checks:
+// behind haproxy, 3 tpr-indexer shards (shard 0 with a follower, which the
+// gateway reads from too), 1 tpr-gateway, and one more tpr-indexer holding
+// the same corpus alone as the reference. Checks:
 // - exactness: every query answers the same (id, distance) list through the
 //   gateway as from the single indexer, bit for bit (ties, radius, label
 //   filter, exclude_self, k above the corpus, after deletes), with models
@@ -11,8 +12,11 @@
 // - kill -9 of a shard primary during batch ingest through the gateway loses
 //   no acknowledged write (the shard restarts on its port and has them);
 // - SIGTERM drains each service: an in-flight search through the gateway
-//   completes, and every process exits 0.
-// Follower and backup checks join when indexer replication lands.
+//   completes, and every process (the follower too) exits 0;
+// - kill -9 of the follower during ingest: restarted, it catches up by
+//   itself and answers as its primary does;
+// - backup of every shard (`tpr backup`) and restore into empty directories
+//   (`tpr restore`): a gateway over the restored shards answers as before.
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -128,6 +132,8 @@ class ClusterTest : public ::testing::Test {
       shard_flags.push_back("--shard");
       shard_flags.push_back(shards_[s].address());
     }
+    ASSERT_TRUE(StartFollower("127.0.0.1:0").ok());
+    shard_flags[1] += "," + follower_.address();
     shard_flags.push_back("--health-interval-ms");
     shard_flags.push_back("200");
     ASSERT_TRUE(gateway_.Start(BinaryPath("tpr-gateway"), shard_flags, Path("gateway.log")).ok());
@@ -143,6 +149,48 @@ class ClusterTest : public ::testing::Test {
     return shards_[s].Start(BinaryPath("tpr-indexer"),
                             {"--data-dir", Path(absl::StrCat("shard", s))},
                             Path(absl::StrCat("shard", s, ".log")), listen);
+  }
+
+  // The follower of shard 0 (tpr-indexer --follow).
+  absl::Status StartFollower(const std::string& listen) {
+    return follower_.Start(BinaryPath("tpr-indexer"),
+                           {"--data-dir", Path("follower0"), "--follow", shards_[0].address()},
+                           Path("follower0.log"), listen);
+  }
+
+  // Waits (bounded) until the follower has applied everything shard 0 has
+  // and reports SERVING; false on timeout.
+  bool WaitForFollower() {
+    auto primary = v1::IndexerAdmin::NewStub(
+        grpc::CreateChannel(shards_[0].address(), grpc::InsecureChannelCredentials()));
+    auto follower = v1::IndexerAdmin::NewStub(
+        grpc::CreateChannel(follower_.address(), grpc::InsecureChannelCredentials()));
+    for (int i = 0; i < 1500; ++i) {
+      grpc::ClientContext c1, c2;
+      v1::ReplicationStatusResponse p, f;
+      if (primary->ReplicationStatus(&c1, {}, &p).ok() &&
+          follower->ReplicationStatus(&c2, {}, &f).ok() && f.caught_up() &&
+          f.applied_sequence() >= p.applied_sequence()) {
+        // The gateway's health checker must have seen it SERVING too.
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+        return true;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return false;
+  }
+
+  // Runs `tpr ARGS...` and returns its exit code and standard output.
+  std::pair<int, std::string> Tpr(const std::string& args) const {
+    const std::string command =
+        absl::StrCat(BinaryPath("tpr"), " ", args, " 2>", Path("tpr.err"));
+    std::string out;
+    FILE* pipe = popen(command.c_str(), "r");
+    if (pipe == nullptr) return {-1, ""};
+    char buffer[4096];
+    for (size_t n; (n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0;) out.append(buffer, n);
+    const int status = pclose(pipe);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
   }
 
   std::string Path(const std::string& name) const { return dir_.path() + "/" + name; }
@@ -181,6 +229,7 @@ class ClusterTest : public ::testing::Test {
   Haproxy haproxy_;
   int front_port_ = 0;
   ServiceProcess shards_[kShards];
+  ServiceProcess follower_;
   ServiceProcess gateway_;
   ServiceProcess reference_;
   std::unique_ptr<v1::Indexer::Stub> gateway_stub_;
@@ -221,6 +270,9 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
   grpc::Status status = Batch(gateway_stub_.get(), requests, &sharded);
   ASSERT_TRUE(status.ok()) << status.error_message();
   ASSERT_EQ(sharded.written(), static_cast<int64_t>(requests.size()));
+  // Replicas are asynchronous: the gateway may read shard 0 from its
+  // follower, which must have caught up for the answers to be complete.
+  ASSERT_TRUE(WaitForFollower());
 
   // The caller's request id reaches the shard's log through the gateway.
   {
@@ -276,6 +328,7 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
       ASSERT_TRUE(stub->Delete(&context, request, &response).ok()) << id;
     }
   }
+  ASSERT_TRUE(WaitForFollower());
   v1::SearchRequest deleted;
   deleted.set_id("m00000");
   deleted.set_k(3);
@@ -349,6 +402,7 @@ TEST_F(ClusterTest, KillNineOfAPrimaryDuringIngestLosesNoAcknowledgedWrite) {
     if (gateway_stub_->Stats(&context, {}, &stats).ok()) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
+  ASSERT_TRUE(WaitForFollower());  // reads of shard 0 may go to its follower
   int acked = 0;
   for (size_t i = 0; i < models.size(); ++i) {
     if (!acknowledged[i]) continue;
@@ -373,6 +427,7 @@ TEST_F(ClusterTest, KillNineOfAPrimaryDuringIngestLosesNoAcknowledgedWrite) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_TRUE(WaitForFollower());
   grpc::ClientContext context;
   v1::StatsResponse stats;
   ASSERT_TRUE(gateway_stub_->Stats(&context, {}, &stats).ok());
@@ -413,10 +468,117 @@ TEST_F(ClusterTest, SigtermDrainsEveryService) {
     std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     EXPECT_NE(log.find("data directory closed"), std::string::npos) << log;
   }
+  EXPECT_EQ(follower_.Stop(SIGTERM), 0) << "follower";
   for (ServiceProcess& e : extractors_) EXPECT_EQ(e.Stop(SIGTERM), 0);
   EXPECT_EQ(reference_.Stop(SIGTERM), 0);
   // haproxy stops on SIGTERM too ("hard stop": 0 is its exit code then).
   EXPECT_EQ(haproxy_.Stop(SIGUSR1), 0);
+}
+
+// Every answer of `stub` to `queries` (by id, k 10 and k 40 with a label),
+// serialized byte for byte.
+std::vector<std::string> Answers(v1::Indexer::Stub* stub, const std::vector<std::string>& ids) {
+  std::vector<std::string> out;
+  for (const std::string& id : ids) {
+    for (int k : {10, 40}) {
+      v1::SearchRequest request;
+      request.set_id(id);
+      request.set_k(k);
+      if (k == 40) request.set_label("class1");
+      SearchResult r = RunSearch(stub, request);
+      std::string answer = r.status.ok() ? "" : absl::StrCat("error ", r.status.error_code());
+      for (const v1::Neighbor& n : r.neighbors) answer += n.SerializeAsString() + "|";
+      out.push_back(answer);
+    }
+  }
+  return out;
+}
+
+TEST_F(ClusterTest, KillNineOfAFollowerCatchesUpByItself) {
+  const std::vector<TestModel> models = MakeModels(900, 6, 12, "f");
+  std::vector<v1::UpsertRequest> first, second;
+  for (size_t i = 0; i < models.size(); ++i) {
+    (i < 400 ? first : second).push_back(ToRequest(models[i], true));
+  }
+  v1::BatchUpsertResponse response;
+  ASSERT_TRUE(Batch(gateway_stub_.get(), first, &response).ok());
+  ASSERT_TRUE(WaitForFollower());
+  // kill -9 while the primary takes more writes; restart on the same port.
+  const int port = follower_.port();
+  std::thread ingest([&] {
+    v1::BatchUpsertResponse r;
+    EXPECT_TRUE(Batch(Stub(gateway_.address()).get(), second, &r).ok());
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(follower_.Stop(SIGKILL), 128 + SIGKILL);
+  ingest.join();
+  ASSERT_TRUE(StartFollower(absl::StrCat("127.0.0.1:", port)).ok());
+  ASSERT_TRUE(WaitForFollower());
+  std::ifstream in(follower_.log_path());
+  const std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(log.find("copied a checkpoint"), std::string::npos)
+      << "it should resume from its own store, not copy again: " << log;
+  auto primary = Stub(shards_[0].address());
+  auto follower = Stub(follower_.address());
+  grpc::ClientContext c1, c2;
+  v1::StatsResponse p, f;
+  ASSERT_TRUE(primary->Stats(&c1, {}, &p).ok());
+  ASSERT_TRUE(follower->Stats(&c2, {}, &f).ok());
+  EXPECT_EQ(f.models(), p.models());
+  EXPECT_GT(p.models(), 200);
+  std::vector<std::string> ids;
+  for (int i = 0; i < 900; i += 97) {
+    if (gateway::ShardOf(models[i].id, kShards) == 0) ids.push_back(models[i].id);
+  }
+  ASSERT_FALSE(ids.empty());
+  EXPECT_EQ(Answers(follower.get(), ids), Answers(primary.get(), ids));
+  // Read-only: a write to the follower names its primary.
+  grpc::ClientContext c3;
+  v1::UpsertResponse ignored;
+  grpc::Status refused = follower->Upsert(&c3, ToRequest(models[0], true), &ignored);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(refused.error_message().find(shards_[0].address()), std::string::npos);
+}
+
+TEST_F(ClusterTest, BackupAndRestoreOfEveryShardAnswerIdentically) {
+  const std::vector<TestModel> models = MakeModels(600, 5, 17, "b");
+  std::vector<v1::UpsertRequest> requests;
+  for (const TestModel& m : models) requests.push_back(ToRequest(m, true));
+  v1::BatchUpsertResponse response;
+  ASSERT_TRUE(Batch(gateway_stub_.get(), requests, &response).ok());
+  ASSERT_TRUE(WaitForFollower());
+  std::vector<std::string> ids;
+  for (int i = 0; i < 600; i += 50) ids.push_back(models[i].id);
+  const std::vector<std::string> before = Answers(gateway_stub_.get(), ids);
+  // Per shard: back up its primary with `tpr backup`, restore with `tpr
+  // restore` into an empty directory, start an indexer on each copy.
+  ServiceProcess restored[kShards];
+  std::vector<std::string> flags;
+  for (int s = 0; s < kShards; ++s) {
+    const std::string set = Path(absl::StrCat("backup", s));
+    auto [code, out] = Tpr(absl::StrCat("--indexer ", shards_[s].address(), " backup --to ", set));
+    ASSERT_EQ(code, 0) << out;
+    EXPECT_NE(out.find("verified"), std::string::npos) << out;
+    const std::string into = Path(absl::StrCat("restored", s));
+    std::tie(code, out) = Tpr(absl::StrCat("--indexer ", shards_[s].address(),
+                                           " restore --from ", set, " --into ", into));
+    ASSERT_EQ(code, 0) << out;
+    // A second restore into the now non-empty directory is refused.
+    EXPECT_EQ(Tpr(absl::StrCat("--indexer ", shards_[s].address(), " restore --from ", set,
+                               " --into ", into)).first, 1);
+    ASSERT_TRUE(restored[s].Start(BinaryPath("tpr-indexer"), {"--data-dir", into},
+                                  Path(absl::StrCat("restored", s, ".log"))).ok());
+    flags.push_back("--shard");
+    flags.push_back(restored[s].address());
+  }
+  ServiceProcess gateway;
+  ASSERT_TRUE(gateway.Start(BinaryPath("tpr-gateway"), flags, Path("gateway-restored.log")).ok());
+  auto stub = Stub(gateway.address());
+  EXPECT_EQ(Answers(stub.get(), ids), before);
+  grpc::ClientContext context;
+  v1::StatsResponse stats;
+  ASSERT_TRUE(stub->Stats(&context, {}, &stats).ok());
+  EXPECT_EQ(stats.models(), 600);
 }
 
 }  // namespace
