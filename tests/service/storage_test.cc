@@ -194,8 +194,9 @@ TEST(StorageTest, DatabaseBehindWhatWasAcknowledgedIsDataLoss) {
     ASSERT_TRUE((*ack)->Record({5, 3}).ok());
   }
   std::map<std::string, uintmax_t> files;
-  for (const auto& e : std::filesystem::directory_iterator(dir.path())) {
-    files[e.path().filename().string()] = e.file_size();
+  // Every file, the archived write-ahead logs kept for followers included.
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir.path())) {
+    if (e.is_regular_file()) files[e.path().lexically_relative(dir.path()).string()] = e.file_size();
   }
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.path());
   ASSERT_FALSE(storage.ok());
@@ -205,8 +206,9 @@ TEST(StorageTest, DatabaseBehindWhatWasAcknowledgedIsDataLoss) {
   EXPECT_EQ(storage.status().message().find(dir.path()), std::string::npos)
       << "names the server path: " << storage.status();
   std::map<std::string, uintmax_t> after;
-  for (const auto& e : std::filesystem::directory_iterator(dir.path())) {
-    after[e.path().filename().string()] = e.file_size();
+  // Every file, the archived write-ahead logs kept for followers included.
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir.path())) {
+    if (e.is_regular_file()) after[e.path().lexically_relative(dir.path()).string()] = e.file_size();
   }
   EXPECT_EQ(after, files);
 
