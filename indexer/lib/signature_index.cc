@@ -563,7 +563,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   }
   {
     ByteReader r(bytes.substr(sizeof kMagic));
-    uint64_t version;
+    uint64_t version = 0;
     r.U(2, &version);
     if (version != kVersion) {
       return absl::InvalidArgumentError(
@@ -575,7 +575,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   const size_t body = bytes.size() - 8;
   {
     ByteReader tail(bytes.substr(body));
-    uint64_t checksum;
+    uint64_t checksum = 0;
     tail.U(8, &checksum);
     if (checksum != Fnv1a(bytes.data(), body)) return Corrupt("checksum mismatch");
   }

@@ -688,7 +688,7 @@ class VpTreeReader {
       return absl::InvalidArgumentError("not VP-tree bytes (bad magic)");
     }
     ByteReader r(bytes.substr(sizeof kMagic));
-    uint64_t version;
+    uint64_t version = 0;
     r.U(2, &version);
     if (version != kVersion) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -697,7 +697,7 @@ class VpTreeReader {
     if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
     const size_t body = bytes.size() - 8;
     ByteReader tail(bytes.substr(body));
-    uint64_t checksum;
+    uint64_t checksum = 0;
     tail.U(8, &checksum);
     if (checksum != Fnv1a(bytes.data(), body)) {
       return Corrupt("checksum mismatch");

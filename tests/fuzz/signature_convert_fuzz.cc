@@ -48,7 +48,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!converted.ok()) {
     tpr::fuzz::CheckRefusal(converted.status(), {absl::StatusCode::kInvalidArgument,
                                                  absl::StatusCode::kResourceExhausted,
-                                                 absl::StatusCode::kFailedPrecondition}));
+                                                 absl::StatusCode::kFailedPrecondition});
     return 0;
   }
   const tpr::index::GroundDistanceOptions ground;
