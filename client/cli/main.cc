@@ -12,6 +12,7 @@
 // failed, 2 on bad usage.
 #include <CLI/CLI.hpp>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "client/cli/command.h"
@@ -25,9 +26,22 @@ int main(int argc, char** argv) {
   app.fallthrough();
   tpr::cli::AddGlobalFlags(&app, &g);
 
+  // Each subcommand's --help names the global flags (connection, TLS, API
+  // key), which CLI11 lists only in `tpr --help`.
+  std::string globals;
+  for (const CLI::Option* option : app.get_options()) {
+    const std::string name = option->get_name();  // the long name; "" when hidden
+    if (name.empty() || name == "--help") continue;
+    if (!globals.empty()) globals += ", ";
+    globals += name;
+    if (!option->get_envname().empty()) globals += " (" + option->get_envname() + ")";
+  }
+  const std::string footer =
+      "\nGlobal options, before or after the subcommand (details: tpr --help):\n  " + globals;
   std::vector<std::pair<CLI::App*, tpr::cli::CommandAction>> actions;
   for (const tpr::cli::Command& command : tpr::cli::Commands()) {
     CLI::App* sub = app.add_subcommand(command.name, command.help);
+    sub->footer(footer);
     actions.emplace_back(sub, command.setup(*sub));
   }
   CLI11_PARSE(app, argc, argv);

@@ -327,6 +327,17 @@ TEST_F(AuthTest, TprKeyNewAndTheCommandsKeyFlags) {
   EXPECT_NE(r.out.find("PERMISSION_DENIED"), std::string::npos) << r.out;
   r = RunShell(absl::StrCat(tpr, at, "--api-key ", key, " remove some/id"));
   EXPECT_NE(r.out.find("NOT_FOUND"), std::string::npos) << r.out;
+
+  // The help texts show the security flags: the top level and every
+  // subcommand (whose footer lists the global flags).
+  for (const char* help : {" --help", " query --help", " add --help", " remove --help"}) {
+    r = RunShell(tpr + help);
+    EXPECT_EQ(r.exit_code, 0) << help;
+    for (const char* flag : {"--api-key", "TPR_API_KEY", "--tls", "--tls-ca", "--tls-cert",
+                             "--tls-key", "--verbose"}) {
+      EXPECT_NE(r.out.find(flag), std::string::npos) << help << " lacks " << flag << "\n" << r.out;
+    }
+  }
 }
 
 TEST(AuthFormatTest, HashMatchesOpensslAndLinesParse) {
