@@ -82,10 +82,12 @@ struct ServerOptions {
   int readiness_poll_ms = 1000;
   // API keys (common/auth.h): when set, every call but health checks and
   // reflection needs a key of a sufficient role, and SIGHUP reloads the
-  // keys file (ServeUntilSignal). Kept alive by these options. Default none.
+  // keys file (ServeUntilSignal). Kept alive by these options and by the
+  // StartedServer. Default none.
   std::shared_ptr<ApiKeyAuthenticator> api_keys;
   // Prometheus metrics (common/metrics.h) every call is recorded into; the
-  // caller serves them (Metrics::Serve). Default none.
+  // caller serves them (Metrics::Serve). Kept alive by the StartedServer.
+  // Default none.
   std::shared_ptr<Metrics> metrics;
   // Credentials the port is opened with (e.g. TLS, common/tls.h); StartServer
   // attaches api_keys' processor to them. nullptr: plaintext. Default nullptr.
@@ -115,6 +117,10 @@ inline std::shared_ptr<grpc::ServerCredentials> ListeningCredentials(
 // StartedServer: a running server and the port it actually bound.
 // Destroying it stops the readiness monitor before the server.
 struct StartedServer {
+  // What the server's auth filter and interceptors point into, kept alive
+  // until after the server (members are destroyed in reverse order).
+  std::shared_ptr<ApiKeyAuthenticator> api_keys;
+  std::shared_ptr<Metrics> metrics;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
   // Set when ServerOptions::readiness_service is.
@@ -139,6 +145,8 @@ inline absl::StatusOr<StartedServer> StartServer(
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   StartedServer started;
+  started.api_keys = options.api_keys;
+  started.metrics = options.metrics;
   std::shared_ptr<grpc::ServerCredentials> credentials = internal::ListeningCredentials(options);
   builder.AddListeningPort(options.listen_address, credentials, &started.port);
   {
@@ -208,6 +216,7 @@ class UnavailableGenericService final : public grpc::CallbackGenericService {
 // LoadingServer: the stand-in StartLoadingServer returns. Destroying it
 // shuts it down at once.
 struct LoadingServer {
+  std::shared_ptr<ApiKeyAuthenticator> api_keys;  // outlives the server
   std::unique_ptr<internal::UnavailableGenericService> service;
   std::unique_ptr<grpc::Server> server;
   // The port bound: give it to the real server (ListenAddressWithPort).
@@ -238,6 +247,7 @@ inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
   }
   grpc::EnableDefaultHealthCheckService(true);
   auto loading = std::make_unique<LoadingServer>();
+  loading->api_keys = options.api_keys;
   loading->service = std::make_unique<internal::UnavailableGenericService>(
       absl::StrCat(options.log_name, " is not ready: ", reason));
   grpc::ServerBuilder builder;

@@ -4,7 +4,8 @@
 // against an expected table written here independently of the server's;
 // reload when the keys file changes and on SIGHUP; bad keys files refused at
 // start naming the line; the keys file format and hashing against OpenSSL's
-// command-line tool.
+// command-line tool; a server keeps its keys alive after its options are
+// gone.
 #include <fcntl.h>
 #include <sys/stat.h>
 
@@ -22,6 +23,7 @@
 
 #include "absl/strings/ascii.h"
 #include "common/auth.h"
+#include "common/server_lifecycle.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/ops_testing.h"
 #include "tpr/v1/extractor.grpc.pb.h"
@@ -367,6 +369,41 @@ TEST(AuthFormatTest, HashMatchesOpensslAndLinesParse) {
   EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'a') + " root\n").ok());
   EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'A') + " read\n").ok());
   EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'a') + "\n").ok());
+}
+
+// The auth filter points into the authenticator: a server must keep it
+// alive whatever happens to the ServerOptions it was started with (the
+// overhead benchmark once crashed on a freed one).
+TEST(AuthLifetimeTest, ServerKeepsItsKeysAliveAfterItsOptionsAreGone) {
+  TempDir dir;
+  absl::StatusOr<std::string> key = common::NewApiKey();
+  ASSERT_TRUE(key.ok());
+  WriteFile(dir.path() + "/keys", common::KeyFileLine(*key, Role::kRead, "") + "\n");
+  absl::StatusOr<common::StartedServer> started;
+  {
+    common::ServerOptions options;
+    absl::StatusOr<std::shared_ptr<common::ApiKeyAuthenticator>> keys =
+        common::ApiKeyAuthenticator::Open(dir.path() + "/keys", "lifetime-test", 0);
+    ASSERT_TRUE(keys.ok()) << keys.status();
+    options.api_keys = *keys;
+    started = common::StartServer(options, {});
+    ASSERT_TRUE(started.ok()) << started.status();
+  }
+  auto channel = grpc::CreateChannel(absl::StrCat("127.0.0.1:", started->port),
+                                     grpc::InsecureChannelCredentials());
+  for (const std::string& header : {"Bearer " + *key, std::string("Bearer tpr_wrong")}) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", header);
+    tpr::v1::StatsResponse stats;
+    const grpc::Status status =
+        tpr::v1::Indexer::NewStub(channel)->Stats(&context, tpr::v1::StatsRequest(), &stats);
+    // The right key passes the filter (no Indexer service here: UNIMPLEMENTED).
+    EXPECT_EQ(status.error_code(), header == "Bearer " + *key
+                                       ? grpc::StatusCode::UNIMPLEMENTED
+                                       : grpc::StatusCode::UNAUTHENTICATED)
+        << status.error_message();
+  }
+  started->server->Shutdown();
 }
 
 }  // namespace
