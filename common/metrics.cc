@@ -9,6 +9,11 @@
 #include <prometheus/exposer.h>
 #include <prometheus/text_serializer.h>
 
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/wire_format_lite.h>
+#include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/proto_buffer_reader.h>
+
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "tpr/v1/extractor.pb.h"
@@ -130,6 +135,28 @@ namespace {
 
 using grpc::experimental::InterceptionHookPoints;
 
+// The bytes of the `data` field (the mesh chunk) in one serialized
+// tpr.v1.ExtractRequest, read from its wire form without copying the chunk
+// (the extractor parses the message itself). 0 for bytes that do not parse.
+size_t UploadBytes(grpc::ByteBuffer* raw) {
+  using google::protobuf::internal::WireFormatLite;
+  grpc::ProtoBufferReader reader(raw);
+  google::protobuf::io::CodedInputStream in(&reader);
+  const uint32_t data_tag = WireFormatLite::MakeTag(tpr::v1::ExtractRequest::kDataFieldNumber,
+                                                    WireFormatLite::WIRETYPE_LENGTH_DELIMITED);
+  size_t total = 0;
+  while (const uint32_t tag = in.ReadTag()) {
+    if (tag == data_tag) {
+      uint32_t length = 0;
+      if (!in.ReadVarint32(&length) || !in.Skip(static_cast<int>(length))) return 0;
+      total += length;
+    } else if (!WireFormatLite::SkipField(&in, tag)) {
+      return 0;
+    }
+  }
+  return total;
+}
+
 enum class Kind { kOther, kExtract, kSearch };
 
 class MetricsInterceptor final : public grpc::experimental::Interceptor {
@@ -152,9 +179,11 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
   void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
     if (kind_ == Kind::kExtract &&
         methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_MESSAGE)) {
-      // The method fixes the message type.
-      if (const auto* chunk = static_cast<const tpr::v1::ExtractRequest*>(methods->GetRecvMessage())) {
-        upload_bytes_ += chunk->data().size();
+      // The extractor reads its upload as raw bytes (common/stream_messages.h),
+      // so the received message is a grpc::ByteBuffer holding one serialized
+      // ExtractRequest.
+      if (auto* raw = static_cast<grpc::ByteBuffer*>(methods->GetRecvMessage())) {
+        upload_bytes_ += UploadBytes(raw);
       }
     }
     if (kind_ != Kind::kOther &&
