@@ -17,13 +17,6 @@
 namespace tpr::index {
 namespace {
 
-// Rows are padded to a multiple of 8 doubles so that the inner loop of the
-// distance kernel runs over whole SIMD registers (2, 4 or 8 lanes) with no
-// remainder handling.
-constexpr int kLanePad = 8;
-
-int PaddedStride(int n) { return (n + kLanePad - 1) / kLanePad * kLanePad; }
-
 bool AllFinite(const std::vector<double>& v) {
   for (double x : v) {
     if (!std::isfinite(x)) return false;
@@ -125,38 +118,51 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   p.serial_ = next_serial.fetch_add(1, std::memory_order_relaxed);
   p.size_ = static_cast<int>(f.size());
   p.bands_ = static_cast<int>(f[0].curvature.size());
-  p.stride_ = PaddedStride(p.size_);
   const int n = p.size_;
   const int bands = p.bands_;
-  const size_t stride = static_cast<size_t>(p.stride_);
-  const size_t rows = 1 + 3 * static_cast<size_t>(bands);
+  const size_t un = static_cast<size_t>(n);
+  const size_t rows = static_cast<size_t>(p.Rows());
+  std::vector<double> spectral = SpectralEmbedding(signature.spectrum, options.spectral);
+  p.spectral_size_ = static_cast<int>(spectral.size());
+  p.scalars_.assign(un + rows + spectral.size(), 0.0);
 
   double sum = 0.0;
   for (const Feature& x : f) sum += x.weight;
-  p.weights_.resize(static_cast<size_t>(n));
-  for (int i = 0; i < n; ++i) p.weights_[i] = f[i].weight / sum;
+  for (size_t i = 0; i < un; ++i) p.scalars_[i] = f[i].weight / sum;
 
-  // phi(U) of ground_distance.h, dimension-major.
-  p.coords_.assign(rows * stride, 0.0);
+  // phi(U) of ground_distance.h, dimension-major, rounded to float32.
+  p.coords_.assign(rows * un, 0.0f);
   const double ck = options.w2 * options.k_scale;
   const double ca = options.w3 * options.a_scale;
   const double ch = options.w4 * options.h_scale;
-  for (int i = 0; i < n; ++i) {
+  for (size_t i = 0; i < un; ++i) {
     const Feature& x = f[i];
-    p.coords_[i] = options.w1 * x.integral_geodesic;
-    for (int b = 0; b < bands; ++b) {
-      p.coords_[(1 + b) * stride + i] = ck * x.curvature[b];
-      p.coords_[(1 + bands + b) * stride + i] = ca * x.area[b];
-      p.coords_[(1 + 2 * bands + b) * stride + i] = ch * x.distance[b];
+    p.coords_[i] = static_cast<float>(options.w1 * x.integral_geodesic);
+    for (size_t b = 0; b < static_cast<size_t>(bands); ++b) {
+      p.coords_[(1 + b) * un + i] = static_cast<float>(ck * x.curvature[b]);
+      p.coords_[(1 + bands + b) * un + i] = static_cast<float>(ca * x.area[b]);
+      p.coords_[(1 + 2 * bands + b) * un + i] = static_cast<float>(ch * x.distance[b]);
     }
   }
-  p.centroid_.assign(rows, 0.0);
+  // A finite double beyond float32's range (about 3.4e38) would become
+  // infinite in storage and poison every distance to it.
+  for (size_t r = 0; r < rows; ++r) {
+    for (size_t i = 0; i < un; ++i) {
+      if (!std::isfinite(p.coords_[r * un + i])) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "feature ", i, ": ", r == 0 ? "integral geodesic" : "a band value",
+            " is too large (beyond float32 range once weighted)"));
+      }
+    }
+  }
+  // The centroid of the rounded points, in double (exact inputs).
+  double* centroid = p.scalars_.data() + un;
   for (size_t r = 0; r < rows; ++r) {
     double c = 0.0;
-    for (int i = 0; i < n; ++i) c += p.weights_[i] * p.coords_[r * stride + i];
-    p.centroid_[r] = c;
+    for (size_t i = 0; i < un; ++i) c += p.scalars_[i] * p.coords_[r * un + i];
+    centroid[r] = c;
   }
-  p.spectral_ = SpectralEmbedding(signature.spectrum, options.spectral);
+  std::copy(spectral.begin(), spectral.end(), centroid + rows);
   return p;
 }
 
@@ -167,13 +173,14 @@ namespace {
 double BlockSquared(const PreparedSignature& a, int i, int a_row0,
                     const PreparedSignature& b, int j, int b_row0) {
   const int common = std::min(a.bands(), b.bands());
-  const double* ac = a.coords();
-  const double* bc = b.coords();
-  const size_t as = static_cast<size_t>(a.stride());
-  const size_t bs = static_cast<size_t>(b.stride());
+  const float* ac = a.coords();
+  const float* bc = b.coords();
+  const size_t as = static_cast<size_t>(a.size());
+  const size_t bs = static_cast<size_t>(b.size());
   double s = 0.0;
   for (int d = 0; d < common; ++d) {
-    const double diff = ac[(a_row0 + d) * as + i] - bc[(b_row0 + d) * bs + j];
+    const double diff = static_cast<double>(ac[(a_row0 + d) * as + i]) -
+                        static_cast<double>(bc[(b_row0 + d) * bs + j]);
     s += diff * diff;
   }
   for (int d = common; d < a.bands(); ++d) {
@@ -192,7 +199,8 @@ double BlockSquared(const PreparedSignature& a, int i, int a_row0,
 double GroundDistance(const PreparedSignature& a, int i,
                       const PreparedSignature& b, int j) {
   assert(i >= 0 && i < a.size() && j >= 0 && j < b.size());
-  const double g = std::abs(a.coords()[i] - b.coords()[j]);
+  const double g = std::abs(static_cast<double>(a.coords()[i]) -
+                            static_cast<double>(b.coords()[j]));
   const double k = std::sqrt(BlockSquared(a, i, 1, b, j, 1));
   const double ar =
       std::sqrt(BlockSquared(a, i, 1 + a.bands(), b, j, 1 + b.bands()));
@@ -232,25 +240,48 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // Why intrinsics: the build targets baseline x86-64 (SSE2), and GCC does
 // not vectorize sqrt without -fno-math-errno; the matrix is about a third
 // of an EMD, so it gets hand-written AVX2 and AVX-512 versions chosen once
-// at run time. Lanes run over 8 consecutive features of b (the padded,
+// at run time. Lanes run over 8 consecutive features of b (the
 // dimension-major layout of PreparedSignature); a's coordinates are
-// broadcast. Each lane accumulates its bands in the same order, so the
-// matrix is symmetric under swapping a and b exactly: (x - y)^2 and
-// (y - x)^2 are the same double and fma(d, d, s) depends on d only
-// through d * d.
+// broadcast. Coordinates are stored in float32 without padding: a block of
+// 8 features is read with a masked load (features at or past b.size() read
+// as 0, and nothing past the row is touched) and widened to double, so the
+// arithmetic is the scalar kernel's. Each lane accumulates its bands in the
+// same order, so the matrix is symmetric under swapping a and b exactly:
+// (x - y)^2 and (y - x)^2 are the same double and fma(d, d, s) depends on
+// d only through d * d.
+
+// Lanes [0, valid) on, for _mm256_maskload_ps.
+__attribute__((target("avx2,fma"))) inline __m256i LaneMask(int valid) {
+  const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  return _mm256_cmpgt_epi32(_mm256_set1_epi32(valid), lanes);
+}
+
+// Squared difference of a broadcast value x against 8 float32 lanes at p
+// (masked), accumulated into lo (lanes 0-3) and hi (lanes 4-7).
+__attribute__((target("avx2,fma"))) inline void AccumulateAvx2(
+    float x, const float* p, __m256i mask, __m256d* lo, __m256d* hi) {
+  const __m256 y = _mm256_maskload_ps(p, mask);
+  const __m256d xd = _mm256_set1_pd(static_cast<double>(x));
+  __m256d t = _mm256_sub_pd(xd, _mm256_cvtps_pd(_mm256_castps256_ps128(y)));
+  *lo = _mm256_fmadd_pd(t, t, *lo);
+  t = _mm256_sub_pd(xd, _mm256_cvtps_pd(_mm256_extractf128_ps(y, 1)));
+  *hi = _mm256_fmadd_pd(t, t, *hi);
+}
+
 __attribute__((target("avx2,fma"))) double KernelAvx2(
     const PreparedSignature& a, const PreparedSignature& b, double* out,
     int out_stride) {
   const int bands = a.bands();
-  const size_t as = static_cast<size_t>(a.stride());
-  const size_t bs = static_cast<size_t>(b.stride());
-  const double* ac = a.coords();
-  const double* bc = b.coords();
+  const size_t as = static_cast<size_t>(a.size());
+  const size_t bs = static_cast<size_t>(b.size());
+  const float* ac = a.coords();
+  const float* bc = b.coords();
   const __m256d sign = _mm256_set1_pd(-0.0);
   __m256d mx = _mm256_setzero_pd();
-  for (int i = 0; i < a.size(); ++i) {
-    double* row = out + static_cast<size_t>(i) * out_stride;
-    for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+  for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+    const __m256i mask = LaneMask(b.size() - j0);
+    for (int i = 0; i < a.size(); ++i) {
+      double* row = out + static_cast<size_t>(i) * out_stride;
       __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
       __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd();
       __m256d h0 = _mm256_setzero_pd(), h1 = _mm256_setzero_pd();
@@ -258,30 +289,16 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
         const size_t rk = static_cast<size_t>(1 + d);
         const size_t ra = rk + static_cast<size_t>(bands);
         const size_t rh = ra + static_cast<size_t>(bands);
-        const __m256d xk = _mm256_broadcast_sd(ac + rk * as + i);
-        const __m256d xa = _mm256_broadcast_sd(ac + ra * as + i);
-        const __m256d xh = _mm256_broadcast_sd(ac + rh * as + i);
-        const double* yk = bc + rk * bs + j0;
-        const double* ya = bc + ra * bs + j0;
-        const double* yh = bc + rh * bs + j0;
-        __m256d t;
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk));
-        k0 = _mm256_fmadd_pd(t, t, k0);
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk + 4));
-        k1 = _mm256_fmadd_pd(t, t, k1);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya));
-        a0 = _mm256_fmadd_pd(t, t, a0);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya + 4));
-        a1 = _mm256_fmadd_pd(t, t, a1);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh));
-        h0 = _mm256_fmadd_pd(t, t, h0);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh + 4));
-        h1 = _mm256_fmadd_pd(t, t, h1);
+        AccumulateAvx2(ac[rk * as + i], bc + rk * bs + j0, mask, &k0, &k1);
+        AccumulateAvx2(ac[ra * as + i], bc + ra * bs + j0, mask, &a0, &a1);
+        AccumulateAvx2(ac[rh * as + i], bc + rh * bs + j0, mask, &h0, &h1);
       }
-      const __m256d xg = _mm256_broadcast_sd(ac + i);
-      __m256d g0 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(bc + j0)));
-      __m256d g1 =
-          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(bc + j0 + 4)));
+      const __m256 yg = _mm256_maskload_ps(bc + j0, mask);
+      const __m256d xg = _mm256_set1_pd(static_cast<double>(ac[i]));
+      __m256d g0 = _mm256_andnot_pd(
+          sign, _mm256_sub_pd(xg, _mm256_cvtps_pd(_mm256_castps256_ps128(yg))));
+      __m256d g1 = _mm256_andnot_pd(
+          sign, _mm256_sub_pd(xg, _mm256_cvtps_pd(_mm256_extractf128_ps(yg, 1))));
       g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
                                        _mm256_sqrt_pd(a0)),
                          _mm256_sqrt_pd(h0));
@@ -303,18 +320,20 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
-__attribute__((target("avx512f"))) double KernelAvx512(
+__attribute__((target("avx512f,avx512vl"))) double KernelAvx512(
     const PreparedSignature& a, const PreparedSignature& b, double* out,
     int out_stride) {
   const int bands = a.bands();
-  const size_t as = static_cast<size_t>(a.stride());
-  const size_t bs = static_cast<size_t>(b.stride());
-  const double* ac = a.coords();
-  const double* bc = b.coords();
+  const size_t as = static_cast<size_t>(a.size());
+  const size_t bs = static_cast<size_t>(b.size());
+  const float* ac = a.coords();
+  const float* bc = b.coords();
   __m512d mx = _mm512_setzero_pd();
-  for (int i = 0; i < a.size(); ++i) {
-    double* row = out + static_cast<size_t>(i) * out_stride;
-    for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+  for (int j0 = 0; j0 < b.stride(); j0 += 8) {
+    const int valid = std::min(8, b.size() - j0);
+    const __mmask8 mask = static_cast<__mmask8>((1u << valid) - 1u);
+    for (int i = 0; i < a.size(); ++i) {
+      double* row = out + static_cast<size_t>(i) * out_stride;
       __m512d k = _mm512_setzero_pd();
       __m512d ar = _mm512_setzero_pd();
       __m512d h = _mm512_setzero_pd();
@@ -324,17 +343,17 @@ __attribute__((target("avx512f"))) double KernelAvx512(
         const size_t rh = ra + static_cast<size_t>(bands);
         __m512d t;
         t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]),
-                          _mm512_loadu_pd(bc + rk * bs + j0));
+                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + rk * bs + j0)));
         k = _mm512_fmadd_pd(t, t, k);
         t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]),
-                          _mm512_loadu_pd(bc + ra * bs + j0));
+                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + ra * bs + j0)));
         ar = _mm512_fmadd_pd(t, t, ar);
         t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]),
-                          _mm512_loadu_pd(bc + rh * bs + j0));
+                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + rh * bs + j0)));
         h = _mm512_fmadd_pd(t, t, h);
       }
-      __m512d g = _mm512_abs_pd(
-          _mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(bc + j0)));
+      __m512d g = _mm512_abs_pd(_mm512_sub_pd(
+          _mm512_set1_pd(ac[i]), _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + j0))));
       g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k)),
                                       _mm512_sqrt_pd(ar)),
                         _mm512_sqrt_pd(h));
@@ -350,7 +369,9 @@ __attribute__((target("avx512f"))) double KernelAvx512(
 KernelFn PickKernel() {
 #ifdef TPR_HAVE_X86_KERNELS
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) return KernelAvx512;
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) {
+    return KernelAvx512;
+  }
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     return KernelAvx2;
   }
@@ -369,4 +390,32 @@ double GroundDistanceMatrix(const PreparedSignature& a,
   return kernel(a, b, out, out_stride);
 }
 
+namespace internal {
+
+bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
+                                    const PreparedSignature& b, double* out,
+                                    int out_stride) {
+  if (a.bands() != b.bands() && kernel != 0) return false;
+  switch (kernel) {
+    case 0:
+      KernelScalar(a, b, out, out_stride);
+      return true;
+#ifdef TPR_HAVE_X86_KERNELS
+    case 1:
+      if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return false;
+      KernelAvx2(a, b, out, out_stride);
+      return true;
+    case 2:
+      if (!__builtin_cpu_supports("avx512f") || !__builtin_cpu_supports("avx512vl")) {
+        return false;
+      }
+      KernelAvx512(a, b, out, out_stride);
+      return true;
+#endif
+    default:
+      return false;
+  }
+}
+
+}  // namespace internal
 }  // namespace tpr::index

@@ -104,10 +104,25 @@ inline constexpr int kMaxFeatures = 200;
 
 // PreparedSignature: what the index stores for one signature. An immutable,
 // flat structure-of-arrays copy holding the scaled coordinates phi(U) of
-// every feature (dimension-major, padded so that a ground-distance row is a
-// vectorizable loop), the masses normalized to sum to 1, and the centroid
-// sum_i w_i phi(U_i) used by EmdLowerBound. Copyable and movable; built only
-// by Prepare. Thread-safe to read from any number of threads.
+// every feature (dimension-major), the masses normalized to sum to 1, the
+// centroid sum_i w_i phi(U_i) used by EmdLowerBound and the spectral
+// embedding. Copyable and movable; built only by Prepare. Thread-safe to
+// read from any number of threads.
+//
+// Compact storage (issue 14: about 4 KB per model). The coordinates are
+// the bulk of a signature (1 + 3 bands values per feature) and are kept in
+// float32, unpadded; everything else (masses, centroid, spectral
+// embedding) is double and shares one allocation, so a model costs two
+// heap blocks. Every distance is computed in double from these float32
+// coordinates, so the index's distance is exactly the EMD of Eq. 7 between
+// the rounded points phi32(U) = fl32(phi(U)): still a metric (ground
+// distance is N(phi32(U1) - phi32(U2)), a norm of a difference), and it
+// differs from the EMD on double coordinates by at most
+//   2^-24 (max_i N(phi(a_i)) + max_j N(phi(b_j)))
+// (each coordinate moves by at most 2^-24 of itself, so each ground
+// distance by at most the norms of the two moves, and an EMD is a convex
+// combination of ground distances: ground_distance_test checks the bound
+// and that rankings on real signatures do not change).
 class PreparedSignature {
  public:
   PreparedSignature() = default;
@@ -118,49 +133,51 @@ class PreparedSignature {
   // bands returns the length of the K, A and H vectors.
   int bands() const { return bands_; }
   // weight returns the normalized mass of feature i, 0 <= i < size().
-  double weight(int i) const { return weights_[static_cast<size_t>(i)]; }
+  double weight(int i) const { return scalars_[static_cast<size_t>(i)]; }
   // weights returns all masses (size() values summing to 1).
-  const double* weights() const { return weights_.data(); }
+  const double* weights() const { return scalars_.data(); }
   // MemoryBytes returns the heap bytes this object holds.
   size_t MemoryBytes() const {
-    return (weights_.capacity() + coords_.capacity() + centroid_.capacity() +
-            spectral_.capacity()) *
-           sizeof(double);
+    return scalars_.capacity() * sizeof(double) + coords_.capacity() * sizeof(float);
   }
   // spectral returns the spectral embedding E(spectrum) (spectral.h) of
   // spectral_size() values: options.spectral.eigenvalues, or 0 when the
   // spectral weight is 0. metric.h compares it.
-  const double* spectral() const { return spectral_.data(); }
-  int spectral_size() const { return static_cast<int>(spectral_.size()); }
+  const double* spectral() const { return scalars_.data() + size_ + Rows(); }
+  int spectral_size() const { return spectral_size_; }
 
   // Layout (for emd.cc and the lower bound; not a stable interface):
-  // stride() >= size() is the padded row length, a multiple of 8. Row 0 of
-  // coords() holds W1 G'; rows 1 .. bands() hold W2 c_K K; the next bands()
-  // rows W3 c_A A; the next bands() rows W4 c_H H. Row r, feature i is
-  // coords()[r * stride() + i]; padding entries are 0.
-  int stride() const { return stride_; }
+  // coords() holds 1 + 3 bands() rows of size() float32 values each
+  // (dimension-major, no padding): row 0 holds W1 G'; rows 1 .. bands()
+  // hold W2 c_K K; the next bands() rows W3 c_A A; the next bands() rows
+  // W4 c_H H. Row r, feature i is coords()[r * size() + i].
+  const float* coords() const { return coords_.data(); }
+  // stride returns the row length of this signature's ground-distance
+  // matrix as the column side (GroundDistanceMatrix's out_stride): size()
+  // rounded up to a multiple of 8, so that matrix rows are whole SIMD
+  // registers.
+  int stride() const { return (size_ + 7) / 8 * 8; }
   // serial returns a process-unique number of the Prepare call that made
   // this object (copies share it, as they share the content): a cache key
   // for work derived from the content (EmdSolver reuses a ground-distance
   // matrix across a bound and the EMD of the same pair).
   uint64_t serial() const { return serial_; }
-  const double* coords() const { return coords_.data(); }
-  // centroid returns sum_i weight(i) phi(U_i): 1 + 3 bands() values in row
-  // order.
-  const double* centroid() const { return centroid_.data(); }
+  // centroid returns sum_i weight(i) phi32(U_i), computed in double from
+  // coords(): 1 + 3 bands() values in row order.
+  const double* centroid() const { return scalars_.data() + size_; }
 
  private:
   friend absl::StatusOr<PreparedSignature> Prepare(
       const Signature& signature, const GroundDistanceOptions& options);
+  int Rows() const { return 1 + 3 * bands_; }
 
   int size_ = 0;
   int bands_ = 0;
-  int stride_ = 0;
+  int spectral_size_ = 0;
   uint64_t serial_ = 0;
-  std::vector<double> weights_;
-  std::vector<double> coords_;
-  std::vector<double> centroid_;
-  std::vector<double> spectral_;
+  // weights (size_), centroid (Rows()), spectral embedding (spectral_size_).
+  std::vector<double> scalars_;
+  std::vector<float> coords_;  // Rows() x size_
 };
 
 // Prepare validates `signature` and `options` (see ValidateSignature and
@@ -179,8 +196,8 @@ double GroundDistance(const PreparedSignature& a, int i,
 // GroundDistanceMatrix writes the a.size() x b.size() matrix of ground
 // distances into `out`, row i at out[i * out_stride], with
 // out_stride >= b.stride(); entries past b.size() in a row (up to
-// b.stride()) are written with unspecified finite values. This is the
-// vectorized kernel (AVX-512 or AVX2, chosen at run time) the EMD uses;
+// b.stride()) are written with finite values (the distance to the
+// origin). This is the vectorized kernel (AVX-512 or AVX2, chosen at run time) the EMD uses;
 // entries equal GroundDistance to rounding (about 1e-15 relative) and the
 // matrix of (b, a) is exactly the transpose of that of (a, b). Returns an
 // upper bound of the entries (the largest value written, padding
@@ -189,6 +206,16 @@ double GroundDistance(const PreparedSignature& a, int i,
 double GroundDistanceMatrix(const PreparedSignature& a,
                             const PreparedSignature& b, double* out,
                             int out_stride);
+
+namespace internal {
+// GroundDistanceMatrixWithKernel runs one kernel of GroundDistanceMatrix
+// regardless of the run-time choice, for tests: 0 = portable, 1 = AVX2,
+// 2 = AVX-512. Returns false, writing nothing, when this CPU (or build)
+// cannot run it. Same contract as GroundDistanceMatrix otherwise.
+bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
+                                    const PreparedSignature& b, double* out,
+                                    int out_stride);
+}  // namespace internal
 
 }  // namespace tpr::index
 

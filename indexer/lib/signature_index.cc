@@ -46,7 +46,7 @@ uint64_t Fingerprint(const PreparedSignature& p) {
   uint64_t h = Fnv1a(shape, sizeof shape);
   h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
   const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
-  h = Fnv1a(p.coords(), sizeof(double) * rows * static_cast<size_t>(p.stride()), h);
+  h = Fnv1a(p.coords(), sizeof(float) * rows * static_cast<size_t>(p.size()), h);
   h = Fnv1a(p.spectral(), sizeof(double) * static_cast<size_t>(p.spectral_size()), h);
   return h;
 }

@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <chrono>
 #include <ctime>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
@@ -281,6 +282,24 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
   return spec;
 }
 
+// PeakRssMiB returns the process's peak resident set (VmHWM) in MiB, or 0
+// where /proc is not available. Databases are cached per process, so it is
+// the peak over every database built so far: run one size per process
+// (--benchmark_filter) to read it per size.
+double PeakRssMiB() {
+  std::ifstream status("/proc/self/status");
+  std::string key;
+  while (status >> key) {
+    if (key == "VmHWM:") {
+      double kib = 0.0;
+      status >> kib;
+      return kib / 1024.0;
+    }
+    status.ignore(1 << 20, '\n');
+  }
+  return 0.0;
+}
+
 void Report(benchmark::State& state, const Db& db, const SearchStats& total,
             int64_t queries) {
   const double per = queries > 0 ? 1.0 / static_cast<double>(queries) : 0.0;
@@ -292,6 +311,10 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["nodes"] = static_cast<double>(total.nodes_visited) * per;
   state.counters["build_s"] = db.build_seconds;
   state.counters["build_cpu_s"] = db.build_cpu_seconds;
+  state.counters["peak_rss_mib"] = PeakRssMiB();
+  size_t bytes = db.tree.MemoryBytes() + db.centroids.MemoryBytes();
+  for (const PreparedSignature& p : db.items) bytes += sizeof(PreparedSignature) + p.MemoryBytes();
+  state.counters["bytes_per_model"] = static_cast<double>(bytes) / n;
 }
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
@@ -351,6 +374,7 @@ void BM_KnnVpTreeExtracted(benchmark::State& state) {
 BENCHMARK(BM_KnnVpTreeExtracted)
     ->Args({1000, 10})
     ->Args({10000, 10})
+    ->Args({100000, 1})
     ->Args({100000, 10})
     ->Args({1000000, 1})
     ->Args({1000000, 10})
@@ -456,8 +480,10 @@ BENCHMARK(BM_KnnBruteForce)
 void RunIndex(benchmark::State& state, const DbKey& key) {
   std::vector<std::pair<std::string, tpr::index::Signature>> items;
   std::vector<tpr::index::Signature> queries;
+  double features = 0.0;
   Generate(key, [&](tpr::index::Signature s) {
     if (static_cast<int64_t>(items.size()) < key.n) {
+      features += static_cast<double>(s.features.size());
       items.emplace_back("model-" + std::to_string(items.size()), std::move(s));
     } else {
       queries.push_back(std::move(s));
@@ -488,6 +514,7 @@ void RunIndex(benchmark::State& state, const DbKey& key) {
   const double per = 1.0 / static_cast<double>(std::max<int64_t>(n_queries, 1));
   state.counters["bytes_per_model"] = static_cast<double>(index.MemoryBytes()) /
                                       static_cast<double>(index.size());
+  state.counters["features_per_model"] = features / static_cast<double>(key.n);
   state.counters["emds"] = static_cast<double>(total.emd_computations) * per;
   state.counters["emd_share"] = static_cast<double>(total.emd_computations) *
                                 per / static_cast<double>(key.n);

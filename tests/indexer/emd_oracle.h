@@ -70,6 +70,16 @@ class LemonEmd {
     return Run(a, b);
   }
 
+  // DistanceWithCosts returns the EMD of a's and b's masses under the given
+  // ground distances (a.size() x b.size(), row-major), e.g. Eq. 7 in double
+  // from the raw signatures (eq7_oracle.h).
+  double DistanceWithCosts(const PreparedSignature& a, const PreparedSignature& b,
+                           const std::vector<double>& costs) {
+    Setup(a.size(), b.size());
+    costs_ = costs;
+    return Run(a, b);
+  }
+
  private:
   static std::vector<int64_t> Scale(const PreparedSignature& s,
                                     int64_t total) {

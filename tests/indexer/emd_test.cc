@@ -14,6 +14,7 @@
 #include "gtest/gtest.h"
 #include "indexer/lib/ground_distance.h"
 #include "tests/indexer/emd_oracle.h"
+#include "tests/indexer/eq7_oracle.h"
 #include "tests/allocation_counter.h"
 #include "tests/indexer/signature_testing.h"
 
@@ -21,6 +22,8 @@
 namespace tpr::index {
 namespace {
 
+using testing::DirectEq7;
+using testing::Float32EmdSlack;
 using testing::LemonEmd;
 using testing::SignatureGenerator;
 using testing::SignatureGeneratorOptions;
@@ -178,6 +181,38 @@ TEST(EmdTest, RandomPairsMatchLemon) {
         << "pair " << t << " sizes " << a.size() << " x " << b.size();
   }
   RecordProperty("worst_relative_error", std::to_string(worst));
+}
+
+// Compact storage (issue 14): the EMD on float32 coordinates stays within
+// the documented bound (ground_distance.h) of the EMD computed by LEMON on
+// Eq. 7 in double straight from the raw features.
+TEST(EmdTest, Float32StorageErrorWithinBound) {
+  SignatureGeneratorOptions o;
+  o.seed = 31;
+  o.classes = 10;
+  SignatureGenerator gen(o);
+  const GroundDistanceOptions ground;
+  EmdSolver solver;
+  LemonEmd lemon;
+  double worst_ratio = 0.0;
+  for (int t = 0; t < 400; ++t) {
+    const Signature sa = t % 2 ? gen.Next() : gen.Random(1 + t % 60);
+    const Signature sb = gen.Next();
+    const PreparedSignature a = Prep(sa);
+    const PreparedSignature b = Prep(sb);
+    std::vector<double> costs;
+    for (const Feature& x : sa.features) {
+      for (const Feature& y : sb.features) costs.push_back(DirectEq7(x, y, ground));
+    }
+    const double exact64 = lemon.DistanceWithCosts(a, b, costs);
+    ASSERT_GE(exact64, 0.0);
+    const double slack = Float32EmdSlack(sa, sb, ground);
+    const double ours = solver.Distance(a, b);
+    // LEMON's integer scaling adds about 1e-12 of the largest cost.
+    ASSERT_NEAR(ours, exact64, slack + 1e-9 * std::max(exact64, 1e-3)) << "pair " << t;
+    worst_ratio = std::max(worst_ratio, std::abs(ours - exact64) / slack);
+  }
+  RecordProperty("worst_error_over_bound", std::to_string(worst_ratio));
 }
 
 TEST(EmdTest, LargestSignaturesMatchLemon) {

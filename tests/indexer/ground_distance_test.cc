@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "tests/indexer/eq7_oracle.h"
 #include "tests/indexer/signature_testing.h"
 
 namespace tpr::index {
@@ -15,22 +16,8 @@ namespace {
 using testing::SignatureGenerator;
 using testing::SignatureGeneratorOptions;
 
-// Eq. 7 straight from the raw features, with L2norm as documented:
-// c_X ||X1 - X2||_2, the shorter vector padded with zeros.
-double DirectEq7(const Feature& x, const Feature& y,
-                 const GroundDistanceOptions& o) {
-  auto l2 = [](const std::vector<double>& p, const std::vector<double>& q) {
-    const size_t n = std::max(p.size(), q.size());
-    double s = 0.0;
-    for (size_t i = 0; i < n; ++i) {
-      const double d = (i < p.size() ? p[i] : 0.0) - (i < q.size() ? q[i] : 0.0);
-      s += d * d;
-    }
-    return std::sqrt(s);
-  };
-  return o.w1 * std::abs(x.integral_geodesic - y.integral_geodesic) + o.w2 * o.k_scale * l2(x.curvature, y.curvature) +
-         o.w3 * o.a_scale * l2(x.area, y.area) + o.w4 * o.h_scale * l2(x.distance, y.distance);
-}
+using testing::DirectEq7;
+using testing::Float32Slack;
 
 PreparedSignature Prep(const Signature& s, const GroundDistanceOptions& o) {
   absl::StatusOr<PreparedSignature> p = Prepare(s, o);
@@ -146,7 +133,8 @@ TEST(GroundDistanceTest, MatchesEquation7ComputedDirectly) {
     for (int i = 0; i < a.size(); ++i) {
       for (int j = 0; j < b.size(); ++j) {
         const double expected = DirectEq7(sa.features[i], sb.features[j], o);
-        EXPECT_NEAR(GroundDistance(a, i, b, j), expected, 1e-12 * expected);
+        EXPECT_NEAR(GroundDistance(a, i, b, j), expected,
+                    Float32Slack(sa.features[i], sb.features[j], o) + 1e-12 * expected);
       }
     }
   }
@@ -171,8 +159,47 @@ TEST(GroundDistanceTest, MatrixKernelMatchesScalarAndIsSymmetric) {
         EXPECT_NEAR(m, GroundDistance(a, i, b, j), 1e-14);
         EXPECT_EQ(m, ba[static_cast<size_t>(j) * a.stride() + i]);
       }
+      // Padding columns (the masked tail of the float32 rows) stay finite:
+      // the EMD's pricing pass reads them.
+      for (int j = b.size(); j < b.stride(); ++j) {
+        EXPECT_TRUE(std::isfinite(ab[static_cast<size_t>(i) * b.stride() + j]));
+      }
     }
   }
+}
+
+// Every kernel this CPU runs (not only the one chosen at run time) agrees
+// with the scalar GroundDistance, at every tail length of the masked
+// float32 loads (sizes 1 .. 17 cover all 8 residues twice).
+TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
+  SignatureGenerator gen(SignatureGeneratorOptions{});
+  int kernels_run = 0;
+  for (int kernel = 0; kernel < 3; ++kernel) {
+    bool ran = false;
+    for (int na = 1; na <= 17; na += 4) {
+      for (int nb = 1; nb <= 17; ++nb) {
+        const PreparedSignature a = Prep(gen.Random(na), GroundDistanceOptions{});
+        const PreparedSignature b = Prep(gen.Random(nb), GroundDistanceOptions{});
+        std::vector<double> m(static_cast<size_t>(na) * b.stride(), -1.0);
+        if (!internal::GroundDistanceMatrixWithKernel(kernel, a, b, m.data(), b.stride())) {
+          continue;
+        }
+        ran = true;
+        for (int i = 0; i < na; ++i) {
+          for (int j = 0; j < nb; ++j) {
+            EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride() + j], GroundDistance(a, i, b, j),
+                        1e-14)
+                << "kernel " << kernel << " " << na << " x " << nb;
+          }
+          for (int j = nb; j < b.stride(); ++j) {
+            EXPECT_TRUE(std::isfinite(m[static_cast<size_t>(i) * b.stride() + j]));
+          }
+        }
+      }
+    }
+    kernels_run += ran ? 1 : 0;
+  }
+  EXPECT_GE(kernels_run, 1);  // the portable kernel always runs
 }
 
 TEST(GroundDistanceTest, DifferentBandCountsComparedWithZeroPadding) {
@@ -186,9 +213,20 @@ TEST(GroundDistanceTest, DifferentBandCountsComparedWithZeroPadding) {
   GroundDistanceMatrix(a, b, m.data(), b.stride());
   for (int i = 0; i < a.size(); ++i) {
     const double expected = DirectEq7(sa.features[i], sb.features[0], o);
-    EXPECT_NEAR(GroundDistance(a, i, b, 0), expected, 1e-14);
-    EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride()], expected, 1e-14);
+    const double slack = Float32Slack(sa.features[i], sb.features[0], o) + 1e-14;
+    EXPECT_NEAR(GroundDistance(a, i, b, 0), expected, slack);
+    EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride()], expected, slack);
   }
+}
+
+TEST(GroundDistanceTest, ValuesBeyondFloat32RangeRejected) {
+  Signature s = Valid();
+  s.features[1].distance[1] = 1e300;  // finite in double, infinite in float32
+  absl::StatusOr<PreparedSignature> p = Prepare(s, GroundDistanceOptions{});
+  ASSERT_FALSE(p.ok());
+  EXPECT_EQ(p.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(p.status().message().find("feature 1"), std::string::npos) << p.status();
+  EXPECT_NE(p.status().message().find("float32"), std::string::npos) << p.status();
 }
 
 TEST(GroundDistanceTest, IsAMetricOnFeatures) {
@@ -225,7 +263,7 @@ TEST(GroundDistanceTest, PreparedWeightsAndCentroid) {
   for (int r = 0; r < 1 + 3 * p.bands(); ++r) {
     double c = 0.0;
     for (int i = 0; i < p.size(); ++i) {
-      c += p.weight(i) * p.coords()[static_cast<size_t>(r) * p.stride() + i];
+      c += p.weight(i) * p.coords()[static_cast<size_t>(r) * p.size() + i];
     }
     EXPECT_NEAR(p.centroid()[r], c, 1e-15);
   }
