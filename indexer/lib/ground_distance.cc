@@ -242,30 +242,40 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // of an EMD, so it gets hand-written AVX2 and AVX-512 versions chosen once
 // at run time. Lanes run over 8 consecutive features of b (the
 // dimension-major layout of PreparedSignature); a's coordinates are
-// broadcast. Coordinates are stored in float32 without padding: a block of
-// 8 features is read with a masked load (features at or past b.size() read
-// as 0, and nothing past the row is touched) and widened to double, so the
-// arithmetic is the scalar kernel's. Each lane accumulates its bands in the
+// broadcast. Coordinates are stored in float32 without padding: each block
+// of 8 features of b is widened to double once (WidenBlock, features at or
+// past b.size() as 0), so the arithmetic is the scalar kernel's. Each lane accumulates its bands in the
 // same order, so the matrix is symmetric under swapping a and b exactly:
 // (x - y)^2 and (y - x)^2 are the same double and fma(d, d, s) depends on
 // d only through d * d.
 
-// Lanes [0, valid) on, for _mm256_maskload_ps.
-__attribute__((target("avx2,fma"))) inline __m256i LaneMask(int valid) {
-  const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  return _mm256_cmpgt_epi32(_mm256_set1_epi32(valid), lanes);
-}
-
-// Squared difference of a broadcast value x against 8 float32 lanes at p
-// (masked), accumulated into lo (lanes 0-3) and hi (lanes 4-7).
-__attribute__((target("avx2,fma"))) inline void AccumulateAvx2(
-    float x, const float* p, __m256i mask, __m256d* lo, __m256d* hi) {
-  const __m256 y = _mm256_maskload_ps(p, mask);
-  const __m256d xd = _mm256_set1_pd(static_cast<double>(x));
-  __m256d t = _mm256_sub_pd(xd, _mm256_cvtps_pd(_mm256_castps256_ps128(y)));
-  *lo = _mm256_fmadd_pd(t, t, *lo);
-  t = _mm256_sub_pd(xd, _mm256_cvtps_pd(_mm256_extractf128_ps(y, 1)));
-  *hi = _mm256_fmadd_pd(t, t, *hi);
+// WidenBlock returns the columns j0 .. j0 + 7 of b's float32 coordinates
+// widened to double, row-major (row r at [8 r]), columns at or past
+// b.size() as 0: one conversion per value and block, instead of one per
+// row of a. The buffer is per thread and reused (no allocation after
+// warm-up).
+const double* WidenBlock(const PreparedSignature& b, int j0) {
+  thread_local std::vector<double> block;
+  const size_t rows = 1 + 3 * static_cast<size_t>(b.bands());
+  if (block.size() < rows * 8) block.resize(rows * 8);
+  const size_t bs = static_cast<size_t>(b.size());
+  const int valid = std::min(8, b.size() - j0);
+  const float* bc = b.coords() + j0;
+  if (valid == 8) {  // a whole block: a fixed-length loop the compiler vectorizes
+    for (size_t r = 0; r < rows; ++r) {
+      double* out = block.data() + r * 8;
+      const float* in = bc + r * bs;
+      for (int c = 0; c < 8; ++c) out[c] = static_cast<double>(in[c]);
+    }
+    return block.data();
+  }
+  for (size_t r = 0; r < rows; ++r) {
+    double* out = block.data() + r * 8;
+    int c = 0;
+    for (; c < valid; ++c) out[c] = static_cast<double>(bc[r * bs + static_cast<size_t>(c)]);
+    for (; c < 8; ++c) out[c] = 0.0;
+  }
+  return block.data();
 }
 
 __attribute__((target("avx2,fma"))) double KernelAvx2(
@@ -273,13 +283,11 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
     int out_stride) {
   const int bands = a.bands();
   const size_t as = static_cast<size_t>(a.size());
-  const size_t bs = static_cast<size_t>(b.size());
   const float* ac = a.coords();
-  const float* bc = b.coords();
   const __m256d sign = _mm256_set1_pd(-0.0);
   __m256d mx = _mm256_setzero_pd();
   for (int j0 = 0; j0 < b.stride(); j0 += 8) {
-    const __m256i mask = LaneMask(b.size() - j0);
+    const double* blk = WidenBlock(b, j0);
     for (int i = 0; i < a.size(); ++i) {
       double* row = out + static_cast<size_t>(i) * out_stride;
       __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
@@ -289,16 +297,29 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
         const size_t rk = static_cast<size_t>(1 + d);
         const size_t ra = rk + static_cast<size_t>(bands);
         const size_t rh = ra + static_cast<size_t>(bands);
-        AccumulateAvx2(ac[rk * as + i], bc + rk * bs + j0, mask, &k0, &k1);
-        AccumulateAvx2(ac[ra * as + i], bc + ra * bs + j0, mask, &a0, &a1);
-        AccumulateAvx2(ac[rh * as + i], bc + rh * bs + j0, mask, &h0, &h1);
+        const __m256d xk = _mm256_set1_pd(ac[rk * as + i]);
+        const __m256d xa = _mm256_set1_pd(ac[ra * as + i]);
+        const __m256d xh = _mm256_set1_pd(ac[rh * as + i]);
+        const double* yk = blk + rk * 8;
+        const double* ya = blk + ra * 8;
+        const double* yh = blk + rh * 8;
+        __m256d t;
+        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk));
+        k0 = _mm256_fmadd_pd(t, t, k0);
+        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk + 4));
+        k1 = _mm256_fmadd_pd(t, t, k1);
+        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya));
+        a0 = _mm256_fmadd_pd(t, t, a0);
+        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya + 4));
+        a1 = _mm256_fmadd_pd(t, t, a1);
+        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh));
+        h0 = _mm256_fmadd_pd(t, t, h0);
+        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh + 4));
+        h1 = _mm256_fmadd_pd(t, t, h1);
       }
-      const __m256 yg = _mm256_maskload_ps(bc + j0, mask);
-      const __m256d xg = _mm256_set1_pd(static_cast<double>(ac[i]));
-      __m256d g0 = _mm256_andnot_pd(
-          sign, _mm256_sub_pd(xg, _mm256_cvtps_pd(_mm256_castps256_ps128(yg))));
-      __m256d g1 = _mm256_andnot_pd(
-          sign, _mm256_sub_pd(xg, _mm256_cvtps_pd(_mm256_extractf128_ps(yg, 1))));
+      const __m256d xg = _mm256_set1_pd(ac[i]);
+      __m256d g0 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk)));
+      __m256d g1 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk + 4)));
       g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
                                        _mm256_sqrt_pd(a0)),
                          _mm256_sqrt_pd(h0));
@@ -320,18 +341,15 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
-__attribute__((target("avx512f,avx512vl"))) double KernelAvx512(
+__attribute__((target("avx512f"))) double KernelAvx512(
     const PreparedSignature& a, const PreparedSignature& b, double* out,
     int out_stride) {
   const int bands = a.bands();
   const size_t as = static_cast<size_t>(a.size());
-  const size_t bs = static_cast<size_t>(b.size());
   const float* ac = a.coords();
-  const float* bc = b.coords();
   __m512d mx = _mm512_setzero_pd();
   for (int j0 = 0; j0 < b.stride(); j0 += 8) {
-    const int valid = std::min(8, b.size() - j0);
-    const __mmask8 mask = static_cast<__mmask8>((1u << valid) - 1u);
+    const double* blk = WidenBlock(b, j0);
     for (int i = 0; i < a.size(); ++i) {
       double* row = out + static_cast<size_t>(i) * out_stride;
       __m512d k = _mm512_setzero_pd();
@@ -342,18 +360,14 @@ __attribute__((target("avx512f,avx512vl"))) double KernelAvx512(
         const size_t ra = rk + static_cast<size_t>(bands);
         const size_t rh = ra + static_cast<size_t>(bands);
         __m512d t;
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]),
-                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + rk * bs + j0)));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]), _mm512_loadu_pd(blk + rk * 8));
         k = _mm512_fmadd_pd(t, t, k);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]),
-                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + ra * bs + j0)));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]), _mm512_loadu_pd(blk + ra * 8));
         ar = _mm512_fmadd_pd(t, t, ar);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]),
-                          _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + rh * bs + j0)));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]), _mm512_loadu_pd(blk + rh * 8));
         h = _mm512_fmadd_pd(t, t, h);
       }
-      __m512d g = _mm512_abs_pd(_mm512_sub_pd(
-          _mm512_set1_pd(ac[i]), _mm512_cvtps_pd(_mm256_maskz_loadu_ps(mask, bc + j0))));
+      __m512d g = _mm512_abs_pd(_mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(blk)));
       g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k)),
                                       _mm512_sqrt_pd(ar)),
                         _mm512_sqrt_pd(h));
@@ -369,9 +383,7 @@ __attribute__((target("avx512f,avx512vl"))) double KernelAvx512(
 KernelFn PickKernel() {
 #ifdef TPR_HAVE_X86_KERNELS
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) {
-    return KernelAvx512;
-  }
+  if (__builtin_cpu_supports("avx512f")) return KernelAvx512;
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
     return KernelAvx2;
   }
@@ -406,9 +418,7 @@ bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
       KernelAvx2(a, b, out, out_stride);
       return true;
     case 2:
-      if (!__builtin_cpu_supports("avx512f") || !__builtin_cpu_supports("avx512vl")) {
-        return false;
-      }
+      if (!__builtin_cpu_supports("avx512f")) return false;
       KernelAvx512(a, b, out, out_stride);
       return true;
 #endif

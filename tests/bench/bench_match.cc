@@ -449,6 +449,18 @@ BENCHMARK(BM_KnnVpTreeLeaf)
     ->ArgsProduct({{600, 10000, 100000}, {10}, {64, 128, 192, 256, 512, 1024}})
     ->Unit(benchmark::kMillisecond);
 
+// BM_KnnVpTreeExtractedLeaf/<n>/<k>/<leaf_size>: BM_KnnVpTreeExtracted with
+// another bucket size, to choose the default on realistic data.
+void BM_KnnVpTreeExtractedLeaf(benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.extracted = true;
+  key.leaf_size = static_cast<size_t>(state.range(2));
+  RunTree(state, key, static_cast<size_t>(state.range(1)));
+}
+BENCHMARK(BM_KnnVpTreeExtractedLeaf)
+    ->ArgsProduct({{100000}, {10}, {32, 64, 128, 256, 512}})
+    ->Unit(benchmark::kMillisecond);
+
 // BM_KnnBruteForce/<n>/<k>: every EMD, same data and queries.
 void BM_KnnBruteForce(benchmark::State& state) {
   Db& db = GetDb({state.range(0), kClasses, kJitterPermille});
