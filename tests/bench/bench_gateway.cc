@@ -11,8 +11,12 @@
 //  * BM_IngestSingle/N and BM_IngestGateway/N: a streamed BatchUpsert of N
 //    models into fresh data directories, durable (synced group commits), to
 //    one indexer or through the gateway to 4 shards; items/s.
+//  * BM_FollowerLag/B/P: a primary and its follower (tpr-indexer --follow's
+//    Follower over loopback gRPC); durable writes of B models every P ms
+//    for 4 s; how long until the follower has applied each write (ms) and
+//    how many keys it was behind when sampled.
 //
-//   bench_gateway --benchmark_filter='BM_Knn10SingleVsGateway/100000|BM_Ingest'
+//   bench_gateway --benchmark_filter='BM_Knn10SingleVsGateway/100000|BM_Ingest.*/10000|BM_FollowerLag'
 //
 // Signatures: tests/indexer/signature_testing.h, 20 clustered classes, 30
 // features x 20 bands (the paper's average size), as bench_service.
@@ -20,7 +24,11 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <deque>
+#include <mutex>
+#include <thread>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -34,9 +42,12 @@
 #include "common/server_lifecycle.h"
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
+#include "indexer/service/admin_service.h"
 #include "indexer/service/batch_writer.h"
+#include "indexer/service/follower.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
+#include "indexer/service/replication.h"
 #include "tests/bench/bench_indexer_setup.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
@@ -222,6 +233,144 @@ void BM_IngestGateway(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * state.range(0));
 }
 BENCHMARK(BM_IngestGateway)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// A primary or follower with the IndexerAdmin service (replication), served
+// on a loopback port; a follower of `primary` (copied and tailing on
+// return) when it is not empty.
+struct ReplicaNode {
+  std::string dir;
+  std::unique_ptr<IndexerCore> core;
+  std::unique_ptr<indexer::IndexerService> service;
+  std::unique_ptr<indexer::Follower> follower;
+  std::unique_ptr<indexer::IndexerAdminService> admin;
+  tpr::common::ServerOptions server_options;
+  tpr::common::StartedServer server;
+  ~ReplicaNode() {
+    admin->Stop();
+    if (follower) follower->Stop();
+    tpr::common::ShutdownGracefully(server, server_options);
+    server.server.reset();
+    follower.reset();
+    core.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  }
+  std::string address() const { return absl::StrCat("127.0.0.1:", server.port); }
+};
+
+std::unique_ptr<ReplicaNode> StartReplicaNode(const std::string& primary) {
+  auto x = std::make_unique<ReplicaNode>();
+  x->dir = bench::FreshDir("replica");
+  indexer::FollowerOptions follower_options;
+  follower_options.primary = primary;
+  follower_options.data_dir = x->dir;
+  if (!primary.empty() && !indexer::PrepareFollowerDir(follower_options).ok()) std::abort();
+  indexer::CoreOptions options;
+  options.data_dir = x->dir;
+  options.persist_interval_ms = 0;
+  options.follow = primary;
+  absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(options);
+  if (!core.ok()) std::abort();
+  x->core = std::move(*core);
+  x->service = std::make_unique<indexer::IndexerService>(x->core.get(), indexer::ServiceOptions{});
+  if (!primary.empty()) {
+    x->follower = std::make_unique<indexer::Follower>(x->core.get(), follower_options);
+  }
+  x->admin = std::make_unique<indexer::IndexerAdminService>(x->core.get(), x->follower.get(),
+                                                           indexer::AdminOptions{});
+  x->server_options.shutdown_grace_ms = 1000;
+  absl::StatusOr<tpr::common::StartedServer> started =
+      tpr::common::StartServer(x->server_options, {x->service.get(), x->admin.get()});
+  if (!started.ok()) std::abort();
+  x->server = std::move(*started);
+  if (x->follower) x->follower->Start(nullptr);
+  return x;
+}
+
+// Follower lag under steady ingest: a primary and its follower (tpr-indexer
+// --follow's Follower and IndexerAdmin services, in this process, over
+// loopback gRPC), durable group writes of `batch` models every `period`
+// ms for 4 s. Lag of each write: from the primary's acknowledgement to the
+// follower having applied it (its store and index), in ms; and how many
+// RocksDB sequence numbers (keys) the follower was behind when sampled.
+void BM_FollowerLag(benchmark::State& state) {
+  const int batch = static_cast<int>(state.range(0));
+  const int period_ms = static_cast<int>(state.range(1));
+  std::vector<double> lag_ms, behind;
+  int64_t written = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto primary = StartReplicaNode("");
+    auto follower = StartReplicaNode(primary->address());
+    state.ResumeTiming();
+    const auto start = std::chrono::steady_clock::now();
+    const auto end = start + std::chrono::seconds(4);
+    std::atomic<bool> done{false};
+    std::atomic<bool> stuck{false};
+    std::mutex mu;
+    std::deque<std::pair<std::chrono::steady_clock::time_point, uint64_t>> pending;
+    std::thread watcher([&] {
+      while (true) {
+        const uint64_t latest = indexer::LatestSequence(primary->core->storage());
+        const uint64_t applied = follower->follower->Status().applied_sequence();
+        const auto now = std::chrono::steady_clock::now();
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          behind.push_back(static_cast<double>(latest > applied ? latest - applied : 0));
+          while (!pending.empty() && pending.front().second <= applied) {
+            lag_ms.push_back(
+                std::chrono::duration<double, std::milli>(now - pending.front().first).count());
+            pending.pop_front();
+          }
+          if (done && pending.empty()) return;
+          if (now > end + std::chrono::seconds(20)) {  // bounded: report, then stop
+            stuck = true;
+            return;
+          }
+        }
+        std::this_thread::sleep_for(std::chrono::microseconds(500));
+      }
+    });
+    std::vector<tpr::v1::UpsertRequest> all =
+        UpsertRequests(batch * (4000 / period_ms + 2), 5, "lag");
+    size_t next = 0;
+    for (auto t = start; t < end && next + batch <= all.size(); t += std::chrono::milliseconds(period_ms)) {
+      std::this_thread::sleep_until(t);
+      std::vector<tpr::v1::UpsertRequest> group(all.begin() + next, all.begin() + next + batch);
+      next += batch;
+      std::vector<tpr::index::Signature> sigs(group.size());
+      for (size_t i = 0; i < group.size(); ++i) {
+        if (!primary->core->CheckModel(group[i].model(), &sigs[i]).ok()) std::abort();
+      }
+      if (!primary->core->WriteGroup(group, sigs).ok()) std::abort();
+      std::lock_guard<std::mutex> lock(mu);
+      pending.emplace_back(std::chrono::steady_clock::now(),
+                           indexer::LatestSequence(primary->core->storage()));
+      written += batch;
+    }
+    done = true;
+    watcher.join();
+    if (stuck) state.SkipWithError("the follower did not catch up within 20 s");
+    state.PauseTiming();
+    follower.reset();
+    primary.reset();
+    state.ResumeTiming();
+  }
+  state.counters["lag_p50_ms"] = Percentile(lag_ms, 0.5);
+  state.counters["lag_p99_ms"] = Percentile(lag_ms, 0.99);
+  state.counters["lag_max_ms"] = Percentile(lag_ms, 1.0);
+  state.counters["behind_p50_keys"] = Percentile(behind, 0.5);
+  state.counters["behind_max_keys"] = Percentile(behind, 1.0);
+  state.counters["models_per_s"] = benchmark::Counter(static_cast<double>(written),
+                                                      benchmark::Counter::kIsRate);
+}
+// (batch, period ms): 16 models every 50 ms (320/s), 64 every 50 ms (1280/s).
+BENCHMARK(BM_FollowerLag)
+    ->Args({16, 50})
+    ->Args({64, 50})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace tpr::gateway

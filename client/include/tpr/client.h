@@ -217,7 +217,11 @@ class BatchUpsertWriter {
 // the same models. Never list independent indexers (or shards) here: every
 // search would see only part of the data. Sharding is the gateway's job:
 // connect to the gateway (or several gateways of one shard map), which
-// routes ids to shards and merges their answers exactly.
+// routes ids to shards and merges their answers exactly. When the addresses
+// are a primary and its followers (tpr-indexer --follow), writes that reach
+// a follower fail with FAILED_PRECONDITION naming the primary, and reads
+// may lag the primary by the replication delay: write through the gateway
+// (writes to primaries, reads to any ready copy) or list only the primary.
 class IndexerClient {
  public:
   explicit IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
