@@ -39,6 +39,26 @@ ClassSeparation Separation(const std::vector<std::string>& labels, const Distanc
   return s;
 }
 
+ClassSeparation Separation(const std::vector<std::string>& labels,
+                           const std::vector<Query>& queries) {
+  ClassSeparation s;
+  int64_t within = 0, between = 0;
+  for (const Query& q : queries) {
+    for (const Retrieved& r : q.ranking) {
+      if (labels[q.model] == labels[r.model]) {
+        s.within += r.distance;
+        ++within;
+      } else {
+        s.between += r.distance;
+        ++between;
+      }
+    }
+  }
+  if (within > 0) s.within /= static_cast<double>(within);
+  if (between > 0) s.between /= static_cast<double>(between);
+  return s;
+}
+
 DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members) {
   DistanceMatrix out(members.size());
   for (size_t a = 0; a < members.size(); ++a) {

@@ -94,6 +94,12 @@ struct ClassSeparation {
 // class). Precondition: labels.size() == d.size(). O(n^2); thread-safe.
 ClassSeparation Separation(const std::vector<std::string>& labels, const DistanceMatrix& d);
 
+// Separation over the (query, retrieved) pairs of `queries` (each pair of
+// a full leave-one-out evaluation is then counted twice, which leaves the
+// means as above): what `tpr eval` measures through the services. O(pairs).
+ClassSeparation Separation(const std::vector<std::string>& labels,
+                           const std::vector<Query>& queries);
+
 // Restrict returns the submatrix of `d` over positions `members` (in that
 // order). Precondition: every member < d.size(). O(members^2).
 DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members);
