@@ -35,6 +35,7 @@
 #include "eval/lib/parallel.h"
 #include "eval/lib/plots.h"
 #include "eval/lib/report.h"
+#include "eval/lib/saved_set.h"
 #include "eval/lib/signature_cache.h"
 #include "eval/lib/tpr_descriptor.h"
 #include "extractor/lib/extract.h"
@@ -173,7 +174,9 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   key << " bands=" << e.bands << (e.bands_per_feature_extent ? "" : "/diameter")
       << " cycle=" << e.cycle_min_vertices << "/" << e.cycle_search_hops
       << " ring=" << e.ring_length_threshold << " prominence=" << e.point_min_prominence
-      << " stop=" << e.ring_stop_at_centre_saddles << " d2=" << config.d2.pairs
+      << " stop=" << e.ring_stop_at_centre_saddles << " spectrum=" << e.spectrum_eigenvalues
+      << "/" << e.spectrum.max_vertices << "/" << e.spectrum.dense_max_vertices
+      << " d2=" << config.d2.pairs
       << "/" << config.d2.bins << "/" << config.d2.range << "/"
       << config.d2.seed;
   return key.str();
@@ -275,8 +278,8 @@ Described Describe(const Model& model, const Config& config, size_t index) {
 
 // Everything the command line sets.
 struct Flags {
-  std::string manifest, synthetic, out_dir, dump;
-  bool invariance = false, tune = false, tune_spectral = false, index_timing = false;
+  std::string manifest, synthetic, out_dir, dump, save_matrices;
+  bool invariance = false, tune = false, index_timing = false;
   std::string spectral_transform;  // "" keeps the default
   int threads =
       static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -318,8 +321,6 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "phi of the spectral term: raw, by_index or log");
   app->add_option("--spectral-eigenvalues", c.ground.spectral.eigenvalues,
                   "eigenvalues the spectral term compares");
-  app->add_flag("--tune-spectral", f->tune_spectral,
-                "score phi x w_s on the two halves of every class (JSON under \"spectral_tuning\")");
   app->add_option("--w1", c.ground.w1, "Eq. 7 weight of G'");
   app->add_option("--w2", c.ground.w2, "Eq. 7 weight of curvature");
   app->add_option("--w3", c.ground.w3, "Eq. 7 weight of area");
@@ -333,6 +334,9 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--a-scale", c.ground.a_scale, "Eq. 7 L2norm scale of area");
   app->add_option("--h-scale", c.ground.h_scale,
                   "Eq. 7 L2norm scale of thickness");
+  app->add_option("--save-matrices", f->save_matrices,
+                  "write names, classes, spectra and the EMD and D2 matrices to this file "
+                  "(saved_set.h), for tpr-tune-spectral");
   app->add_option("--dump", f->dump,
                   "write every model's features (text) to this file");
 }
@@ -651,8 +655,6 @@ absl::StatusOr<IndexTiming> TimeIndex(const std::vector<Described>& described,
   return timing;
 }
 
-double Objective(const Metrics& m) { return (m.nn + m.ft + m.st + m.dcg) / 4; }
-
 // Two folds: models alternate between folds within each class. W1..W4 are
 // chosen on one fold by a grid over the simplex (step 0.1) that maximizes
 // mean(NN, FT, ST, DCG); the chosen W is reported on the other fold. No
@@ -737,26 +739,11 @@ std::string Tune(const std::vector<Model>& models,
 }
 
 // WithinBetween returns "mean distance within classes W, between B, ratio
-// W / B" over all pairs of distinct models (issue 9's measure of how well a
-// descriptor separates similar-skeleton classes: lower is better).
+// W / B" (distance_matrix.h Separation: lower separates better).
 std::string WithinBetween(const std::vector<std::string>& labels, const DistanceMatrix& d) {
-  double within = 0.0, between = 0.0;
-  int64_t nw = 0, nb = 0;
-  for (size_t i = 0; i < d.size(); ++i) {
-    for (size_t j = i + 1; j < d.size(); ++j) {
-      if (labels[i] == labels[j]) {
-        within += d(i, j);
-        ++nw;
-      } else {
-        between += d(i, j);
-        ++nb;
-      }
-    }
-  }
-  within /= std::max<int64_t>(nw, 1);
-  between /= std::max<int64_t>(nb, 1);
-  return absl::StrFormat("mean distance within classes %.4g, between %.4g, ratio %.4f", within,
-                         between, between > 0 ? within / between : 0.0);
+  const ClassSeparation s = Separation(labels, d);
+  return absl::StrFormat("mean distance within classes %.4g, between %.4g, ratio %.4f", s.within,
+                         s.between, s.Ratio());
 }
 
 std::string TprTitle(const Config& c) {
@@ -772,70 +759,9 @@ std::string ShapeDnaTitle(const Config& c) {
                          c.ground.spectral.eigenvalues);
 }
 
-// Restrict returns the submatrix of `d` over positions `members`.
-DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members) {
-  DistanceMatrix out(members.size());
-  for (size_t a = 0; a < members.size(); ++a) {
-    for (size_t b = a + 1; b < members.size(); ++b) out.Set(a, b, d(members[a], members[b]));
-  }
-  return out;
-}
-
-// The grid of spectral weights --tune-spectral scores (0 is the paper).
-const std::vector<double>& SpectralWeightGrid() {
-  static const std::vector<double> grid = {0,   0.01, 0.02, 0.05, 0.1, 0.2, 0.5,
-                                           1,   2,    5,    10,   20,  50,  100};
-  return grid;
-}
-
-// TuneSpectral scores every (phi, w_s) of the grid on each half of every
-// class (models alternate between the halves within a class), with W1..W4
-// as given, and returns them as JSON: [{"phi","w","fold","objective",
-// "metrics"}, ...] where objective = mean(NN, FT, ST, DCG). No EMD is
-// recomputed: a fold is a submatrix of the full matrices. The choice is
-// made across data sets by scripts/eval-shrec (best summed over every set
-// on one half, reported on the other), never on one set alone.
-std::string TuneSpectral(const std::vector<Model>& models,
-                         const std::vector<Described>& described,
-                         const std::vector<int>& kept, const Config& config,
-                         const Matching& m, int threads) {
-  std::map<std::string, int> seen;
-  std::vector<size_t> fold[2];
-  for (size_t a = 0; a < kept.size(); ++a) {
-    fold[seen[models[kept[a]].label]++ % 2].push_back(a);
-  }
-  std::string json = "[";
-  bool first = true;
-  for (index::SpectralTransform t :
-       {index::SpectralTransform::kRaw, index::SpectralTransform::kByIndex,
-        index::SpectralTransform::kLog}) {
-    const DistanceMatrix spectral =
-        SpectralMatrix(described, kept, config.ground.spectral, t, threads);
-    for (int f = 0; f < 2; ++f) {
-      std::vector<std::string> labels;
-      for (size_t a : fold[f]) labels.push_back(models[kept[a]].label);
-      const DistanceMatrix e = Restrict(m.emd, fold[f]);
-      const DistanceMatrix s = Restrict(spectral, fold[f]);
-      std::vector<double> weights = SpectralWeightGrid();
-      weights.push_back(-1);  // the spectrum alone (ShapeDNA)
-      for (double w : weights) {
-        const Metrics scores =
-            Evaluate(labels, LeaveOneOutQueries(w < 0 ? s : Sum(e, w, s))).overall;
-        absl::StrAppend(&json, first ? "" : ",", "{\"phi\":\"",
-                        index::SpectralTransformName(t), "\",\"w\":", w < 0 ? "\"alone\"" : JsonNumber(w),
-                        ",\"fold\":", f, ",\"objective\":", JsonNumber(Objective(scores)),
-                        ",\"metrics\":", MetricsJson(scores), "}");
-        first = false;
-      }
-    }
-  }
-  return json + "]";
-}
-
 // Everything a run measured, for the files of --out.
 struct Results {
   Scores tpr, paper, shapedna, d2;
-  std::string spectral_tune_json;  // "" without --tune-spectral
   Config config;
   Summary summary;
   Matching matching;
@@ -925,7 +851,6 @@ absl::Status WriteOutputs(const std::string& out_dir, const Results& r,
       "},\"shapedna\":{\"overall\":", MetricsJson(r.shapedna.overall),
       ",\"per_class\":", PerClassJson(r.shapedna, s.models_per_class), "}",
       r.tune_json.empty() ? "" : ",\"tuning\":" + r.tune_json,
-      r.spectral_tune_json.empty() ? "" : ",\"spectral_tuning\":" + r.spectral_tune_json,
       "}\n");
   const fs::path out(out_dir);
   const std::vector<std::pair<std::string, std::string>> files = {
@@ -1004,6 +929,20 @@ int Run(int argc, char** argv) {
 
   // Full matrices over all kept models, so that timing is honest.
   r.matching = MatchAll(described, kept, config, flags.threads);
+  if (!flags.save_matrices.empty()) {
+    SavedSet saved;
+    for (int i : kept) {
+      saved.names.push_back((*models)[i].name);
+      saved.labels.push_back((*models)[i].label);
+      saved.spectra.push_back(described[i].raw.spectrum);
+    }
+    saved.emd = r.matching.emd;
+    saved.d2 = r.matching.d2;
+    if (absl::Status st = SaveSet(flags.save_matrices, saved); !st.ok()) {
+      std::fprintf(stderr, "tpr-eval-local: %s\n", st.ToString().c_str());
+      return 1;
+    }
+  }
   if (flags.invariance) {
     r.copy_note = InvarianceNote(*models, kept, r.matching.tpr, base_size);
     std::printf("%s\n", r.copy_note.c_str());
@@ -1032,9 +971,6 @@ int Run(int argc, char** argv) {
               ScoresTable(r.d2, r.summary.models_per_class).c_str());
   if (flags.tune)
     r.tune_json = Tune(*models, described, kept, config, flags.threads);
-  if (flags.tune_spectral) {
-    r.spectral_tune_json = TuneSpectral(*models, described, kept, config, r.matching, flags.threads);
-  }
 
   if (!flags.out_dir.empty()) {
     if (absl::Status st = WriteOutputs(flags.out_dir, r, described); !st.ok()) {

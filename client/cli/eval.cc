@@ -18,6 +18,7 @@
 #include "absl/strings/str_format.h"
 #include "client/cli/command.h"
 #include "eval/lib/dataset.h"
+#include "eval/lib/distance_matrix.h"
 #include "eval/lib/metrics.h"
 #include "eval/lib/plots.h"
 #include "eval/lib/report.h"
@@ -162,6 +163,8 @@ int RunEval(const Globals& g, const std::string& dataset,
   for (int i : evaluated) labels.push_back((*items)[i].label);
   const eval::ClassSizes models_per_class = eval::CountClasses(labels);
   const eval::Scores scores = eval::Evaluate(labels, queries);
+  // Issue 9's measure of class separation under the served distance.
+  const eval::ClassSeparation separation = eval::Separation(labels, queries);
   const bool evaluable = scores.overall.queries > 0;
 
   // 3. Pictures.
@@ -200,11 +203,13 @@ int RunEval(const Globals& g, const std::string& dataset,
         "{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":%s,\"files\":%zu,"
         "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
         "\"failures\":%s,"
+        "\"within_between\":%s,"
         "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
         evaluated.size(), models_per_class.size(),
         eval::MetricsJsonFields(scores.overall).c_str(),
         eval::PerClassJson(scores, models_per_class).c_str(), items->size(),
-        added, updated, skipped, failures.size(), FailuresJson(failures).c_str(), add_seconds,
+        added, updated, skipped, failures.size(), FailuresJson(failures).c_str(),
+        eval::JsonNumber(separation.Ratio()).c_str(), add_seconds,
         query_seconds,
         evaluable && pictures.ok() ? JsonString(out_dir).c_str() : "null");
   } else {
@@ -214,8 +219,13 @@ int RunEval(const Globals& g, const std::string& dataset,
         "failed); extraction and indexing %.1f s, queries %.1f s\n\n",
         evaluated.size(), models_per_class.size(), added, updated, skipped,
         failures.size(), add_seconds, query_seconds);
-    if (evaluable)
+    if (evaluable) {
       std::fputs(eval::ScoresTable(scores, models_per_class).c_str(), stdout);
+      std::printf(
+          "mean distance within classes %.4g, between %.4g, ratio %.4f (the "
+          "indexer's distance)\n",
+          separation.within, separation.between, separation.Ratio());
+    }
     PrintFailures(failures);
     if (evaluable && pictures.ok())
       std::printf("\nwrote %s\n", written.c_str());

@@ -13,6 +13,7 @@
 #include <cassert>
 #include <chrono>
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include "eval/lib/metrics.h"
@@ -78,6 +79,30 @@ DistanceMatrix PairwiseDistances(size_t n, int threads,
 // LeaveOneOutQueries returns one Query per model i of `d` (model = i), its
 // ranking holding every other model j at distance d(i, j). O(n^2).
 std::vector<Query> LeaveOneOutQueries(const DistanceMatrix& d);
+
+// ClassSeparation: mean distance between two distinct models of one class
+// and of different classes, over every pair (issue 9's measure of how well
+// a distance separates similar-skeleton classes).
+struct ClassSeparation {
+  double within = 0.0, between = 0.0;
+  // within / between (lower separates better); 0 when there is no pair
+  // of different classes or their mean distance is 0.
+  double Ratio() const { return between > 0.0 ? within / between : 0.0; }
+};
+
+// Separation returns the ClassSeparation of `d` (labels[i]: model i's
+// class). Precondition: labels.size() == d.size(). O(n^2); thread-safe.
+ClassSeparation Separation(const std::vector<std::string>& labels, const DistanceMatrix& d);
+
+// Separation over the (query, retrieved) pairs of `queries` (each pair of
+// a full leave-one-out evaluation is then counted twice, which leaves the
+// means as above): what `tpr eval` measures through the services. O(pairs).
+ClassSeparation Separation(const std::vector<std::string>& labels,
+                           const std::vector<Query>& queries);
+
+// Restrict returns the submatrix of `d` over positions `members` (in that
+// order). Precondition: every member < d.size(). O(members^2).
+DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members);
 
 }  // namespace tpr::eval
 

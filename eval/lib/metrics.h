@@ -72,6 +72,10 @@ struct Scores {
 Scores Evaluate(const std::vector<std::string>& labels,
                 const std::vector<Query>& queries);
 
+// Objective returns mean(NN, FT, ST, DCG), the one number the tuning
+// tools maximize (tpr-eval-local --tune, tpr-tune-spectral).
+inline double Objective(const Metrics& m) { return (m.nn + m.ft + m.st + m.dcg) / 4; }
+
 // SimilarityMatrix: mean distance between every pair of classes, turned into
 // a similarity per row as the paper's Fig. 11 and Tables 2-3 do:
 // sim(i, j) = (max_i - D(i, j)) / (max_i - min_i), where min_i and max_i are

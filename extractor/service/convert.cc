@@ -45,6 +45,19 @@ absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& prot
   }
   options.threads = std::clamp(proto.threads(), 1, std::max(1, max_threads));
   options.explain = proto.explain();
+  if (proto.spectrum_eigenvalues() < 0 || proto.spectrum_eigenvalues() > 1000) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.spectrum_eigenvalues must be in 1..1000 (0 for the default 50), got ",
+        proto.spectrum_eigenvalues()));
+  }
+  if (proto.spectrum_eigenvalues() != 0) {
+    options.spectrum_eigenvalues = proto.spectrum_eigenvalues();
+  }
+  if (!(proto.point_min_prominence() >= 0.0 && proto.point_min_prominence() <= 1.0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.point_min_prominence must be in [0, 1], got ", proto.point_min_prominence()));
+  }
+  options.point_min_prominence = proto.point_min_prominence();
   return options;
 }
 
@@ -55,6 +68,8 @@ v1::ExtractOptions OptionsToProto(const extract::Options& options) {
   proto.set_ring_length_threshold(options.ring_length_threshold);
   proto.set_threads(options.threads);
   proto.set_explain(options.explain);
+  proto.set_spectrum_eigenvalues(options.spectrum_eigenvalues);
+  proto.set_point_min_prominence(options.point_min_prominence);
   return proto;
 }
 

@@ -6,7 +6,9 @@
 //
 // with s_X the Laplace-Beltrami spectrum of X and E the fixed embedding of
 // spectral.h (w_s * phi(s) / sqrt(n), phi one per-coordinate map, padded).
-// With w_s = 0, S = 0 and d is the paper's distance exactly.
+// With w_s = 0, S = 0 and d is the paper's distance exactly. The defaults
+// (spectral.h: w_s = 1, phi(x) = x / i, the first n = 20 values) were
+// chosen by cross-validation over every dev set together (docs/results.md).
 //
 // Why d is still a metric (so the VP-tree of section 6.2 stays exact).
 //  1. EMD is a pseudometric on signatures: ground_distance.h shows that Eq.

@@ -158,7 +158,8 @@ struct DbKey {
   bool extracted = false;
   // > 0: signatures carry 50-value spectra (SignatureGenerator) and the
   // distance is metric.h's EMD + w_s x spectral term with w_s =
-  // spectral_permille / 1000 (log transform); -1: spectra present, w_s = 0
+  // spectral_permille / 1000 (the default transform and count); -1:
+  // spectra present, w_s = 0
   // (the same data searched with the paper's distance).
   int spectral_permille = 0;
   bool operator<(const DbKey& o) const {
@@ -230,7 +231,8 @@ Db& GetDb(const DbKey& key) {
   if (slot) return *slot;
   slot = std::make_unique<Db>();
   GroundDistanceOptions ground;
-  if (key.spectral_permille > 0) ground.spectral.weight = key.spectral_permille / 1000.0;
+  // Explicit, so that w_s = 0 stays the paper's distance whatever the default.
+  ground.spectral.weight = key.spectral_permille > 0 ? key.spectral_permille / 1000.0 : 0.0;
   slot->items.reserve(static_cast<size_t>(key.n));
   Generate(key, [&](tpr::index::Signature s) {
     std::vector<PreparedSignature>& to =
@@ -425,6 +427,7 @@ BENCHMARK(BM_KnnVpTreeSpectral)
     ->Args({10000, 10, 200})
     ->Args({100000, 10, 0})
     ->Args({100000, 10, 200})
+    ->Args({100000, 10, 1000})  // the default w_s (spectral.h)
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeCentroid/<n>/<k>: BM_KnnVpTree with the centroid bound alone.

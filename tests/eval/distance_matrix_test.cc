@@ -75,5 +75,27 @@ TEST(ParallelForTest, VisitsEveryIndexExactlyOnce) {
   }
 }
 
+// Separation against a hand count: within = d(0,1) = 1, between =
+// mean(4, 2) = 3.
+TEST(DistanceMatrixTest, SeparationAndRestrict) {
+  DistanceMatrix d(3);
+  d.Set(0, 1, 1.0);
+  d.Set(0, 2, 4.0);
+  d.Set(1, 2, 2.0);
+  const ClassSeparation s = Separation({"a", "a", "b"}, d);
+  EXPECT_DOUBLE_EQ(s.within, 1.0);
+  EXPECT_DOUBLE_EQ(s.between, 3.0);
+  EXPECT_DOUBLE_EQ(s.Ratio(), 1.0 / 3.0);
+  EXPECT_EQ(Separation({"a", "a", "a"}, d).Ratio(), 0.0);  // no pair across classes
+  const ClassSeparation q = Separation({"a", "a", "b"}, LeaveOneOutQueries(d));
+  EXPECT_DOUBLE_EQ(q.within, s.within);
+  EXPECT_DOUBLE_EQ(q.between, s.between);
+  const DistanceMatrix r = Restrict(d, {2, 0});
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r(0, 1), 4.0);
+  EXPECT_EQ(r(1, 0), 4.0);
+  EXPECT_EQ(r(0, 0), 0.0);
+}
+
 }  // namespace
 }  // namespace tpr::eval

@@ -115,6 +115,7 @@ absl::StatusOr<Matrix> InProcessDistances(const std::vector<LabelledMesh>& meshe
 struct Oracle {
   eval::Scores scores;
   std::vector<std::string> labels;
+  double within_between = 0.0;  // mean within-class / mean between-class d
 };
 
 Oracle Score(const Matrix& d, const std::vector<std::string>& labels) {
@@ -126,7 +127,15 @@ Oracle Score(const Matrix& d, const std::vector<std::string>& labels) {
     }
     queries.push_back(std::move(q));
   }
-  return {eval::Evaluate(labels, queries), labels};
+  double within = 0.0, between = 0.0;
+  int nw = 0, nb = 0;
+  for (size_t i = 0; i < d.size(); ++i) {
+    for (size_t j = i + 1; j < d.size(); ++j) {
+      (labels[i] == labels[j] ? within : between) += d[i][j];
+      ++(labels[i] == labels[j] ? nw : nb);
+    }
+  }
+  return {eval::Evaluate(labels, queries), labels, (within / nw) / (between / nb)};
 }
 
 // Checks that the metrics object of `json` starting at `from` equals `m`.
@@ -154,6 +163,7 @@ void ExpectReport(const std::string& json, const Oracle& oracle) {
   // Overall fields come before "per_class".
   ASSERT_LT(json.find("\"nn\":"), json.find("\"per_class\"")) << json;
   ExpectMetrics(json, 0, oracle.scores.overall, "overall");
+  EXPECT_NEAR(JsonNumber(json, 0, "within_between"), oracle.within_between, 1e-9) << json;
   ASSERT_EQ(oracle.scores.per_class.size(), 3u);
   for (const auto& [cls, m] : oracle.scores.per_class) {
     const size_t at = json.find("\"" + cls + "\":{");
