@@ -190,7 +190,11 @@ int main(int argc, char** argv) {
   if (!follow.empty()) {
     follower = std::make_unique<tpr::indexer::Follower>(core->get(), follower_options);
     tpr::indexer::Follower* f = follower.get();
-    server_options.readiness_check = [f] { return f->Readiness(); };
+    // A follower is ready once caught up and while its disk has room.
+    server_options.readiness_check = [f, c = core->get()] {
+      std::string reason = f->Readiness();
+      return reason.empty() ? c->WriteReadiness() : reason;
+    };
   }
   tpr::indexer::AdminOptions admin_options;
   admin_options.log = log;
