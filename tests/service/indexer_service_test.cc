@@ -167,8 +167,8 @@ TEST_F(IndexerServiceTest, UpsertGetListDeleteStatsRoundTrip) {
     EXPECT_EQ(s.labels().at("class1"), 5);
     EXPECT_GT(s.disk_bytes(), 0);
     // At least the 9 prepared signatures' coordinates: MakeModels gives 12
-    // features x 8 bands, so 1 + 3 x 8 rows of 16 (padded) doubles each.
-    EXPECT_GE(s.memory_bytes(), 9 * 25 * 16 * 8);
+    // features x 8 bands, so 1 + 3 x 8 rows of 12 float32 values each.
+    EXPECT_GE(s.memory_bytes(), 9 * 25 * 12 * 4);
   }
 }
 
