@@ -380,15 +380,20 @@ __attribute__((target("avx512f"))) double KernelAvx512(
 #pragma GCC diagnostic pop
 #endif
 
-KernelFn PickKernel() {
+// KernelByNumber returns kernel `kernel` (numbers as in
+// internal::KernelSupported); the portable one for a number this build has
+// no kernel for.
+KernelFn KernelByNumber(int kernel) {
+  switch (kernel) {
 #ifdef TPR_HAVE_X86_KERNELS
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) return KernelAvx512;
-  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) {
-    return KernelAvx2;
-  }
+    case 1:
+      return KernelAvx2;
+    case 2:
+      return KernelAvx512;
 #endif
-  return KernelScalar;
+    default:
+      return KernelScalar;
+  }
 }
 
 }  // namespace
@@ -397,34 +402,47 @@ double GroundDistanceMatrix(const PreparedSignature& a,
                             const PreparedSignature& b, double* out,
                             int out_stride) {
   assert(out_stride >= b.stride());
-  static const KernelFn kernel = PickKernel();
+  static const KernelFn kernel = KernelByNumber(internal::ChosenKernel());
   if (a.bands() != b.bands()) return KernelScalar(a, b, out, out_stride);
   return kernel(a, b, out, out_stride);
 }
 
 namespace internal {
 
-bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
-                                    const PreparedSignature& b, double* out,
-                                    int out_stride) {
-  if (a.bands() != b.bands() && kernel != 0) return false;
+bool KernelSupported(int kernel) {
   switch (kernel) {
     case 0:
-      KernelScalar(a, b, out, out_stride);
       return true;
 #ifdef TPR_HAVE_X86_KERNELS
     case 1:
-      if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return false;
-      KernelAvx2(a, b, out, out_stride);
-      return true;
+      __builtin_cpu_init();
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
     case 2:
-      if (!__builtin_cpu_supports("avx512f")) return false;
-      KernelAvx512(a, b, out, out_stride);
-      return true;
+      __builtin_cpu_init();
+      return __builtin_cpu_supports("avx512f");
 #endif
     default:
       return false;
   }
+}
+
+int ChosenKernel() {
+  static const int chosen = [] {
+    for (int kernel = 2; kernel > 0; --kernel) {
+      if (KernelSupported(kernel)) return kernel;
+    }
+    return 0;
+  }();
+  return chosen;
+}
+
+bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
+                                    const PreparedSignature& b, double* out,
+                                    int out_stride) {
+  if (!KernelSupported(kernel)) return false;
+  if (a.bands() != b.bands() && kernel != 0) return false;
+  KernelByNumber(kernel)(a, b, out, out_stride);
+  return true;
 }
 
 }  // namespace internal

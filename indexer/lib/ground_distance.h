@@ -208,10 +208,25 @@ double GroundDistanceMatrix(const PreparedSignature& a,
                             int out_stride);
 
 namespace internal {
+// The kernels of GroundDistanceMatrix, by number: 0 = portable, 1 = AVX2
+// with FMA, 2 = AVX-512F.
+
+// KernelSupported returns whether this CPU and build can run `kernel`: 0
+// always; 1 and 2 in an x86-64 GCC or Clang build on a CPU (and OS) with
+// those features; false for any other number. The one CPU-feature check
+// behind both the run-time choice and GroundDistanceMatrixWithKernel. Cost:
+// a CPU-feature query; thread-safe.
+bool KernelSupported(int kernel);
+
+// ChosenKernel returns the kernel GroundDistanceMatrix runs when the band
+// counts match: the highest supported one, chosen once per process.
+// Thread-safe.
+int ChosenKernel();
+
 // GroundDistanceMatrixWithKernel runs one kernel of GroundDistanceMatrix
-// regardless of the run-time choice, for tests: 0 = portable, 1 = AVX2,
-// 2 = AVX-512. Returns false, writing nothing, when this CPU (or build)
-// cannot run it. Same contract as GroundDistanceMatrix otherwise.
+// regardless of the run-time choice, for tests. Returns false, writing
+// nothing, when !KernelSupported(kernel), or for a vectorized kernel when
+// the band counts differ. Same contract as GroundDistanceMatrix otherwise.
 bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
                                     const PreparedSignature& b, double* out,
                                     int out_stride);

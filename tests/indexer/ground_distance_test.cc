@@ -2,8 +2,12 @@
 #include "indexer/lib/ground_distance.h"
 
 #include <cmath>
+#include <fstream>
 #include <limits>
 #include <random>
+#include <set>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -181,9 +185,12 @@ TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
         const PreparedSignature a = Prep(gen.Random(na), GroundDistanceOptions{});
         const PreparedSignature b = Prep(gen.Random(nb), GroundDistanceOptions{});
         std::vector<double> m(static_cast<size_t>(na) * b.stride(), -1.0);
-        if (!internal::GroundDistanceMatrixWithKernel(kernel, a, b, m.data(), b.stride())) {
-          continue;
-        }
+        const bool supported = internal::KernelSupported(kernel);
+        ASSERT_EQ(internal::GroundDistanceMatrixWithKernel(
+                      kernel, a, b, m.data(), b.stride()),
+                  supported)
+            << "kernel " << kernel;
+        if (!supported) continue;
         ran = true;
         for (int i = 0; i < na; ++i) {
           for (int j = 0; j < nb; ++j) {
@@ -200,6 +207,44 @@ TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
     kernels_run += ran ? 1 : 0;
   }
   EXPECT_GE(kernels_run, 1);  // the portable kernel always runs
+}
+
+// CpuFlags returns the feature flags the kernel lists in /proc/cpuinfo (an
+// oracle independent of the compiler's CPU query), empty where there is none.
+std::set<std::string> CpuFlags() {
+  std::ifstream in("/proc/cpuinfo");
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("flags", 0) != 0) continue;
+    std::istringstream words(line.substr(line.find(':') + 1));
+    std::set<std::string> flags;
+    for (std::string w; words >> w;) flags.insert(w);
+    return flags;
+  }
+  return {};
+}
+
+// KernelSupported is the one CPU-feature check: it agrees with the CPU's
+// flags, GroundDistanceMatrix runs the highest supported kernel, and only
+// kernels 0-2 exist.
+TEST(GroundDistanceTest, KernelSupportedMatchesCpuFlags) {
+  EXPECT_TRUE(internal::KernelSupported(0));
+  EXPECT_FALSE(internal::KernelSupported(-1));
+  EXPECT_FALSE(internal::KernelSupported(3));
+  int highest = 0;
+  for (int kernel = 0; kernel < 3; ++kernel) {
+    if (internal::KernelSupported(kernel)) highest = kernel;
+  }
+  EXPECT_EQ(internal::ChosenKernel(), highest);
+#if defined(__GNUC__) && defined(__x86_64__)
+  const std::set<std::string> flags = CpuFlags();
+  if (flags.empty()) GTEST_SKIP() << "no flags line in /proc/cpuinfo";
+  EXPECT_EQ(internal::KernelSupported(1),
+            flags.count("avx2") == 1 && flags.count("fma") == 1);
+  EXPECT_EQ(internal::KernelSupported(2), flags.count("avx512f") == 1);
+#else
+  EXPECT_FALSE(internal::KernelSupported(1));
+  EXPECT_FALSE(internal::KernelSupported(2));
+#endif
 }
 
 TEST(GroundDistanceTest, DifferentBandCountsComparedWithZeroPadding) {
