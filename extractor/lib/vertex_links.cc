@@ -1,7 +1,5 @@
 #include "extractor/lib/vertex_links.h"
 
-#include <algorithm>
-
 namespace tpr::extract {
 
 VertexLinks VertexLinks::Build(const Mesh& mesh) {
@@ -27,25 +25,22 @@ VertexLinks VertexLinks::Build(const Mesh& mesh) {
     }
   }
 
-  // Neighbours: the distinct vertices of the link, sorted per vertex.
-  links.nbr_offsets_.assign(static_cast<size_t>(n) + 1, 0);
-  links.nbr_.reserve(links.link_.size() / 2 + 16);
-  std::vector<int32_t> scratch;
-  for (int32_t v = 0; v < n; ++v) {
-    scratch.assign(links.link_begin(v), links.link_end(v));
-    std::sort(scratch.begin(), scratch.end());
-    scratch.erase(std::unique(scratch.begin(), scratch.end()), scratch.end());
-    links.nbr_.insert(links.nbr_.end(), scratch.begin(), scratch.end());
-    links.nbr_offsets_[v + 1] = static_cast<int64_t>(links.nbr_.size());
-  }
-
   // Fans: each link edge (a, b) of v says that around v, b follows a;
   // chaining them walks the fan. Fans are small (about 6), so the per-vertex
-  // work is a quadratic scan over a few link edges.
+  // work is a quadratic scan over a few link edges. The sorted neighbours
+  // are the fan's vertices (each once already) sorted in place by an
+  // insertion sort, plus v itself where a degenerate triangle (v, v, b)
+  // puts it in its own link: no second pass over the link edges, no
+  // deduplication (a sort of each link, about 12 entries with repeats, cost
+  // as much as the rest of MeshGraph::Build together).
+  const size_t reserve = links.link_.size() / 2 + 16;
   links.fan_offsets_.assign(static_cast<size_t>(n) + 1, 0);
-  links.fan_.reserve(links.link_.size() / 2 + 16);
+  links.fan_.reserve(reserve);
+  links.nbr_offsets_.assign(static_cast<size_t>(n) + 1, 0);
+  links.nbr_.reserve(reserve);
   std::vector<char> used;
   std::vector<int32_t>& fan = links.fan_;
+  std::vector<int32_t>& nbr = links.nbr_;
   for (int32_t v = 0; v < n; ++v) {
     const int32_t* pairs = links.link_begin(v);
     const int64_t count = links.link_offsets_[v + 1] - links.link_offsets_[v];
@@ -53,8 +48,12 @@ VertexLinks VertexLinks::Build(const Mesh& mesh) {
     auto to = [pairs](int64_t i) { return pairs[2 * i + 1]; };
     used.assign(count, 0);
     const size_t out_begin = fan.size();
+    bool in_own_link = false;
     auto emit = [&](int32_t u) {
-      if (u == v) return;
+      if (u == v) {
+        in_own_link = true;
+        return;
+      }
       for (size_t i = out_begin; i < fan.size(); ++i) {
         if (fan[i] == u) return;
       }
@@ -101,6 +100,20 @@ VertexLinks VertexLinks::Build(const Mesh& mesh) {
       }
     }
     links.fan_offsets_[v + 1] = static_cast<int64_t>(fan.size());
+
+    const size_t nbr_begin = nbr.size();
+    nbr.insert(nbr.end(), fan.begin() + out_begin, fan.end());
+    if (in_own_link) nbr.push_back(v);
+    for (size_t i = nbr_begin + 1; i < nbr.size(); ++i) {
+      const int32_t value = nbr[i];
+      size_t j = i;
+      while (j > nbr_begin && value < nbr[j - 1]) {
+        nbr[j] = nbr[j - 1];
+        --j;
+      }
+      nbr[j] = value;
+    }
+    links.nbr_offsets_[v + 1] = static_cast<int64_t>(nbr.size());
   }
   return links;
 }

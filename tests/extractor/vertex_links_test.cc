@@ -97,6 +97,31 @@ TEST(VertexLinksTest, MeshGraphServesTheSameStructure) {
   }
 }
 
+// A degenerate triangle (intake drops them, Build does not require it)
+// puts a vertex into its own link: its neighbours include it, as the
+// oracle's, while its fan never does.
+TEST(VertexLinksTest, DegenerateTriangleKeepsTheVertexInItsOwnNeighbours) {
+  Mesh m;
+  m.positions.assign(4, Eigen::Vector3d::Zero());
+  m.triangles = {{0, 1, 2}, {0, 2, 3}, {2, 2, 3}};
+  const VertexLinks links = VertexLinks::Build(m);
+  for (int32_t v = 0; v < links.num_vertices(); ++v) {
+    const std::set<int32_t> nb = OracleNeighbours(m, v);
+    EXPECT_EQ(
+        std::vector<int32_t>(links.neighbors_begin(v), links.neighbors_end(v)),
+        std::vector<int32_t>(nb.begin(), nb.end()))
+        << v;
+    std::set<int32_t> without_self = nb;
+    without_self.erase(v);
+    std::vector<int32_t> fan(links.fan(v).begin(), links.fan(v).end());
+    std::sort(fan.begin(), fan.end());
+    EXPECT_EQ(fan,
+              std::vector<int32_t>(without_self.begin(), without_self.end()))
+        << v;
+  }
+  EXPECT_EQ(links.degree(2), 4);  // 0, 1, 3 and 2 itself
+}
+
 TEST(VertexLinksTest, EmptyMeshHasNoVertices) {
   EXPECT_EQ(VertexLinks::Build(Mesh{}).num_vertices(), 0);
   EXPECT_EQ(VertexLinks().num_vertices(), 0);
