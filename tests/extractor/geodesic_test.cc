@@ -2,21 +2,21 @@
 // analytic distances (sphere, tube) and brute-force oracles.
 #include "extractor/lib/geodesic.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <atomic>
-#include <cstdlib>
-#include <new>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <new>
 #include <random>
+#include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "gtest/gtest.h"
 #include "tests/allocation_counter.h"
 #include "tests/extractor/test_meshes.h"
-
 
 namespace tpr::extract {
 namespace {
@@ -349,6 +349,117 @@ TEST_P(SolverFamilyTest, BoundedRunMatchesFullRunInsideTheRadius) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Meshes, SolverFamilyTest, ::testing::Range(0, 6));
+
+// The graph's rows against a brute-force construction from the triangles:
+// every mesh edge with its length; with unfolding, for every edge with
+// exactly two triangles (a, b, c) and (a, b, d), the arc (c, d) of length
+// sqrt(|ac|^2 + |ad|^2 - 2 |ac| |ad| cos(A)), A the sum of the two angles
+// at a, present when the unfolded segment crosses the open edge (both angle
+// sums, at a and at b, below pi). Arcs within 1e-7 of that limit may go
+// either way. Meshes: closed, with boundary, two components, a perturbed
+// sphere (no collinear unfoldings), a degenerate triangle and an edge of
+// three triangles.
+TEST(GeodesicTest, RowsMatchBruteForceEdgesAndUnfoldedArcs) {
+  Mesh perturbed = testing::Icosphere(2);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.03, 0.03);
+  for (Eigen::Vector3d& q : perturbed.positions) {
+    q += Eigen::Vector3d(jitter(rng), jitter(rng), jitter(rng));
+  }
+  Mesh odd;  // a degenerate triangle and an edge (0, 1) of three triangles
+  odd.positions = {
+      {0, 0, 0}, {1, 0, 0}, {0.5, 1, 0}, {0.5, -1, 0.2}, {0.4, 0.2, 1}};
+  odd.triangles = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {2, 2, 4}, {1, 2, 4}};
+  const std::vector<Mesh> meshes = {
+      testing::Icosphere(1),
+      testing::Tube(1.0, 2.0, 4, 12),
+      testing::Rectangle(2.0, 1.0, 5, 3),
+      testing::Union(testing::Icosphere(1), testing::Tube(0.5, 1.0, 3, 8)),
+      perturbed,
+      odd};
+  auto angle = [](const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
+    return std::acos(std::clamp(u.normalized().dot(v.normalized()), -1.0, 1.0));
+  };
+  int unfolded = 0;
+  for (size_t m = 0; m < meshes.size(); ++m) {
+    const Mesh& mesh = meshes[m];
+    const auto& p = mesh.positions;
+    std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>> sides;
+    for (const auto& t : mesh.triangles) {
+      for (int k = 0; k < 3; ++k) {
+        const int32_t a = t[k], b = t[(k + 1) % 3];
+        if (a != b) {
+          sides[{std::min(a, b), std::max(a, b)}].push_back(t[(k + 2) % 3]);
+        }
+      }
+    }
+    for (bool unfold : {false, true}) {
+      // Per vertex: neighbour -> the lengths it must have (the shortest of
+      // the definite candidates) and the optional ones.
+      const int32_t n = static_cast<int32_t>(p.size());
+      std::vector<std::map<int32_t, double>> must(n);
+      std::vector<std::multimap<int32_t, double>> may(n);
+      auto add = [&](int32_t u, int32_t v, double len, bool definite) {
+        for (auto [x, y] : {std::pair{u, v}, std::pair{v, u}}) {
+          if (!definite) {
+            may[x].insert({y, len});
+          } else if (!must[x].count(y) || len < must[x][y]) {
+            must[x][y] = len;
+          }
+        }
+      };
+      for (const auto& [edge, opposite] : sides) {
+        const auto [a, b] = edge;
+        add(a, b, (p[a] - p[b]).norm(), true);
+        if (!unfold || opposite.size() != 2 || opposite[0] == opposite[1]) {
+          continue;
+        }
+        const int32_t c = opposite[0], d = opposite[1];
+        const double at_a =
+            angle(p[c] - p[a], p[b] - p[a]) + angle(p[d] - p[a], p[b] - p[a]);
+        const double at_b =
+            angle(p[c] - p[b], p[a] - p[b]) + angle(p[d] - p[b], p[a] - p[b]);
+        const double ac = (p[c] - p[a]).norm(), ad = (p[d] - p[a]).norm();
+        const double len = std::sqrt(
+            std::max(0.0, ac * ac + ad * ad - 2.0 * ac * ad * std::cos(at_a)));
+        const double margin = std::min(kPi - at_a, kPi - at_b);
+        if (margin > 1e-7) {
+          add(c, d, len, true);
+          ++unfolded;
+        } else if (margin > -1e-7) {
+          add(c, d, len, false);
+        }
+      }
+      const MeshGraph graph = MeshGraph::Build(mesh, {unfold});
+      ASSERT_EQ(graph.num_vertices(), n);
+      for (int32_t v = 0; v < n; ++v) {
+        std::map<int32_t, double> row;
+        for (size_t i = 0; i < graph.neighbors(v).size(); ++i) {
+          EXPECT_TRUE(
+              row.insert({graph.neighbors(v)[i], graph.lengths(v)[i]}).second)
+              << "mesh " << m << " vertex " << v << ": repeated neighbour";
+        }
+        for (const auto& [u, len] : row) {
+          const auto it = must[v].find(u);
+          bool matched = it != must[v].end() &&
+                         std::abs(len - it->second) <= 1e-12 * it->second;
+          const auto [lo, hi] = may[v].equal_range(u);
+          for (auto j = lo; j != hi && !matched; ++j) {
+            matched = std::abs(len - j->second) <= 1e-12 * j->second &&
+                      (it == must[v].end() || j->second <= it->second);
+          }
+          EXPECT_TRUE(matched) << "mesh " << m << " unfold " << unfold
+                               << " arc " << v << "-" << u << " length " << len;
+        }
+        for (const auto& [u, len] : must[v]) {
+          EXPECT_TRUE(row.count(u)) << "mesh " << m << " unfold " << unfold
+                                    << " missing " << v << "-" << u;
+        }
+      }
+    }
+  }
+  EXPECT_GT(unfolded, 100);  // the unfolding case is exercised
+}
 
 TEST(GeodesicTest, DistancesFollowRigidMotionAndScale) {
   const Mesh mesh = testing::Capsule(0.5, 2.0, 40, 24);
