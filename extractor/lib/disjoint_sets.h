@@ -1,6 +1,7 @@
 // Union-find over ids 0..n-1 with path halving, in one flat array: the one
 // union-find of the extractor, used by intake (fans, components),
-// ComputeMeshStats and the ring sweep (merging wavefronts, 4.6.3).
+// ComputeMeshStats, the ring sweep (merging wavefronts, 4.6.3) and the
+// synthetic shapes' largest-component filter (extractor/synth).
 //
 //   DisjointSets sets(num_faces);
 //   sets.Union(f, g);

@@ -36,7 +36,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <numeric>
 #include <queue>
 #include <tuple>
 #include <unordered_map>
@@ -46,6 +45,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "extractor/lib/disjoint_sets.h"
 #include "extractor/synth/synth.h"
 
 namespace tpr::synth {
@@ -388,34 +388,22 @@ Mesh MarchingTetrahedra(const Grid& grid) {
   return mesh;
 }
 
-int32_t FindRoot(std::vector<int32_t>& parent, int32_t x) {
-  while (parent[x] != x) {
-    parent[x] = parent[parent[x]];
-    x = parent[x];
-  }
-  return x;
-}
-
 // Keeps the component with the most triangles; returns the number of
 // triangles dropped.
 int64_t KeepLargestComponent(Mesh& mesh) {
   const int32_t n = static_cast<int32_t>(mesh.positions.size());
-  std::vector<int32_t> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
+  extract::DisjointSets sets(n);
   for (const auto& t : mesh.triangles) {
-    for (int e = 1; e < 3; ++e) {
-      const int32_t a = FindRoot(parent, t[0]), b = FindRoot(parent, t[e]);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);
-    }
+    for (int e = 1; e < 3; ++e) sets.Union(t[0], t[e]);
   }
   std::vector<int64_t> size(n, 0);
-  for (const auto& t : mesh.triangles) ++size[FindRoot(parent, t[0])];
+  for (const auto& t : mesh.triangles) ++size[sets.Find(t[0])];
   const int32_t best = static_cast<int32_t>(
       std::max_element(size.begin(), size.end()) - size.begin());
   std::vector<int32_t> remap(n, -1);
   Mesh out;
   for (const auto& t : mesh.triangles) {
-    if (FindRoot(parent, t[0]) != best) continue;
+    if (sets.Find(t[0]) != best) continue;
     std::array<int32_t, 3> nt;
     for (int e = 0; e < 3; ++e) {
       if (remap[t[e]] < 0) {
