@@ -182,6 +182,20 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   return key.str();
 }
 
+// PrepareTpr sets out->tpr to the prepared form of out->raw and returns
+// true, or sets out->error and returns false; the one step after both a
+// cache hit and an extraction.
+bool PrepareTpr(const Config& config, Described* out) {
+  absl::StatusOr<index::PreparedSignature> prepared =
+      index::Prepare(out->raw, config.ground);
+  if (!prepared.ok()) {
+    out->error = std::string(prepared.status().message());
+    return false;
+  }
+  out->tpr = std::move(*prepared);
+  return true;
+}
+
 Described Describe(const Model& model, const Config& config, size_t index) {
   Described out;
   std::string key;
@@ -197,14 +211,7 @@ Described Describe(const Model& model, const Config& config, size_t index) {
       out.d2 = std::move(cached.d2);
       out.extract_ms = cached.extract_ms;
       out.stage_ms = std::move(cached.stage_ms);
-      absl::StatusOr<index::PreparedSignature> prepared =
-          index::Prepare(out.raw, config.ground);
-      if (!prepared.ok()) {
-        out.error = std::string(prepared.status().message());
-        return out;
-      }
-      out.tpr = std::move(*prepared);
-      out.ok = true;
+      out.ok = PrepareTpr(config, &out);
       return out;
     }
   }
@@ -255,13 +262,7 @@ Described Describe(const Model& model, const Config& config, size_t index) {
     (f.kind == extract::FeatureKind::kPoint ? out.points : out.rings) += 1;
   }
   out.raw = ToIndexSignature(result->signature);
-  absl::StatusOr<index::PreparedSignature> prepared =
-      index::Prepare(out.raw, config.ground);
-  if (!prepared.ok()) {
-    out.error = std::string(prepared.status().message());
-    return out;
-  }
-  out.tpr = std::move(*prepared);
+  if (!PrepareTpr(config, &out)) return out;
   out.d2 = D2Histogram(loaded->mesh, config.d2);
   out.ok = true;
   if (!key.empty()) {
