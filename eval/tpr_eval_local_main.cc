@@ -28,11 +28,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "common/parallel.h"
 #include "eval/lib/d2.h"
 #include "eval/lib/dataset.h"
 #include "eval/lib/distance_matrix.h"
 #include "eval/lib/metrics.h"
-#include "eval/lib/parallel.h"
 #include "eval/lib/plots.h"
 #include "eval/lib/report.h"
 #include "eval/lib/saved_set.h"
@@ -371,7 +371,7 @@ std::vector<Described> DescribeAll(const std::vector<Model>& models,
   std::vector<Described> described(models.size());
   std::atomic<int> done{0};
   const Clock::time_point start = Clock::now();
-  ParallelFor(models.size(), threads, [&](size_t i) {
+  common::ParallelFor(models.size(), threads, [&](size_t i) {
     described[i] = Describe(models[i], config, i);
     const int n = ++done;
     if (n % 20 == 0 || n == static_cast<int>(models.size())) {

@@ -37,9 +37,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "common/parallel.h"
 #include "eval/lib/distance_matrix.h"
 #include "eval/lib/metrics.h"
-#include "eval/lib/parallel.h"
 #include "eval/lib/report.h"
 #include "eval/lib/saved_set.h"
 #include "indexer/lib/spectral.h"
@@ -217,7 +217,7 @@ int Run(int argc, char** argv) {
   std::vector<std::vector<Metrics>> full(candidates.size(), std::vector<Metrics>(sets.size()));
   std::vector<std::vector<std::vector<Metrics>>> on_fold(
       candidates.size(), std::vector<std::vector<Metrics>>(sets.size(), std::vector<Metrics>(folds)));
-  ParallelFor(candidates.size(), threads, [&](size_t c) {
+  common::ParallelFor(candidates.size(), threads, [&](size_t c) {
     for (size_t s = 0; s < sets.size(); ++s) {
       std::vector<size_t> all(sets[s].data.names.size());
       for (size_t i = 0; i < all.size(); ++i) all[i] = i;

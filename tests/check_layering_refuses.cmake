@@ -19,7 +19,7 @@ endfunction()
 # A tree that keeps every rule: each pure library includes what it may.
 set(good ${WORK}/good)
 file(REMOVE_RECURSE ${good})
-file(WRITE ${good}/extractor/lib/a.h "#include \"extractor/lib/mesh.h\"\n#include \"common/status_macros.h\"\n")
+file(WRITE ${good}/extractor/lib/a.h "#include \"extractor/lib/mesh.h\"\n#include \"common/status_macros.h\"\n#include \"common/parallel.h\"\n")
 file(WRITE ${good}/indexer/lib/a.cc "#include \"indexer/lib/emd.h\"\n#include <vector>\n")
 file(WRITE ${good}/eval/lib/a.h "#include \"extractor/lib/signature.h\"\n#include \"indexer/lib/signature.h\"\n")
 file(WRITE ${good}/extractor/service/a.cc "#include <grpcpp/grpcpp.h>\n#include \"indexer/lib/signature.h\"\n")

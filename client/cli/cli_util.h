@@ -18,7 +18,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
-#include "eval/lib/parallel.h"
+#include "common/parallel.h"
 #include "eval/lib/report.h"
 #include "tpr/v1/signature.pb.h"
 
@@ -26,9 +26,9 @@ namespace tpr::cli {
 
 // One escaper and one loop for the whole command (eval/lib is shared with
 // tpr-eval-local).
+using tpr::common::ParallelFor;
 using tpr::eval::JsonNumber;
 using tpr::eval::JsonString;
-using tpr::eval::ParallelFor;
 using tpr::eval::TextField;
 
 // Fail prints "tpr: WHAT: STATUS" on stderr and returns exit code 1.

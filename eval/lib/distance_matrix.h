@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "common/parallel.h"
 #include "eval/lib/metrics.h"
-#include "eval/lib/parallel.h"
 
 namespace tpr::eval {
 
@@ -60,7 +60,7 @@ DistanceMatrix PairwiseDistances(size_t n, int threads,
   DistanceMatrix d(n);
   // One slot per row: rows are disjoint, so no lock is needed.
   std::vector<double> row_ms(n, 0.0);
-  ParallelForEachWorker(n, threads, [&] {
+  common::ParallelForEachWorker(n, threads, [&] {
     return [&, distance = make_distance()](size_t i) mutable {
       const Clock::time_point start = Clock::now();
       for (size_t j = i + 1; j < n; ++j) d.Set(i, j, distance(i, j));

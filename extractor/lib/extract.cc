@@ -3,16 +3,15 @@
 #include "extractor/lib/extract.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cassert>
 #include <chrono>
 #include <cmath>
 #include <functional>
 #include <memory>
-#include <thread>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "common/parallel.h"
 #include "common/status_macros.h"
 #include "extractor/lib/critical_points.h"
 #include "extractor/lib/features.h"
@@ -41,31 +40,21 @@ class StageTimer {
 };
 
 // ParallelFor runs body(item, solver) for item in [0, count) on up to
-// `threads` threads, each with its own solver (solvers are not thread-safe;
-// the graph is). Items write to their own slots, so results do not depend on
-// the thread count.
+// `threads` threads (common/parallel.h), each with its own solver (solvers
+// are not thread-safe; the graph is); on one thread, in the caller with
+// `caller_solver`. Items write to their own slots, so results do not depend
+// on the thread count.
 void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver, int count,
                  int threads, const std::function<void(int, DijkstraSolver&)>& body) {
-  const int workers = std::min(std::max(threads, 1), count);
-  if (workers <= 1) {
+  if (std::min(std::max(threads, 1), count) <= 1) {
     for (int i = 0; i < count; ++i) body(i, caller_solver);
     return;
   }
-  std::atomic<int> next{0};
-  auto work = [&](DijkstraSolver& solver) {
-    for (int i = next++; i < count; i = next++) body(i, solver);
-  };
-  std::vector<std::thread> pool;
-  std::vector<std::unique_ptr<DijkstraSolver>> solvers;
-  for (int t = 1; t < workers; ++t) {
-    solvers.push_back(std::make_unique<DijkstraSolver>(graph));
-  }
-  for (int t = 1; t < workers; ++t) {
-    DijkstraSolver* s = solvers[t - 1].get();
-    pool.emplace_back([&work, s] { work(*s); });
-  }
-  work(caller_solver);
-  for (std::thread& t : pool) t.join();
+  common::ParallelForEachWorker(static_cast<size_t>(count), threads, [&] {
+    return [&body, solver = std::make_unique<DijkstraSolver>(graph)](size_t i) {
+      body(static_cast<int>(i), *solver);
+    };
+  });
 }
 
 absl::Status ValidateOptions(const Options& o) {

@@ -9,7 +9,7 @@
 #include <set>
 #include <thread>
 
-#include "eval/lib/parallel.h"
+#include "common/parallel.h"
 
 namespace tpr::eval {
 namespace {
@@ -70,7 +70,7 @@ TEST(DistanceMatrixTest, LeaveOneOutQueriesRankEveryOtherModel) {
 TEST(ParallelForTest, VisitsEveryIndexExactlyOnce) {
   for (int threads : {0, 1, 3, 16}) {
     std::vector<std::atomic<int>> visits(1000);
-    ParallelFor(visits.size(), threads, [&](size_t i) { ++visits[i]; });
+    common::ParallelFor(visits.size(), threads, [&](size_t i) { ++visits[i]; });
     for (const auto& v : visits) EXPECT_EQ(v.load(), 1);
   }
 }

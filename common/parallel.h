@@ -1,14 +1,18 @@
-// A small parallel loop over indices with dynamic scheduling, used by the
-// evaluation (distance matrices, extraction) and by the `tpr` command
-// (parallel uploads and queries). Written by hand: the needs are one
+// A small parallel loop over indices with dynamic scheduling: the one used
+// by the extraction (per-thread Dijkstra solvers), the evaluation (distance
+// matrices, extraction) and the `tpr` command (parallel uploads and
+// queries). Header-only and free of gRPC, so the pure libraries may include
+// it (tests/check_layering.cmake). Written by hand: the needs are one
 // function and no pool that outlives the call; std::execution needs TBB at
-// link time on GCC 12 and OpenMP gives no per-worker set-up.
+// link time on GCC 12 and OpenMP gives no per-worker set-up. (The indexer's
+// search keeps a oneTBB arena for its lifetime instead: microsecond
+// dispatch of a few EMDs, indexer/lib/signature_index.cc.)
 //
 //   ParallelFor(items.size(), 4, [&](size_t i) { Process(items[i]); });
 //   ParallelForEachWorker(n, 4, [] { Solver s; return [s](size_t i) mutable
 //                                    { s.Run(i); }; });
-#ifndef TPR_EVAL_LIB_PARALLEL_H_
-#define TPR_EVAL_LIB_PARALLEL_H_
+#ifndef TPR_COMMON_PARALLEL_H_
+#define TPR_COMMON_PARALLEL_H_
 
 #include <algorithm>
 #include <atomic>
@@ -16,7 +20,7 @@
 #include <thread>
 #include <vector>
 
-namespace tpr::eval {
+namespace tpr::common {
 
 // ParallelForEachWorker runs fn(i) for every i in [0, n) on
 // min(max(1, threads), max(1, n)) threads. Each worker first calls
@@ -48,6 +52,6 @@ void ParallelFor(size_t n, int threads, const Fn& fn) {
                         [&fn] { return [&fn](size_t i) { fn(i); }; });
 }
 
-}  // namespace tpr::eval
+}  // namespace tpr::common
 
-#endif  // TPR_EVAL_LIB_PARALLEL_H_
+#endif  // TPR_COMMON_PARALLEL_H_
