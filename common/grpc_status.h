@@ -4,8 +4,8 @@
 // mapping is the identity on code and message; this header exists so that
 // every service and the client SDK convert in exactly one place.
 //
-//   grpc::Status s = tpr::ToGrpcStatus(LoadMeshFromBuffer(...).status());
-//   absl::Status a = tpr::FromGrpcStatus(stub->Extract(&ctx, ...));
+//   grpc::Status s = tpr::common::ToGrpcStatus(LoadMeshFromBuffer(...).status());
+//   absl::Status a = tpr::common::FromGrpcStatus(stub->Extract(&ctx, ...));
 //   if (absl::IsInvalidArgument(a)) { ... }
 //
 // Header-only. Library code never includes this (it would pull in gRPC).
@@ -19,7 +19,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
 
-namespace tpr {
+namespace tpr::common {
 
 // ToGrpcStatus returns the gRPC status with the same canonical code and
 // message as `status`. OK maps to grpc::Status::OK. Codes outside the
@@ -47,6 +47,6 @@ inline absl::Status FromGrpcStatus(const grpc::Status& status) {
   return absl::Status(absl_code, absl::string_view(status.error_message()));
 }
 
-}  // namespace tpr
+}  // namespace tpr::common
 
 #endif  // TPR_COMMON_GRPC_STATUS_H_

@@ -28,7 +28,7 @@ int RunBackup(const Globals& g, const BackupArgs& args) {
   request.set_keep_last(args.keep_last);
   tpr::v1::BackupResponse response;
   grpc::Status status = admin->stub->Backup(&context, request, &response);
-  if (!status.ok()) return Fail("backup", tpr::FromGrpcStatus(status));
+  if (!status.ok()) return Fail("backup", tpr::common::FromGrpcStatus(status));
   if (g.json) {
     std::printf("%s\n", ToJson(response).c_str());
     return 0;

@@ -21,7 +21,7 @@ int RunStatus(const Globals& g, AdminTarget& admin) {
   tpr::v1::ReplicationStatusResponse response;
   grpc::Status status =
       admin.stub->ReplicationStatus(&context, tpr::v1::ReplicationStatusRequest(), &response);
-  if (!status.ok()) return Fail("promote --status", tpr::FromGrpcStatus(status));
+  if (!status.ok()) return Fail("promote --status", tpr::common::FromGrpcStatus(status));
   if (g.json) {
     std::printf("%s\n", ToJson(response).c_str());
   } else if (response.role() == "primary") {
@@ -48,7 +48,7 @@ int RunPromote(const Globals& g, bool status_only) {
   admin->prepare(&context);
   tpr::v1::PromoteResponse response;
   grpc::Status status = admin->stub->Promote(&context, tpr::v1::PromoteRequest(), &response);
-  if (!status.ok()) return Fail("promote", tpr::FromGrpcStatus(status));
+  if (!status.ok()) return Fail("promote", tpr::common::FromGrpcStatus(status));
   if (g.json) {
     std::printf("%s\n", ToJson(response).c_str());
   } else if (response.former_primary().empty()) {

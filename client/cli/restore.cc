@@ -31,7 +31,7 @@ int RunRestore(const Globals& g, const RestoreArgs& args) {
   request.set_data_dir(args.into);
   tpr::v1::RestoreResponse response;
   grpc::Status status = admin->stub->Restore(&context, request, &response);
-  if (!status.ok()) return Fail("restore", tpr::FromGrpcStatus(status));
+  if (!status.ok()) return Fail("restore", tpr::common::FromGrpcStatus(status));
   if (g.json) {
     std::printf("%s\n", ToJson(response).c_str());
     return 0;

@@ -259,7 +259,7 @@ absl::StatusOr<v1::ExtractResponse> ExtractFrom(grpc::Channel* channel, v1::Extr
         return writer->Finish();
       });
   if (!local.ok()) return local;
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 
@@ -309,7 +309,7 @@ class GrpcBatchUpsertWriter final : public BatchUpsertWriter {
     finished_ = true;
     writer_->WritesDone();
     grpc::Status status = writer_->Finish();
-    if (!status.ok()) return FromGrpcStatus(status);
+    if (!status.ok()) return common::FromGrpcStatus(status);
     return response_;
   }
 
@@ -359,7 +359,7 @@ class GrpcSearchStream final : public SearchStream {
         continue;
       }
       done_ = true;
-      status_ = cancelled_ ? absl::OkStatus() : FromGrpcStatus(status);
+      status_ = cancelled_ ? absl::OkStatus() : common::FromGrpcStatus(status);
       if (!status_.ok()) has_stats_ = false;
     }
     return false;
@@ -439,7 +439,7 @@ absl::StatusOr<bool> IndexerClient::Upsert(const v1::Model& model, bool overwrit
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Upsert(context, request, &response);
                                     });
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return common::FromGrpcStatus(status);
   return response.created();
 }
 
@@ -451,7 +451,7 @@ absl::Status IndexerClient::Delete(const std::string& id, const CallOptions* cal
   v1::DeleteRequest request;
   request.set_id(id);
   v1::DeleteResponse response;
-  return FromGrpcStatus(WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/false,
+  return common::FromGrpcStatus(WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/false,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Delete(context, request, &response);
                                     }));
@@ -466,7 +466,7 @@ absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Get(context, request, &response);
                                     });
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 
@@ -477,7 +477,7 @@ absl::StatusOr<v1::ListResponse> IndexerClient::List(const v1::ListRequest& requ
                                     [&](grpc::ClientContext* context) {
                                       return stub_->List(context, request, &response);
                                     });
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 
@@ -509,7 +509,7 @@ absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(const CallOptions* call) 
                                     [&](grpc::ClientContext* context) {
                                       return stub_->Stats(context, request, &response);
                                     });
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 

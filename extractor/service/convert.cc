@@ -11,7 +11,7 @@
 #define TPR_VERSION_STRING "0.1.0"
 #endif
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 
 const char kExtractorVersion[] = TPR_VERSION_STRING;
 
@@ -134,4 +134,4 @@ v1::Explanation ExplanationToProto(const extract::Explanation& explanation) {
   return proto;
 }
 
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor

@@ -15,7 +15,7 @@
 #include "tpr/v1/extractor.pb.h"
 #include "tpr/v1/signature.pb.h"
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 
 // kExtractorVersion is the semantic version stamped into every signature
 // (Signature.extractor_version): the project version from CMake.
@@ -58,6 +58,6 @@ v1::Signature SignatureToProto(const extract::Signature& signature,
 // ExplanationToProto returns `explanation` in wire form.
 v1::Explanation ExplanationToProto(const extract::Explanation& explanation);
 
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor
 
 #endif  // TPR_EXTRACTOR_SERVICE_CONVERT_H_

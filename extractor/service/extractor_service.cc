@@ -19,7 +19,7 @@
 #include "extractor/lib/mesh_io.h"
 #include "extractor/service/convert.h"
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 namespace {
 
 double MillisecondsSince(std::chrono::steady_clock::time_point start) {
@@ -217,7 +217,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     }
     last_message_ = Clock::now();
     if (absl::Status bad = parser_.Parse(&raw_, &request_); !bad.ok()) {
-      FinishLocked(ToGrpcStatus(bad));
+      FinishLocked(common::ToGrpcStatus(bad));
       return;
     }
     if (!got_first_) {
@@ -312,7 +312,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
         std::move(bytes_), header_, *options_,
         [this] { return cancelled_.load() || context_->IsCancelled(); });
     if (result.ok()) *response_ = *std::move(result);
-    Finish(ToGrpcStatus(result.status()));
+    Finish(common::ToGrpcStatus(result.status()));
   }
 
   ExtractorService::State* const state_;
@@ -414,4 +414,4 @@ grpc::ServerReadReactor<grpc::ByteBuffer>* ExtractorService::ExtractRaw(
 
 int ExtractorService::InFlight() const { return state_->in_flight.load(); }
 
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor

@@ -19,7 +19,7 @@
 #include "tpr/v1/extractor.grpc.pb.h"
 #include "tpr/v1/extractor.pb.h"
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 
 // ServiceOptions bounds what one tpr-extractor process does at once.
 //
@@ -118,6 +118,6 @@ class ExtractorService final : public v1::Extractor::CallbackService {
   std::unique_ptr<State> state_;
 };
 
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor
 
 #endif  // TPR_EXTRACTOR_SERVICE_EXTRACTOR_SERVICE_H_

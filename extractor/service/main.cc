@@ -18,7 +18,7 @@
 #include "extractor/service/extractor_service.h"
 
 int main(int argc, char** argv) {
-  tpr::extractor_service::ServiceOptions service_options;
+  tpr::extractor::ServiceOptions service_options;
   tpr::common::ServerOptions server_options;
   server_options.listen_address = "127.0.0.1:7001";
   server_options.log_name = "tpr-extractor";
@@ -76,7 +76,7 @@ int main(int argc, char** argv) {
 
   // Destroyed after the server (declared first): its workers drain any job
   // still queued when the grace period ended.
-  tpr::extractor_service::ExtractorService service(service_options);
+  tpr::extractor::ExtractorService service(service_options);
   if (server_options.metrics != nullptr) {
     server_options.metrics->AddGaugeCallback(
         "tpr_extractor_admitted_calls", "Extract calls admitted (uploading, queued or running)",

@@ -282,8 +282,8 @@ GatewayService::GatewayService(GatewayOptions options)
 
 absl::Status GatewayService::FromShard(int shard, const std::string& address,
                                        const grpc::Status& status) const {
-  if (status.ok() || IsCallersFault(status.error_code())) return FromGrpcStatus(status);
-  return FromGrpcStatus(grpc::Status(
+  if (status.ok() || IsCallersFault(status.error_code())) return common::FromGrpcStatus(status);
+  return common::FromGrpcStatus(grpc::Status(
       status.error_code(),
       absl::StrCat("shard ", shard, " (", address, "): ", status.error_message())));
 }
@@ -293,7 +293,7 @@ grpc::Status GatewayService::Finish(const char* method, const absl::Status& stat
       !IsCallersFault(static_cast<grpc::StatusCode>(status.code()))) {
     options_.log(absl::StrCat(method, " failed: ", status.ToString()));
   }
-  return ToGrpcStatus(status);
+  return common::ToGrpcStatus(status);
 }
 
 absl::Status GatewayService::Read(

@@ -49,16 +49,16 @@ grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
                                          const tpr::v1::BackupRequest* request,
                                          tpr::v1::BackupResponse* response) {
   if (request->keep_last() < 0) {
-    return ToGrpcStatus(absl::InvalidArgumentError(
+    return common::ToGrpcStatus(absl::InvalidArgumentError(
         absl::StrCat("keep_last is ", request->keep_last(), "; it must be >= 0")));
   }
   // The tree goes into the backup as it is now, so a restore loads it
   // instead of rebuilding.
-  if (absl::Status st = core_->PersistTree(); !st.ok()) return ToGrpcStatus(st);
+  if (absl::Status st = core_->PersistTree(); !st.ok()) return common::ToGrpcStatus(st);
   const int64_t models = static_cast<int64_t>(core_->storage().model_count());
   absl::StatusOr<BackupResult> backup =
       CreateBackup(core_->storage(), request->backup_dir(), request->keep_last());
-  if (!backup.ok()) return ToGrpcStatus(backup.status());
+  if (!backup.ok()) return common::ToGrpcStatus(backup.status());
   response->set_backup_id(backup->backup_id);
   response->set_size_bytes(backup->size_bytes);
   response->set_files(backup->files);
@@ -78,19 +78,19 @@ grpc::Status IndexerAdminService::Restore(grpc::ServerContext*,
                                           const tpr::v1::RestoreRequest* request,
                                           tpr::v1::RestoreResponse* response) {
   if (!request->data_dir().empty() && SamePath(request->data_dir(), core_->storage().dir())) {
-    return ToGrpcStatus(absl::FailedPreconditionError(
+    return common::ToGrpcStatus(absl::FailedPreconditionError(
         "data_dir is this indexer's own data directory; restore into an empty directory and "
         "start an indexer on it"));
   }
   absl::StatusOr<RestoreResult> restored =
       RestoreBackup(request->backup_dir(), request->backup_id(), request->data_dir());
-  if (!restored.ok()) return ToGrpcStatus(restored.status());
+  if (!restored.ok()) return common::ToGrpcStatus(restored.status());
   // Counted by opening it as an indexer would (checks included).
   // create_if_missing: the database is there; ACKNOWLEDGED is made.
   StorageOptions storage_options;
   absl::StatusOr<std::unique_ptr<Storage>> storage =
       Storage::Open(request->data_dir(), storage_options);
-  if (!storage.ok()) return ToGrpcStatus(storage.status());
+  if (!storage.ok()) return common::ToGrpcStatus(storage.status());
   response->set_backup_id(restored->backup_id);
   response->set_models(static_cast<int64_t>((*storage)->model_count()));
   return grpc::Status::OK;
@@ -100,7 +100,7 @@ grpc::Status IndexerAdminService::Promote(grpc::ServerContext*, const tpr::v1::P
                                           tpr::v1::PromoteResponse* response) {
   if (follower_ == nullptr) return grpc::Status::OK;  // already a primary
   absl::StatusOr<tpr::v1::PromoteResponse> promoted = follower_->Promote();
-  if (!promoted.ok()) return ToGrpcStatus(promoted.status());
+  if (!promoted.ok()) return common::ToGrpcStatus(promoted.status());
   *response = std::move(*promoted);
   return grpc::Status::OK;
 }
@@ -121,7 +121,7 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
                                              const tpr::v1::CheckpointRequest*,
                                              grpc::ServerWriter<tpr::v1::CheckpointChunk>* writer) {
   if (!core_->following().empty()) {
-    return ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
+    return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
         "this indexer is a follower of ", core_->following(), "; follow the primary")));
   }
   const std::string dir = absl::StrCat(core_->storage().dir(), "/", kCheckpointPrefix,
@@ -134,7 +134,7 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
       fs::remove_all(dir, ec);
     }
   } cleanup{dir};
-  if (!sequence.ok()) return ToGrpcStatus(sequence.status());
+  if (!sequence.ok()) return common::ToGrpcStatus(sequence.status());
   std::vector<std::string> files;
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -146,7 +146,7 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
   for (const std::string& name : files) {
     std::FILE* f = std::fopen((dir + "/" + name).c_str(), "rb");
     if (f == nullptr) {
-      return ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
+      return common::ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
     }
     uint64_t offset = 0;
     bool first = true;
@@ -169,7 +169,7 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
     const bool failed = std::ferror(f) != 0;
     std::fclose(f);
     if (failed) {
-      return ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
+      return common::ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
     }
   }
   tpr::v1::CheckpointChunk last;
@@ -187,7 +187,7 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
                                           const tpr::v1::TailLogRequest* request,
                                           grpc::ServerWriter<tpr::v1::LogBatch>* writer) {
   if (!core_->following().empty()) {
-    return ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
+    return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
         "this indexer is a follower of ", core_->following(), "; follow the primary")));
   }
   Storage& storage = core_->storage();
@@ -195,7 +195,7 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
   {
     const uint64_t latest = LatestSequence(storage);
     if (from > latest + 1) {
-      return ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
+      return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
           "the follower asks for sequence ", from, " but this primary's latest is ", latest,
           ": it is not this database's follower, or this primary lost writes; start the "
           "follower from an empty directory")));
@@ -206,7 +206,7 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
     const uint64_t latest = LatestSequence(storage);
     if (from <= latest) {
       absl::StatusOr<std::vector<LoggedBatch>> batches = ReadLog(storage, from, kLogMessageBytes);
-      if (!batches.ok()) return ToGrpcStatus(batches.status());
+      if (!batches.ok()) return common::ToGrpcStatus(batches.status());
       for (LoggedBatch& b : *batches) {
         tpr::v1::LogBatch message;
         message.set_sequence(b.sequence);

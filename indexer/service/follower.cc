@@ -136,7 +136,7 @@ absl::StatusOr<uint64_t> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
     return failed;
   }
   grpc::Status finished = reader->Finish();
-  if (!finished.ok()) return tpr::FromGrpcStatus(finished);
+  if (!finished.ok()) return tpr::common::FromGrpcStatus(finished);
   if (!done) return absl::UnavailableError("the checkpoint stream ended early");
   TPR_RETURN_IF_ERROR(FsyncPath(options.data_dir, true));
   return sequence;
@@ -324,7 +324,7 @@ void Follower::Run(std::function<void()> on_resync) {
       context_ = nullptr;
       if (stopping_) return;
     }
-    absl::Status status = failed.ok() ? tpr::FromGrpcStatus(finished) : failed;
+    absl::Status status = failed.ok() ? tpr::common::FromGrpcStatus(finished) : failed;
     if (absl::IsOutOfRange(status)) {
       log(absl::StrCat("fell behind the log ", options_.primary, " keeps (",
                        status.message(), "); starting again from a fresh copy"));

@@ -49,7 +49,7 @@ grpc::Status IndexerService::Finish(const char* method, const absl::Status& stat
         break;
     }
   }
-  return tpr::ToGrpcStatus(status);
+  return tpr::common::ToGrpcStatus(status);
 }
 
 grpc::Status IndexerService::Upsert(grpc::ServerContext* context,

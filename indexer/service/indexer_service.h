@@ -1,7 +1,7 @@
 // IndexerService: the tpr.v1.Indexer gRPC service (indexer.proto), a thin
 // shell over IndexerCore. Each handler checks the call's cancellation and
 // deadline, hands the request to the core and maps its absl::Status with
-// tpr::ToGrpcStatus (common/grpc_status.h); no logic lives here.
+// tpr::common::ToGrpcStatus (common/grpc_status.h); no logic lives here.
 //
 //   auto core = IndexerCore::Open(options);
 //   IndexerService service(core->get(), ServiceOptions{});

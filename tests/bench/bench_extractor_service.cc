@@ -20,7 +20,7 @@
 #include "tests/service/extsvc_test_util.h"
 #include "tpr/client.h"
 
-namespace tpr {
+namespace tpr::extractor {
 namespace {
 
 const std::string& MeshOff(int vertices) {
@@ -41,9 +41,9 @@ const std::string& MeshOff(int vertices) {
 // One server for the whole run (never destroyed: benchmarks exit after).
 const std::string& ServerAddress() {
   static const std::string* address = [] {
-    extractor_service::ServiceOptions options;
+    extractor::ServiceOptions options;
     options.worker_threads = 2;
-    auto* service = new extractor_service::ExtractorService(options);
+    auto* service = new extractor::ExtractorService(options);
     common::ServerOptions server_options;
     server_options.listen_address = "127.0.0.1:0";
     absl::StatusOr<common::StartedServer> started = common::StartServer(server_options, {service});
@@ -99,6 +99,6 @@ void BM_ExtractInProcess(benchmark::State& state) {
 BENCHMARK(BM_ExtractInProcess)->Arg(2000)->Arg(10000)->Threads(2)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 }  // namespace
-}  // namespace tpr
+}  // namespace tpr::extractor
 
 BENCHMARK_MAIN();

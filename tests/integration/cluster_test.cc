@@ -34,7 +34,7 @@
 #include "tests/service/indexer_testing.h"
 #include "tpr/client.h"
 
-namespace tpr {
+namespace tpr::gateway {
 namespace {
 
 using ::tpr::indexer::testing::MakeModels;
@@ -582,4 +582,4 @@ TEST_F(ClusterTest, BackupAndRestoreOfEveryShardAnswerIdentically) {
 }
 
 }  // namespace
-}  // namespace tpr
+}  // namespace tpr::gateway

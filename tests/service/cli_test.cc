@@ -22,7 +22,7 @@
 #include "tests/service/extsvc_test_util.h"
 #include "tpr/client.h"
 
-namespace tpr {
+namespace tpr::cli {
 namespace {
 
 using ::tpr::testing::Ranked;
@@ -329,4 +329,4 @@ TEST_F(CliTest, ControlCharactersInIdsAreEscapedInTextOutput) {
 }
 
 }  // namespace
-}  // namespace tpr
+}  // namespace tpr::cli

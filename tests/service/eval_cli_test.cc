@@ -31,7 +31,7 @@
 #include "indexer/lib/metric.h"
 #include "tests/service/extsvc_test_util.h"
 
-namespace tpr {
+namespace tpr::cli {
 namespace {
 
 namespace fs = std::filesystem;
@@ -330,4 +330,4 @@ TEST_F(EvalCliTest, NothingToEvaluateExitsNonZero) {
 }
 
 }  // namespace
-}  // namespace tpr
+}  // namespace tpr::cli

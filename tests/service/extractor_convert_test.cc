@@ -9,7 +9,7 @@
 #include "extractor/lib/extract.h"
 #include "extractor/service/convert.h"
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 namespace {
 
 TEST(ExtractorConvertTest, ZeroFieldsGiveTheLibraryDefaults) {
@@ -109,4 +109,4 @@ TEST(ExtractorConvertTest, LimitsAreAccepted) {
 }
 
 }  // namespace
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor

@@ -29,7 +29,7 @@
 #include "tests/service/extsvc_test_util.h"
 #include "tpr/client.h"
 
-namespace tpr::extractor_service {
+namespace tpr::extractor {
 namespace {
 
 using ::tpr::testing::ToOff;
@@ -716,4 +716,4 @@ TEST_F(ExtractorServiceTest, ExtractFileStreamsInsteadOfReadingTheWholeFile) {
 }
 
 }  // namespace
-}  // namespace tpr::extractor_service
+}  // namespace tpr::extractor

@@ -167,7 +167,7 @@ inline absl::StatusOr<std::string> ReflectedServices(
     }
   }
   grpc::Status status = stream->Finish();
-  if (!status.ok()) return tpr::FromGrpcStatus(status);
+  if (!status.ok()) return tpr::common::FromGrpcStatus(status);
   return bytes;
 }
 

@@ -54,7 +54,7 @@ inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& ch
                                          grpc::internal::RpcMethod::NORMAL_RPC);
   grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
       channel.get(), method, &context, request, &response);
-  if (!s.ok()) return tpr::FromGrpcStatus(s);
+  if (!s.ok()) return tpr::common::FromGrpcStatus(s);
   std::vector<grpc::Slice> slices;
   if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read response");
   std::string answer;
