@@ -56,7 +56,8 @@ class MeshGraph {
   // in [0, positions.size()) and every coordinate is finite (intake,
   // mesh_io.h, guarantees it; use Create for unchecked meshes). Vertices
   // without triangles become isolated vertices of area 0. Thread-safe.
-  // Cost O(n + f) time (about 5 sweeps' worth), O(e) memory.
+  // Cost O(n + f) time (2 to 3 sweeps' worth: BM_BuildGraph against
+  // BM_Dijkstra), O(e) memory.
   static MeshGraph Build(const Mesh& mesh, const GeodesicOptions& options = {});
 
   // Create checks the precondition of Build and then builds. Errors:
