@@ -1,14 +1,17 @@
 #include "common/metrics.h"
 
+#include <array>
 #include <chrono>
 #include <exception>
 #include <sstream>
+#include <unordered_map>
 #include <utility>
 
 #include <prometheus/collectable.h>
 #include <prometheus/exposer.h>
 #include <prometheus/text_serializer.h>
 
+#include <google/protobuf/descriptor.h>
 #include <google/protobuf/io/coded_stream.h>
 #include <google/protobuf/wire_format_lite.h>
 #include <grpcpp/support/byte_buffer.h>
@@ -89,6 +92,78 @@ struct Metrics::Families {
   prometheus::Histogram& emds;
   prometheus::Histogram& lower_bounds;
   prometheus::Histogram& search_seconds;
+
+  // The series of one method, made on its first call and kept (never
+  // removed) for the life of the registry. prometheus-cpp's Family::Add
+  // builds a new metric (for a histogram: its buckets) and compares label
+  // maps under the family's lock on every call, even when the series
+  // exists; looked up here once per call instead, and a code's counter and
+  // histogram once per (method, code).
+  static constexpr size_t kCodes = 17;  // grpc::StatusCode OK..UNAUTHENTICATED
+  struct CodeSeries {
+    prometheus::Counter* requests = nullptr;
+    prometheus::Histogram* duration = nullptr;
+  };
+  struct MethodSeries {
+    prometheus::Gauge* in_flight = nullptr;
+    std::array<CodeSeries, kCodes> by_code;
+  };
+
+  // Of(method): its series (the node is stable: node-based map), and in
+  // *label the method label they carry. The label is the method's name
+  // when the method exists (a method of a compiled-in service, or gRPC's
+  // health service) and "unknown" otherwise: the name comes from the
+  // client, and names it makes up must not each add series (unbounded
+  // memory and scrapes). Thread-safe.
+  MethodSeries& Of(const std::string& method, std::string* label) {
+    std::lock_guard<std::mutex> lock(series_mu);
+    auto it = series.find(method);
+    if (it == series.end()) {
+      const std::string name = KnownMethod(method) ? method : "unknown";
+      it = series.find(name);
+      if (it == series.end()) {
+        it = series.try_emplace(name).first;
+        it->second.in_flight = &in_flight.Add({{"method", name}});
+      }
+    }
+    *label = it->first;
+    return it->second;
+  }
+
+  // KnownMethod("/pkg.Service/Method"): whether the method is defined by a
+  // service compiled into this binary (the generated descriptor pool: our
+  // tpr.v1 services, reflection) or is one of gRPC's health checks (whose
+  // generated code is not Protobuf's).
+  static bool KnownMethod(const std::string& method) {
+    if (method == "/grpc.health.v1.Health/Check" || method == "/grpc.health.v1.Health/Watch") {
+      return true;
+    }
+    const size_t slash = method.rfind('/');
+    if (method.size() < 2 || method[0] != '/' || slash == 0) return false;
+    const std::string full_name =
+        absl::StrCat(method.substr(1, slash - 1), ".", method.substr(slash + 1));
+    return google::protobuf::DescriptorPool::generated_pool()->FindMethodByName(full_name) !=
+           nullptr;
+  }
+  // Code(method, code): that call outcome's counter and histogram.
+  // Thread-safe.
+  CodeSeries Code(const std::string& method, MethodSeries& m, grpc::StatusCode code) {
+    auto make = [&] {
+      const prometheus::Labels labels = {
+          {"method", method},
+          {"code", absl::StatusCodeToString(static_cast<absl::StatusCode>(code))}};
+      return CodeSeries{&requests.Add(labels), &duration.Add(labels, SecondsBuckets())};
+    };
+    const size_t c = static_cast<size_t>(code);
+    if (c >= kCodes) return make();  // Not a code gRPC defines: not cached.
+    std::lock_guard<std::mutex> lock(series_mu);
+    CodeSeries& s = m.by_code[c];
+    if (s.requests == nullptr) s = make();
+    return s;
+  }
+
+  std::mutex series_mu;
+  std::unordered_map<std::string, MethodSeries> series;  // guarded by series_mu
 };
 
 // Gauges and counters computed at scrape time.
@@ -162,18 +237,16 @@ enum class Kind { kOther, kExtract, kSearch };
 class MetricsInterceptor final : public grpc::experimental::Interceptor {
  public:
   MetricsInterceptor(grpc::experimental::ServerRpcInfo* info, Metrics::Families* families)
-      : families_(families),
-        method_(info->method() != nullptr ? info->method() : ""),
-        start_(std::chrono::steady_clock::now()) {
+      : families_(families), start_(std::chrono::steady_clock::now()) {
+    series_ = &families_->Of(info->method() != nullptr ? info->method() : "", &method_);
+    series_->in_flight->Increment();
     if (method_ == "/tpr.v1.Extractor/Extract") kind_ = Kind::kExtract;
     if (method_ == "/tpr.v1.Indexer/Search") kind_ = Kind::kSearch;
-    in_flight_ = &families_->in_flight.Add({{"method", method_}});
-    in_flight_->Increment();
   }
 
   ~MetricsInterceptor() override {
     if (!finished_) Finish(grpc::StatusCode::CANCELLED);
-    in_flight_->Decrement();
+    series_->in_flight->Decrement();
   }
 
   void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
@@ -216,17 +289,16 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
     finished_ = true;
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    const std::string code_name = absl::StatusCodeToString(static_cast<absl::StatusCode>(code));
-    const prometheus::Labels labels = {{"method", method_}, {"code", code_name}};
-    families_->requests.Add(labels).Increment();
-    families_->duration.Add(labels, SecondsBuckets()).Observe(seconds);
+    const Metrics::Families::CodeSeries s = families_->Code(method_, *series_, code);
+    s.requests->Increment();
+    s.duration->Observe(seconds);
   }
 
   Metrics::Families* families_;
   std::string method_;
   Kind kind_ = Kind::kOther;
   std::chrono::steady_clock::time_point start_;
-  prometheus::Gauge* in_flight_ = nullptr;
+  Metrics::Families::MethodSeries* series_ = nullptr;
   size_t upload_bytes_ = 0;
   bool finished_ = false;
 };

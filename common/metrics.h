@@ -3,7 +3,8 @@
 //
 // Histograms, never summaries, so that replicas can be aggregated; no label
 // takes a per-model or per-request value (ids, request ids), only the
-// method and the status code. What is measured:
+// method and the status code (a method the binary does not define counts as
+// method="unknown", so made-up names add no series). What is measured:
 //   every service (a server interceptor, common/server_lifecycle.h):
 //     tpr_rpc_requests_total{method,code}          counter
 //     tpr_rpc_duration_seconds{method,code}        histogram

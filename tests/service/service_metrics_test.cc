@@ -12,11 +12,16 @@
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
 #include <map>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include <grpcpp/create_channel.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/security/credentials.h>
 #include <gtest/gtest.h>
 
 #include "absl/strings/match.h"
@@ -217,6 +222,49 @@ TEST(MetricsTest, IndexAndStorageMetricsFollowKnownWrites) {
   EXPECT_EQ(Sample(m, "tpr_indexer_storage_delayed_stalls_total"), 0);
   EXPECT_EQ(Sample(m, "tpr_indexer_storage_stopped_stalls_total"), 0);
   EXPECT_NE(m.find("# TYPE tpr_indexer_tree_rebuilds_total counter"), std::string::npos);
+}
+
+// A client choosing method names cannot grow the label set: calls to
+// methods the server does not serve are counted (UNIMPLEMENTED) under one
+// method label, never under the names the client sent.
+TEST(MetricsTest, UnknownMethodsShareOneLabel) {
+  TempDir dir;
+  ServiceProcess indexer;
+  const int port =
+      StartWithMetrics(&indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir, "indexer");
+  ASSERT_GT(port, 0);
+  std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateChannel(indexer.address(), grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  for (int i = 0; i < 5; ++i) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    grpc::Slice empty("");
+    grpc::ByteBuffer request(&empty, 1), response;
+    grpc::Status status;
+    std::mutex mu;
+    std::condition_variable done_cv;
+    bool done = false;
+    stub.UnaryCall(&context, absl::StrCat("/tpr.v1.Indexer/NoSuchMethod", i), {}, &request,
+                   &response, [&](grpc::Status s) {
+                     std::lock_guard<std::mutex> lock(mu);
+                     status = std::move(s);
+                     done = true;
+                     done_cv.notify_all();
+                   });
+    std::unique_lock<std::mutex> lock(mu);
+    done_cv.wait(lock, [&] { return done; });
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << status.error_message();
+  }
+  absl::StatusOr<client::IndexerClient> ix = client::IndexerClient::Connect(indexer.address());
+  ASSERT_TRUE(ix.ok());
+  ASSERT_TRUE(ix->Stats().ok());
+  const std::string m = Scrape(port);
+  EXPECT_EQ(m.find("NoSuchMethod"), std::string::npos) << m;
+  EXPECT_EQ(Sample(m, "tpr_rpc_requests_total",
+                   {"code=\"UNIMPLEMENTED\"", "method=\"unknown\""}), 5) << m;
+  EXPECT_EQ(Sample(m, "tpr_rpc_requests_total",
+                   {"code=\"OK\"", "method=\"/tpr.v1.Indexer/Stats\""}), 1);
 }
 
 TEST(MetricsTest, UnusableAddressIsRefusedAtStart) {
