@@ -4,7 +4,8 @@
 // server and a TLS client against a plaintext one, a client trusting
 // another authority, mutual TLS refusing clients without a certificate or
 // with one from another authority, the certificate reloaded when its files
-// change, and unusable files refused at start.
+// change, and unusable files refused at start; tpr-extractor serving mutual
+// TLS with the same flags.
 #include <chrono>
 #include <filesystem>
 #include <string>
@@ -179,6 +180,38 @@ TEST_F(TlsTest, TprCommandTakesTheTlsFlags) {
   r = RunShell(absl::StrCat("TPR_TLS=1 TPR_TLS_CA=", Path("ca1.pem"), " ", tpr, " stats"));
   EXPECT_EQ(r.exit_code, 1) << "mutual TLS without a client certificate";
   EXPECT_NE(r.out.find("--tls-cert"), std::string::npos) << r.out;
+}
+
+// The same flags serve tpr-extractor (common/server_flags.h): mutual TLS,
+// a mesh extracted over it, a plaintext client and a client without a
+// certificate refused fast.
+TEST_F(TlsTest, ExtractorServesMutualTls) {
+  ServiceProcess extractor;
+  ASSERT_TRUE(extractor
+                  .Start(BinaryPath("tpr-extractor"),
+                         {"--tls-cert", Path("serving.pem"), "--tls-key", Path("serving.key"),
+                          "--tls-client-ca", Path("ca1.pem")},
+                         Path("extractor.log"))
+                  .ok())
+      << ReadText(Path("extractor.log"));
+  absl::StatusOr<std::vector<GeneratedFile>> files = GenerateSet(Path("set"), 1, 1, 600);
+  ASSERT_TRUE(files.ok()) << files.status();
+  auto extract = [&](const ConnectionOptions& connection) {
+    client::CallOptions call;
+    call.timeout = absl::Seconds(60);
+    absl::StatusOr<client::ExtractorClient> ex =
+        client::ExtractorClient::Connect(extractor.address(), connection, call);
+    if (!ex.ok()) return ex.status();
+    return ex->ExtractBytes(files->front().off, "m.off").status();
+  };
+  const auto start = std::chrono::steady_clock::now();
+  absl::Status plain = extract(ConnectionOptions());
+  EXPECT_EQ(plain.code(), absl::StatusCode::kUnavailable) << plain;
+  EXPECT_NE(plain.message().find("does it use TLS?"), absl::string_view::npos) << plain;
+  EXPECT_EQ(extract(Tls("ca1")).code(), absl::StatusCode::kUnavailable);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20.0);
+  absl::Status mutual = extract(Tls("ca1", "client1"));
+  EXPECT_TRUE(mutual.ok()) << mutual;
 }
 
 TEST_F(TlsTest, UnusableFilesAreRefusedAtStart) {
