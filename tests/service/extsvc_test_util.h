@@ -103,8 +103,14 @@ class ServiceProcess {
     pid_ = fork();
     if (pid_ < 0) return absl::InternalError("fork failed");
     if (pid_ == 0) {
+      // Both output streams go to the log: a server left behind by a test
+      // that aborted must not hold CTest's output pipe (CTest would wait
+      // for it until the test's timeout).
       FILE* log = std::fopen(log_path.c_str(), "w");
-      if (log != nullptr) dup2(fileno(log), STDERR_FILENO);
+      if (log != nullptr) {
+        dup2(fileno(log), STDERR_FILENO);
+        dup2(fileno(log), STDOUT_FILENO);
+      }
       std::vector<char*> argv;
       for (std::string& a : args) argv.push_back(a.data());
       argv.push_back(nullptr);
