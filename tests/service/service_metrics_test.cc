@@ -53,6 +53,12 @@ int StartWithMetrics(ServiceProcess* process, const std::string& binary,
   return started.ok() ? MetricsPort(ReadText(log)) : 0;
 }
 
+// StartWithMetrics for a tpr-indexer on DIR/data.
+int StartIndexerWithMetrics(ServiceProcess* indexer, const TempDir& dir) {
+  return StartWithMetrics(indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir,
+                          "indexer");
+}
+
 TEST(MetricsTest, ScrapedValuesMatchKnownActions) {
   TempDir dir;
   ServiceProcess extractor;
@@ -161,8 +167,7 @@ std::string ScrapeUntil(int port, const std::string& name, double value) {
 TEST(MetricsTest, IndexAndStorageMetricsFollowKnownWrites) {
   TempDir dir;
   ServiceProcess indexer;
-  const int port =
-      StartWithMetrics(&indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir, "indexer");
+  const int port = StartIndexerWithMetrics(&indexer, dir);
   ASSERT_GT(port, 0);
   std::string m = Scrape(port);
   EXPECT_EQ(Sample(m, "tpr_indexer_tree_rebuilds_total"), 0) << m;
@@ -230,8 +235,7 @@ TEST(MetricsTest, IndexAndStorageMetricsFollowKnownWrites) {
 TEST(MetricsTest, UnknownMethodsShareOneLabel) {
   TempDir dir;
   ServiceProcess indexer;
-  const int port =
-      StartWithMetrics(&indexer, "tpr-indexer", {"--data-dir", dir.path() + "/data"}, dir, "indexer");
+  const int port = StartIndexerWithMetrics(&indexer, dir);
   ASSERT_GT(port, 0);
   std::shared_ptr<grpc::Channel> channel =
       grpc::CreateChannel(indexer.address(), grpc::InsecureChannelCredentials());
