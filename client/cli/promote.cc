@@ -25,17 +25,22 @@ int RunStatus(const Globals& g, AdminTarget& admin) {
   if (g.json) {
     std::printf("%s\n", ToJson(response).c_str());
   } else if (response.role() == "primary") {
-    std::printf("%s: primary at sequence %llu\n", g.indexer.c_str(),
-                static_cast<unsigned long long>(response.applied_sequence()));
+    std::printf("%s: primary at sequence %llu, database %s\n", g.indexer.c_str(),
+                static_cast<unsigned long long>(response.applied_sequence()),
+                response.db_identity().c_str());
   } else {
-    std::printf("%s: follower of %s, applied %llu, primary %llu, %llu behind, %s, last heard "
-                "%lld ms ago\n",
-                g.indexer.c_str(), response.primary().c_str(),
+    std::printf("%s: follower of %s (database %s), applied %llu, primary %llu, %llu behind, "
+                "%s, last heard %lld ms ago\n",
+                g.indexer.c_str(), response.primary().c_str(), response.db_identity().c_str(),
                 static_cast<unsigned long long>(response.applied_sequence()),
                 static_cast<unsigned long long>(response.primary_sequence()),
                 static_cast<unsigned long long>(response.behind()),
                 response.caught_up() ? "caught up" : "catching up",
                 static_cast<long long>(response.last_heard_ms()));
+    if (!response.error().empty()) {
+      std::printf("%s: NOT tailing, the primary refuses: %s\n", g.indexer.c_str(),
+                  response.error().c_str());
+    }
   }
   return 0;
 }

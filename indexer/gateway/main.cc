@@ -22,6 +22,7 @@
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
 #include "tpr/client.h"
+#include "tpr/connection_flags.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"tpr-gateway: one tpr.v1.Indexer endpoint over sharded tpr-indexer processes"};
@@ -48,17 +49,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   // How the gateway reaches the shards: the SDK's connection options.
   tpr::client::ConnectionOptions shard_connection;
-  app.add_flag("--shard-tls", shard_connection.tls, "speak TLS to the shards");
-  app.add_option("--shard-tls-ca", shard_connection.tls_ca_file,
-                 "PEM authority the shards' certificates are checked against (default: the "
-                 "system's roots)");
-  app.add_option("--shard-tls-cert", shard_connection.tls_cert_file,
-                 "PEM client certificate for shards that demand mutual TLS (with "
-                 "--shard-tls-key)");
-  app.add_option("--shard-tls-key", shard_connection.tls_key_file,
-                 "PEM private key of --shard-tls-cert");
-  app.add_option("--shard-tls-server-name", shard_connection.tls_server_name,
-                 "name the shards' certificates carry, when not the host in their addresses");
+  tpr::client::AddPeerConnectionFlags(app, "shard", "the shards", &shard_connection);
   app.add_option("--shard-api-key", shard_connection.api_key,
                  "API key sent to the shards (role write, admin for backups); prefer the "
                  "environment variable TPR_GATEWAY_SHARD_API_KEY, which ps does not show");

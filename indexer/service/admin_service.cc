@@ -114,6 +114,9 @@ grpc::Status IndexerAdminService::ReplicationStatus(
   }
   response->set_role("primary");
   response->set_applied_sequence(LatestSequence(core_->storage()));
+  absl::StatusOr<std::string> identity = DatabaseIdentity(core_->storage());
+  if (!identity.ok()) return common::ToGrpcStatus(identity.status());
+  response->set_db_identity(*identity);
   return grpc::Status::OK;
 }
 
@@ -172,9 +175,12 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
       return common::ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
     }
   }
+  absl::StatusOr<std::string> identity = DatabaseIdentity(core_->storage());
+  if (!identity.ok()) return common::ToGrpcStatus(identity.status());
   tpr::v1::CheckpointChunk last;
   last.set_sequence(*sequence);
   last.set_done(true);
+  last.set_db_identity(*identity);
   writer->Write(last);
   if (options_.log) {
     options_.log(absl::StrCat("sent a checkpoint at sequence ", *sequence, ": ", files.size(),
@@ -191,6 +197,18 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
         "this indexer is a follower of ", core_->following(), "; follow the primary")));
   }
   Storage& storage = core_->storage();
+  if (!request->db_identity().empty()) {
+    absl::StatusOr<std::string> identity = DatabaseIdentity(storage);
+    if (!identity.ok()) return common::ToGrpcStatus(identity.status());
+    if (*identity != request->db_identity()) {
+      return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
+          "this primary is database ", *identity, " but the follower copied database ",
+          request->db_identity(),
+          " (the primary was restored or replaced, or the follower points at the wrong "
+          "indexer); refusing to send another database's log: start the follower again from "
+          "an empty directory")));
+    }
+  }
   uint64_t from = std::max<uint64_t>(request->from_sequence(), 1);
   {
     const uint64_t latest = LatestSequence(storage);
@@ -201,11 +219,13 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
           "follower from an empty directory")));
     }
   }
+  // One cursor for the whole stream: each poll reads only the new log.
+  LogCursor cursor(storage, from);
   auto last_sent = std::chrono::steady_clock::now();
   while (!stopping_ && !context->IsCancelled()) {
     const uint64_t latest = LatestSequence(storage);
     if (from <= latest) {
-      absl::StatusOr<std::vector<LoggedBatch>> batches = ReadLog(storage, from, kLogMessageBytes);
+      absl::StatusOr<std::vector<LoggedBatch>> batches = cursor.Read(kLogMessageBytes);
       if (!batches.ok()) return common::ToGrpcStatus(batches.status());
       for (LoggedBatch& b : *batches) {
         tpr::v1::LogBatch message;

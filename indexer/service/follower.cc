@@ -71,17 +71,28 @@ grpc::ClientContext* Prepare(grpc::ClientContext* context, const std::string& ap
   return context;
 }
 
-std::unique_ptr<tpr::v1::IndexerAdmin::Stub> MakeStub(const std::string& primary) {
+std::unique_ptr<tpr::v1::IndexerAdmin::Stub> MakeStub(const FollowerOptions& options) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
-  return tpr::v1::IndexerAdmin::NewStub(
-      grpc::CreateCustomChannel(primary, grpc::InsecureChannelCredentials(), args));
+  if (options.credentials != nullptr && !options.tls_server_name.empty()) {
+    args.SetSslTargetNameOverride(options.tls_server_name);
+  }
+  return tpr::v1::IndexerAdmin::NewStub(grpc::CreateCustomChannel(
+      options.primary,
+      options.credentials != nullptr ? options.credentials : grpc::InsecureChannelCredentials(),
+      args));
 }
 
-// Streams the primary's checkpoint into `dir` (empty); returns the sequence
-// it reflects.
-absl::StatusOr<uint64_t> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
-                                         const FollowerOptions& options) {
+// A checkpoint copied: the primary sequence it reflects and the primary's
+// database identity.
+struct Copied {
+  uint64_t sequence = 0;
+  std::string identity;
+};
+
+// Streams the primary's checkpoint into `dir` (empty).
+absl::StatusOr<Copied> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
+                                       const FollowerOptions& options) {
   grpc::ClientContext context;
   Prepare(&context, options.api_key);
   std::unique_ptr<grpc::ClientReader<tpr::v1::CheckpointChunk>> reader =
@@ -90,7 +101,7 @@ absl::StatusOr<uint64_t> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
   std::string open_name;
   std::FILE* file = nullptr;
   std::vector<std::string> files;
-  uint64_t sequence = 0;
+  Copied copied;
   bool done = false;
   absl::Status failed;
   auto close_file = [&]() -> absl::Status {
@@ -103,7 +114,8 @@ absl::StatusOr<uint64_t> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
   };
   while (failed.ok() && reader->Read(&chunk)) {
     if (chunk.done()) {
-      sequence = chunk.sequence();
+      copied.sequence = chunk.sequence();
+      copied.identity = chunk.db_identity();
       done = true;
       continue;
     }
@@ -139,7 +151,7 @@ absl::StatusOr<uint64_t> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
   if (!finished.ok()) return tpr::common::FromGrpcStatus(finished);
   if (!done) return absl::UnavailableError("the checkpoint stream ended early");
   TPR_RETURN_IF_ERROR(FsyncPath(options.data_dir, true));
-  return sequence;
+  return copied;
 }
 
 // Empties `dir` (a follower's own copy).
@@ -170,27 +182,33 @@ absl::Status PrepareFollowerDir(const FollowerOptions& options) {
   auto log = [&](const std::string& line) {
     if (options.log) options.log(line);
   };
-  std::unique_ptr<tpr::v1::IndexerAdmin::Stub> stub = MakeStub(options.primary);
+  std::unique_ptr<tpr::v1::IndexerAdmin::Stub> stub = MakeStub(options);
   int wait_ms = options.retry_min_ms;
   for (;;) {
     TPR_RETURN_IF_ERROR(EmptyDir(dir));
     TPR_RETURN_IF_ERROR(WriteMarker(dir, options.primary, "copying"));
     const auto start = std::chrono::steady_clock::now();
-    absl::StatusOr<uint64_t> sequence = FetchCheckpoint(*stub, options);
+    absl::StatusOr<Copied> sequence = FetchCheckpoint(*stub, options);
     if (sequence.ok()) {
       {
-        // Record where tailing starts, in the copied store itself.
-        // The database is there; Open makes its ACKNOWLEDGED record.
+        // The copy is a database of its own (a promoted follower must not
+        // pass for its former primary): a new identity when first opened.
+        TPR_RETURN_IF_ERROR(ForgetDatabaseIdentity(dir));
+        // Record where tailing starts, and whose log it is, in the copied
+        // store itself. The database is there; Open makes its ACKNOWLEDGED
+        // record.
         StorageOptions storage_options;
         TPR_ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage, Storage::Open(dir, storage_options));
-        TPR_RETURN_IF_ERROR(SetAppliedSequence(*storage, *sequence));
+        TPR_RETURN_IF_ERROR(SetPrimaryIdentity(*storage, sequence->identity));
+        TPR_RETURN_IF_ERROR(SetAppliedSequence(*storage, sequence->sequence));
       }
       TPR_RETURN_IF_ERROR(WriteMarker(dir, options.primary, "ready"));
       const double ms =
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count();
-      log(absl::StrCat("copied a checkpoint of ", options.primary, " at sequence ", *sequence,
-                       " in ", static_cast<int64_t>(ms), " ms"));
+      log(absl::StrCat("copied a checkpoint of ", options.primary, " (database ",
+                       sequence->identity, ") at sequence ", sequence->sequence, " in ",
+                       static_cast<int64_t>(ms), " ms"));
       return absl::OkStatus();
     }
     if (!absl::IsUnavailable(sequence.status()) && !absl::IsDeadlineExceeded(sequence.status())) {
@@ -206,7 +224,7 @@ absl::Status PrepareFollowerDir(const FollowerOptions& options) {
 }
 
 Follower::Follower(IndexerCore* core, FollowerOptions options)
-    : core_(core), options_(std::move(options)), stub_(MakeStub(options_.primary)) {}
+    : core_(core), options_(std::move(options)), stub_(MakeStub(options_)) {}
 
 Follower::~Follower() { Stop(); }
 
@@ -224,7 +242,14 @@ void Follower::Stop() {
 }
 
 std::string Follower::Readiness() const {
-  if (promoted_ || caught_up_) return "";
+  if (promoted_) return "";
+  {
+    absl::MutexLock lock(&state_mu_);
+    if (!refused_.empty()) {
+      return absl::StrCat("the primary ", options_.primary, " refuses to be tailed: ", refused_);
+    }
+  }
+  if (caught_up_) return "";
   return absl::StrCat("catching up with ", options_.primary, ": applied ", applied_.load(),
                       ", primary at ", primary_seq_.load());
 }
@@ -234,10 +259,17 @@ tpr::v1::ReplicationStatusResponse Follower::Status() const {
   if (promoted_) {
     status.set_role("primary");
     status.set_applied_sequence(LatestSequence(core_->storage()));
+    absl::StatusOr<std::string> identity = DatabaseIdentity(core_->storage());
+    if (identity.ok()) status.set_db_identity(*identity);
     return status;
   }
   status.set_role("follower");
   status.set_primary(options_.primary);
+  {
+    absl::MutexLock lock(&state_mu_);
+    status.set_db_identity(primary_identity_);
+    status.set_error(refused_);
+  }
   const uint64_t applied = applied_.load();
   const uint64_t primary = primary_seq_.load();
   status.set_applied_sequence(applied);
@@ -284,6 +316,18 @@ void Follower::Run(std::function<void()> on_resync) {
     return;
   }
   applied_ = **applied;
+  absl::StatusOr<std::string> identity = PrimaryIdentity(core_->storage());
+  if (!identity.ok()) {
+    log(absl::StrCat("cannot read the primary's identity (", identity.status().ToString(),
+                     "); not tailing"));
+    absl::MutexLock lock(&state_mu_);
+    refused_ = identity.status().ToString();
+    return;
+  }
+  {
+    absl::MutexLock lock(&state_mu_);
+    primary_identity_ = *identity;
+  }
   int wait_ms = options_.retry_min_ms;
   std::string last_error;
   for (;;) {
@@ -296,12 +340,20 @@ void Follower::Run(std::function<void()> on_resync) {
     }
     tpr::v1::TailLogRequest request;
     request.set_from_sequence(applied_.load() + 1);
+    request.set_db_identity(*identity);
     std::unique_ptr<grpc::ClientReader<tpr::v1::LogBatch>> reader =
         stub_->TailLog(&context, request);
     tpr::v1::LogBatch batch;
     absl::Status failed;
+    bool heard = false;
     while (reader->Read(&batch)) {
       last_heard_ms_ = NowMs();
+      if (!heard) {
+        heard = true;
+        absl::MutexLock lock(&state_mu_);
+        if (!refused_.empty()) log(absl::StrCat("the primary ", options_.primary, " accepts us again"));
+        refused_.clear();
+      }
       if (!batch.batch().empty()) {
         absl::StatusOr<uint64_t> now = core_->ApplyReplicated(batch.batch(), batch.sequence());
         if (!now.ok()) {
@@ -334,6 +386,17 @@ void Follower::Run(std::function<void()> on_resync) {
     }
     if (!failed.ok() && absl::IsFailedPrecondition(failed)) return;  // promoted
     const std::string error = status.ToString();
+    if (failed.ok() && absl::IsFailedPrecondition(status)) {
+      // The primary refuses (another database, not a primary, or it lost
+      // writes): apply nothing, be NOT_SERVING with the reason, ask again
+      // at the slowest pace. The copy stays as it is for the operator.
+      caught_up_ = false;
+      {
+        absl::MutexLock lock(&state_mu_);
+        refused_ = std::string(status.message());
+      }
+      wait_ms = options_.retry_max_ms;
+    }
     if (error != last_error) {
       log(absl::StrCat("tailing ", options_.primary, " stopped (", error, "); retrying"));
       last_error = error;

@@ -20,6 +20,15 @@
 //      asks its process to restart (on_resync); step 1 then copies again.
 //   5. Promote: stops tailing, removes the follower marks, and the indexer
 //      accepts writes. Nothing else changes roles: there is no election.
+//   6. Identity: the copy records the primary's database identity
+//      (replication.h DatabaseIdentity) and sends it with every TailLog; a
+//      primary that is another database (restored from a backup, replaced,
+//      or the wrong address) refuses with FAILED_PRECONDITION, and the
+//      follower then applies nothing, reports NOT_SERVING with the reason
+//      (Readiness, ReplicationStatus.error) and asks again every
+//      retry_max_ms, never wiping its copy by itself. The copy itself gets
+//      an identity of its own, so a promoted follower is a new database to
+//      the followers of its former primary.
 //
 // The data directory holds a marker file FOLLOWER ("primary ADDR", "state
 // copying|ready|resync") while it is a follower's. --follow refuses a
@@ -37,6 +46,7 @@
 #include <thread>
 
 #include <grpcpp/client_context.h>
+#include <grpcpp/security/credentials.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -48,8 +58,15 @@ namespace tpr::indexer {
 
 // FollowerOptions: whom to follow and how.
 struct FollowerOptions {
-  // HOST:PORT of the primary tpr-indexer (plaintext gRPC). Required.
+  // HOST:PORT of the primary tpr-indexer. Required.
   std::string primary;
+  // Channel credentials for the primary: TLS as the other clients make them
+  // (tpr::client::MakeChannelCredentials from tpr-indexer's --follow-tls*
+  // flags). nullptr: plaintext. Default nullptr.
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
+  // Name the primary's certificate carries when not the host in `primary`
+  // (--follow-tls-server-name). Empty: the host. Only with TLS credentials.
+  std::string tls_server_name;
   // The follower's data directory. Required.
   std::string data_dir;
   // API key sent to the primary (admin role) when it checks keys; empty:
@@ -97,7 +114,7 @@ class Follower {
   void Stop();
 
   // Readiness is the server's readiness check: "" once caught up, else
-  // why not.
+  // why not (catching up, or the primary refuses to be tailed).
   std::string Readiness() const;
 
   // Status reports role, sequences and lag (ReplicationStatusResponse).
@@ -119,6 +136,12 @@ class Follower {
   std::atomic<bool> caught_up_{false};
   std::atomic<bool> promoted_{false};
   std::atomic<int64_t> last_heard_ms_{-1};  // steady clock, ms; -1: never
+
+  // The primary database's identity this copy follows ("" when unknown),
+  // and why the primary refuses to be tailed ("" when it does not).
+  mutable absl::Mutex state_mu_;
+  std::string primary_identity_ ABSL_GUARDED_BY(state_mu_);
+  std::string refused_ ABSL_GUARDED_BY(state_mu_);
 
   absl::Mutex mu_;
   bool stopping_ ABSL_GUARDED_BY(mu_) = false;

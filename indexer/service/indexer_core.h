@@ -209,7 +209,7 @@ class IndexerCore {
   void WaitForRebuild() { index_->WaitForRebuild(); }
 
   // ApplyReplicated applies one batch of the primary's write-ahead log
-  // (`data` from replication.h ReadLog, first key at `sequence`) to the
+  // (`data` from replication.h LogCursor::Read, first key at `sequence`) to the
   // store (atomically with the new applied sequence, synced) and then to
   // the index, label map and table, as WriteGroup does for local writes.
   // Returns the new applied sequence. FAILED_PRECONDITION when this

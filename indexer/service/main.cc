@@ -5,6 +5,8 @@
 //
 //   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
 //   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f --follow 127.0.0.1:7002
+//   tpr-indexer ... --follow HOST:7002 --follow-tls --follow-tls-ca ca.pem
+//               (and TPR_INDEXER_FOLLOW_API_KEY): a secured primary
 //
 // A follower (follower.h) that fell behind its primary's kept log re-executes
 // itself after a graceful stop, and copies the primary again at start.
@@ -27,6 +29,8 @@
 #include "indexer/service/follower.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
+#include "tpr/client.h"
+#include "tpr/connection_flags.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"tpr-indexer: stores TPR signatures and answers EMD k-NN searches"};
@@ -55,8 +59,10 @@ int main(int argc, char** argv) {
                  "Be a read-only follower of the primary tpr-indexer at HOST:PORT "
                  "(copies it into an empty --data-dir, then tails its write-ahead log)");
   app.add_option("--follow-api-key", follow_api_key,
-                 "API key (admin role) this follower presents to its primary "
-                 "(or TPR_INDEXER_FOLLOW_API_KEY)");
+                 "API key (admin role) this follower presents to its primary; prefer the "
+                 "environment variable TPR_INDEXER_FOLLOW_API_KEY, which ps does not show");
+  tpr::client::ConnectionOptions primary_connection;
+  tpr::client::AddPeerConnectionFlags(app, "follow", "the primary", &primary_connection);
   app.add_option("--wal-keep-seconds", storage_options.wal_keep_seconds,
                  "Keep closed write-ahead logs this long for followers (s)")
       ->capture_default_str();
@@ -65,7 +71,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
-      tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
+      tpr::common::AddConfigSupport(app, "TPR_INDEXER_", {"follow-api-key"});
   CLI11_PARSE(app, argc, argv);
   if (std::optional<int> exit_code =
           tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
@@ -119,6 +125,15 @@ int main(int argc, char** argv) {
     follower_options.primary = follow;
     follower_options.data_dir = data_dir;
     follower_options.api_key = follow_api_key;
+    grpc::ChannelArguments unused;  // the server name is passed on below
+    absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials =
+        tpr::client::MakeChannelCredentials(primary_connection, &unused);
+    if (!credentials.ok()) {
+      log(absl::StrCat("--follow-tls*: ", credentials.status().message()));
+      return 2;
+    }
+    follower_options.credentials = *std::move(credentials);
+    follower_options.tls_server_name = primary_connection.tls_server_name;
     follower_options.log = log;
     if (absl::Status st = tpr::indexer::PrepareFollowerDir(follower_options); !st.ok()) {
       log(absl::StrCat("cannot start as a follower: ", st.ToString()));

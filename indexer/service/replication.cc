@@ -21,6 +21,8 @@ namespace {
 // meta family (storage.h lists the other keys). Written in the same batch
 // as the primary's writes it follows.
 constexpr char kAppliedSeqKey[] = "replica_applied_seq";
+// The follower's record of the primary database it copied (its identity).
+constexpr char kPrimaryIdentityKey[] = "replica_primary_identity";
 
 // RocksDB's status as ours: what failed, and RocksDB's reason.
 absl::Status Rocks(const rocksdb::Status& s, absl::string_view what) {
@@ -228,6 +230,10 @@ absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint3
   }
   TPR_RETURN_IF_ERROR(
       Rocks(engine->RestoreDBFromBackup(backup_id, data_dir, data_dir), "restore failed"));
+  // A restored database is a new history: followers of the original must
+  // not tail it (their sequence numbers are the original's), so it gets an
+  // identity of its own when first opened.
+  TPR_RETURN_IF_ERROR(ForgetDatabaseIdentity(data_dir));
   return RestoreResult{backup_id};
 }
 
@@ -250,43 +256,84 @@ uint64_t LatestSequence(const Storage& storage) {
   return storage.rocks().db->GetLatestSequenceNumber();
 }
 
-absl::StatusOr<std::vector<LoggedBatch>> ReadLog(Storage& storage, uint64_t from,
-                                                 size_t max_bytes) {
-  std::vector<LoggedBatch> out;
-  rocksdb::DB* db = storage.rocks().db;
-  if (from > db->GetLatestSequenceNumber()) return out;
+struct LogCursor::Iterator {
   std::unique_ptr<rocksdb::TransactionLogIterator> it;
-  rocksdb::Status s = db->GetUpdatesSince(from, &it);
+};
+
+LogCursor::LogCursor(Storage& storage, uint64_t from)
+    : storage_(storage), next_(from), it_(std::make_unique<Iterator>()) {}
+
+LogCursor::~LogCursor() = default;
+
+absl::StatusOr<std::vector<LoggedBatch>> LogCursor::Read(size_t max_bytes) {
+  std::vector<LoggedBatch> out;
+  rocksdb::DB* db = storage_.rocks().db;
+  if (next_ > db->GetLatestSequenceNumber()) return out;
   const auto purged = [&](uint64_t first) {
     return absl::OutOfRangeError(absl::StrCat(
-        "sequence ", from, " is no longer in the kept write-ahead log (it starts at ", first,
+        "sequence ", next_, " is no longer in the kept write-ahead log (it starts at ", first,
         "); start again from a checkpoint"));
   };
-  if (s.IsNotFound() || s.IsTryAgain()) return purged(0);
-  TPR_RETURN_IF_ERROR(Rocks(s, "cannot read the write-ahead log"));
-  size_t bytes = 0;
-  bool seen = false;
-  for (; it->Valid(); it->Next()) {
-    seen = true;
-    rocksdb::BatchResult batch = it->GetBatch();
-    const uint32_t count = static_cast<uint32_t>(batch.writeBatchPtr->Count());
-    if (out.empty()) {
-      // The first batch must hold `from` (it may start before it); a later
-      // start means the log between was deleted.
-      if (batch.sequence > from) return purged(batch.sequence);
-      if (batch.sequence + count <= from) continue;
-    } else if (batch.sequence != out.back().sequence + out.back().count) {
-      break;  // a gap inside the log: stop; the next read reports it
+  std::unique_ptr<rocksdb::TransactionLogIterator>& it = it_->it;
+  // Two rounds at most: the open iterator, then (when it had nothing: a new
+  // log file was started, or it failed) a fresh one.
+  for (int round = 0; round < 2; ++round) {
+    const bool fresh = it == nullptr;
+    if (fresh) {
+      rocksdb::Status s = db->GetUpdatesSince(next_, &it);
+      if (s.IsNotFound() || s.IsTryAgain()) {
+        it.reset();
+        return purged(0);
+      }
+      if (!s.ok()) {
+        it.reset();
+        return Rocks(s, "cannot read the write-ahead log");
+      }
+    } else if (!it->Valid()) {
+      // At the end of what it had read: read on from there (RocksDB
+      // re-reads the end of the current log file). With a non-OK status
+      // (a new log file it cannot see, a gap) this does nothing.
+      it->Next();
     }
-    out.push_back({batch.sequence, count, batch.writeBatchPtr->Data()});
-    bytes += out.back().data.size();
-    if (bytes >= max_bytes) break;
+    size_t bytes = 0;
+    bool seen = false;
+    bool stale = false;
+    while (it->Valid()) {
+      seen = true;
+      rocksdb::BatchResult batch = it->GetBatch();
+      it->Next();  // GetBatch moved the batch out: never look at it twice
+      const uint32_t count = static_cast<uint32_t>(batch.writeBatchPtr->Count());
+      if (batch.sequence + count <= next_) continue;  // before next_: sent already
+      if (batch.sequence > next_) {
+        // The log between is missing: deleted (a fresh iterator starts at
+        // the oldest kept batch), or this iterator skipped (reopen).
+        if (fresh && out.empty()) {
+          it.reset();
+          return purged(batch.sequence);
+        }
+        stale = true;
+        break;
+      }
+      out.push_back({batch.sequence, count, batch.writeBatchPtr->Data()});
+      next_ = batch.sequence + count;
+      bytes += out.back().data.size();
+      if (bytes >= max_bytes) break;
+    }
+    if (stale) it.reset();
+    if (!out.empty()) return out;
+    const rocksdb::Status status = it == nullptr ? rocksdb::Status::OK() : it->status();
+    if (fresh) {
+      it.reset();
+      if (!status.ok() && !status.IsTryAgain()) {
+        return Rocks(status, "cannot read the write-ahead log");
+      }
+      // `next_` was written (it is at most the latest) but no kept log
+      // holds it.
+      if (!seen) return purged(0);
+      return out;
+    }
+    it.reset();  // nothing new from the open iterator: look again afresh
   }
-  if (out.empty() && !it->status().ok() && !it->status().IsTryAgain()) {
-    return Rocks(it->status(), "cannot read the write-ahead log");
-  }
-  // `from` was written (it is at most the latest) but no kept log holds it.
-  if (!seen) return purged(0);
   return out;
 }
 
@@ -338,9 +385,46 @@ absl::Status SetAppliedSequence(Storage& storage, uint64_t sequence) {
 
 absl::Status ClearAppliedSequence(Storage& storage) {
   const RocksHandles h = storage.rocks();
+  rocksdb::WriteBatch batch;
+  TPR_RETURN_IF_ERROR(Rocks(batch.Delete(h.meta, kAppliedSeqKey), "cannot clear"));
+  TPR_RETURN_IF_ERROR(Rocks(batch.Delete(h.meta, kPrimaryIdentityKey), "cannot clear"));
   rocksdb::WriteOptions w;
   w.sync = true;
-  return Rocks(h.db->Delete(w, h.meta, kAppliedSeqKey), "cannot clear the applied sequence");
+  return Rocks(h.db->Write(w, &batch), "cannot clear the applied sequence");
+}
+
+absl::StatusOr<std::string> DatabaseIdentity(const Storage& storage) {
+  std::string identity;
+  TPR_RETURN_IF_ERROR(
+      Rocks(storage.rocks().db->GetDbIdentity(identity), "cannot read the database identity"));
+  return identity;
+}
+
+absl::Status ForgetDatabaseIdentity(const std::string& data_dir) {
+  std::error_code ec;
+  std::filesystem::remove(data_dir + "/IDENTITY", ec);
+  if (ec) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot remove ", data_dir, "/IDENTITY: ", ec.message()));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SetPrimaryIdentity(Storage& storage, const std::string& identity) {
+  const RocksHandles h = storage.rocks();
+  rocksdb::WriteOptions w;
+  w.sync = true;
+  return Rocks(h.db->Put(w, h.meta, kPrimaryIdentityKey, identity),
+               "cannot record the primary's identity");
+}
+
+absl::StatusOr<std::string> PrimaryIdentity(const Storage& storage) {
+  const RocksHandles h = storage.rocks();
+  std::string value;
+  rocksdb::Status s = h.db->Get(rocksdb::ReadOptions(), h.meta, kPrimaryIdentityKey, &value);
+  if (s.IsNotFound()) return std::string();
+  TPR_RETURN_IF_ERROR(Rocks(s, "cannot read the primary's identity"));
+  return value;
 }
 
 }  // namespace tpr::indexer

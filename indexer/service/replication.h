@@ -7,7 +7,8 @@
 //   absl::StatusOr<BackupResult> b = CreateBackup(storage, "/backups/shard0", 7);
 //   absl::StatusOr<RestoreResult> r = RestoreBackup("/backups/shard0", 0, "/data/new");
 //   absl::StatusOr<uint64_t> seq = CreateCheckpoint(storage, dir + "/.checkpoint-1");
-//   absl::StatusOr<std::vector<LoggedBatch>> log = ReadLog(storage, seq + 1, 4 << 20);
+//   LogCursor cursor(storage, seq + 1);
+//   absl::StatusOr<std::vector<LoggedBatch>> log = cursor.Read(4 << 20);
 //   absl::StatusOr<AppliedBatch> a = ApplyLoggedBatch(follower_storage, log[0].data,
 //                                                     log[0].sequence);
 //
@@ -20,6 +21,7 @@
 #define TPR_INDEXER_SERVICE_REPLICATION_H_
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -66,7 +68,9 @@ struct RestoreResult {
 // RestoreBackup restores backup `backup_id` (0: the latest) of the set in
 // `backup_dir` into `data_dir`, which must be absent or an empty directory:
 // FAILED_PRECONDITION naming it otherwise (a restore never overwrites
-// data). The backup is verified (checksums) before it is restored. Returns
+// data). The backup is verified (checksums) before it is restored. The
+// restored database gets a new identity (ForgetDatabaseIdentity): followers
+// of the original refuse to tail it. Returns
 // NOT_FOUND for a missing set or backup id, DATA_LOSS when verification
 // fails, UNAVAILABLE/INTERNAL for I/O errors. Cost: a read of the backup and
 // a copy of its files. Thread-safe.
@@ -93,14 +97,44 @@ struct LoggedBatch {
   std::string data;
 };
 
-// ReadLog returns the batches of `storage`'s write-ahead log from sequence
-// `from` on, until their bytes reach max_bytes (at least one batch when any
-// is there); empty when nothing was written at or after `from`. Returns
-// OUT_OF_RANGE when `from` is no longer in the kept log (archived logs are
-// kept for StorageOptions::wal_keep_seconds / wal_keep_mb), naming both
-// numbers. Cost: reading the log from the file holding `from`. Thread-safe.
-absl::StatusOr<std::vector<LoggedBatch>> ReadLog(Storage& storage, uint64_t from,
-                                                 size_t max_bytes);
+// LogCursor reads `storage`'s write-ahead log forward from a sequence
+// number, for a follower's TailLog stream. It keeps RocksDB's
+// TransactionLogIterator (GetUpdatesSince) open between reads and only asks
+// it for what was written since (TransactionLogIterator::Next re-reads the
+// end of the current log file), so a caught-up follower costs each poll the
+// new bytes only. It opens a new iterator, which reads the log file holding
+// the next sequence from that file's start, when the primary has started a
+// new log file since, or after an error. (Reopening on every poll cost
+// O(log file size) per poll: the follower fell behind at ~1000 models/s;
+// bench_gateway BM_FollowerLag.) Not thread-safe: one cursor per stream.
+class LogCursor {
+ public:
+  // The cursor starts at sequence `from`; `storage` must outlive it.
+  LogCursor(Storage& storage, uint64_t from);
+  ~LogCursor();
+  LogCursor(const LogCursor&) = delete;
+  LogCursor& operator=(const LogCursor&) = delete;
+
+  // Read returns the next batches of the log, in order and contiguous, the
+  // first holding next() (it may start before it), until their bytes reach
+  // max_bytes (at least one batch when any is there), and moves next() past
+  // them; empty when nothing was written at or after next(). Returns
+  // OUT_OF_RANGE when next() is no longer in the kept log (archived logs are
+  // kept for StorageOptions::wal_keep_seconds / wal_keep_mb), naming both
+  // numbers; UNAVAILABLE/INTERNAL for read errors. Cost: the bytes read;
+  // after a new log file was started or an error, also the log file from
+  // its start to next().
+  absl::StatusOr<std::vector<LoggedBatch>> Read(size_t max_bytes);
+
+  // The first sequence number Read has not returned yet.
+  uint64_t next() const { return next_; }
+
+ private:
+  struct Iterator;
+  Storage& storage_;
+  uint64_t next_;
+  std::unique_ptr<Iterator> it_;
+};
 
 // ReplicatedChange: one model a replicated batch put or deleted.
 struct ReplicatedChange {
@@ -140,9 +174,33 @@ absl::StatusOr<std::optional<uint64_t>> AppliedSequence(const Storage& storage);
 // sequence of the checkpoint a follower starts from. Thread-safe.
 absl::Status SetAppliedSequence(Storage& storage, uint64_t sequence);
 
-// ClearAppliedSequence removes the record (promotion: the store is a
-// primary's from then on). Synced. Thread-safe.
+// ClearAppliedSequence removes the record and the followed primary's
+// identity (promotion: the store is a primary's from then on). Synced.
+// Thread-safe.
 absl::Status ClearAppliedSequence(Storage& storage);
+
+// DatabaseIdentity returns `storage`'s database identity (RocksDB
+// GetDbIdentity: a UUID made when the database is created). Every database
+// copy a follower makes and every restore gets a new one
+// (ForgetDatabaseIdentity), so sequence numbers are only compared between a
+// follower and the very database it copied. Errors: the store's. Cost: a
+// small file read. Thread-safe.
+absl::StatusOr<std::string> DatabaseIdentity(const Storage& storage);
+
+// ForgetDatabaseIdentity removes the identity file of the database copy in
+// `data_dir` (a follower's checkpoint copy, a restored backup) before it is
+// first opened, so that RocksDB gives the copy an identity of its own (the
+// identity lives in that file only: Storage never sets
+// write_dbid_to_manifest). Absent file: OK. UNAVAILABLE when it cannot be
+// removed. Not thread-safe with an open database in `data_dir`.
+absl::Status ForgetDatabaseIdentity(const std::string& data_dir);
+
+// SetPrimaryIdentity records, in a follower's store, the identity of the
+// primary database it copied (synced); PrimaryIdentity reads it ("" when
+// none was recorded: a store copied before identities were kept, which is
+// then not checked). Errors: the store's. Thread-safe.
+absl::Status SetPrimaryIdentity(Storage& storage, const std::string& identity);
+absl::StatusOr<std::string> PrimaryIdentity(const Storage& storage);
 
 }  // namespace tpr::indexer
 

@@ -9,7 +9,8 @@
 // gateway's trailing metadata and found in the JSON log lines of the
 // gateway and of the shards that served it; and the gateway's /metrics
 // after known calls (per-shard latency counts equal to the calls each shard
-// got, per-shard errors with their code).
+// got, per-shard errors with their code). Also a follower tpr-indexer
+// reaching its TLS primary with its own TLS options and key (issue 10).
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -210,6 +211,66 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
                     "code=\"UNAUTHENTICATED\""}),
             1)
       << m.out;
+}
+
+// A follower reaches a primary that demands TLS and keys with the same
+// options as every other client (--follow-tls, --follow-tls-ca, the key in
+// TPR_INDEXER_FOLLOW_API_KEY): with an admin key it copies and tails it;
+// with too low a role it stops with the primary's PERMISSION_DENIED in its
+// log, never copying anything.
+TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
+  const std::vector<v1::Model> models = Models(10);
+  client::IndexerClient primary = Client(shards_[0], keys_[Role::kWrite]);
+  for (size_t i = 0; i < 6; ++i) ASSERT_TRUE(primary.Upsert(models[i], true).ok());
+
+  auto start_follower = [&](ServiceProcess* follower, const std::string& name, Role role) {
+    setenv("TPR_INDEXER_FOLLOW_API_KEY", keys_[role].c_str(), 1);
+    absl::Status started = follower->Start(
+        BinaryPath("tpr-indexer"),
+        {"--data-dir", Path(name), "--follow", shards_[0].address(), "--follow-tls",
+         "--follow-tls-ca", Path("ca1.pem"), "--follow-tls-server-name", "localhost"},
+        Path(name + ".log"));
+    unsetenv("TPR_INDEXER_FOLLOW_API_KEY");
+    return started;
+  };
+  ServiceProcess follower;
+  absl::Status started = start_follower(&follower, "follower", Role::kAdmin);
+  ASSERT_TRUE(started.ok()) << started << ReadText(Path("follower.log"));
+  std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateChannel(follower.address(), grpc::InsecureChannelCredentials());
+  auto follower_models = [&]() -> int64_t {
+    absl::StatusOr<client::IndexerClient> c =
+        client::IndexerClient::Connect(follower.address(), client::ConnectionOptions{});
+    if (!c.ok()) return -1;
+    absl::StatusOr<v1::StatsResponse> stats = c->Stats();
+    return stats.ok() ? stats->models() : -1;
+  };
+  auto wait_for = [](auto pred) {
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (std::chrono::steady_clock::now() < give_up && !pred()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return pred();
+  };
+  ASSERT_TRUE(wait_for([&] {
+    absl::StatusOr<int> health = HealthStatus(channel, "tpr.v1.Indexer");
+    return health.ok() && *health == 1;  // SERVING: copied and caught up
+  })) << ReadText(Path("follower.log"));
+  EXPECT_EQ(follower_models(), 6);
+  for (size_t i = 6; i < models.size(); ++i) ASSERT_TRUE(primary.Upsert(models[i], true).ok());
+  EXPECT_TRUE(wait_for([&] { return follower_models() == 10; }))
+      << ReadText(Path("follower.log"));
+  EXPECT_EQ(follower.Stop(SIGTERM), 0);
+
+  // A write key is not enough to copy a primary.
+  ServiceProcess refused;
+  started = start_follower(&refused, "refused", Role::kWrite);
+  if (started.ok()) {  // it may exit before or after reporting its port
+    EXPECT_NE(refused.Stop(0, std::chrono::seconds(30)), 0);
+  }
+  const std::string log = ReadText(Path("refused.log"));
+  EXPECT_NE(log.find("PERMISSION_DENIED"), std::string::npos) << log;
+  EXPECT_NE(log.find("cannot copy a checkpoint"), std::string::npos) << log;
 }
 
 TEST_F(GatewayOpsTest, RequestIdTravelsToTheShardsAndBack) {

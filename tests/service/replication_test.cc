@@ -139,6 +139,14 @@ grpc::Status Call(Node& node, const tpr::v1::RestoreRequest& request,
   return node.admin()->Restore(&context, request, response);
 }
 
+// Storage options that keep no closed write-ahead log: deleted at once.
+StorageOptions NoArchive() {
+  StorageOptions options;
+  options.wal_keep_seconds = 0;
+  options.wal_keep_mb = 0;
+  return options;
+}
+
 template <typename Pred>
 bool WaitFor(Pred pred, int seconds = 30) {
   const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
@@ -293,10 +301,7 @@ TEST(FollowerTest, CopiesTailsRefusesWritesAndPromotes) {
 
 TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   TempDir tmp;
-  StorageOptions no_archive;  // closed logs deleted at once
-  no_archive.wal_keep_seconds = 0;
-  no_archive.wal_keep_mb = 0;
-  Node primary(tmp.path() + "/primary", "", no_archive);
+  Node primary(tmp.path() + "/primary", "", NoArchive());
   ASSERT_TRUE(primary.Start().ok());
   const std::vector<TestModel> models = MakeModels(80, 4, 31);
   Ingest(primary.core(), {models.begin(), models.begin() + 20});
@@ -329,6 +334,146 @@ TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   const std::vector<TestModel> queries(models.begin(), models.begin() + 8);
   EXPECT_EQ(Answers(follower, queries), Answers(primary, queries));
   EXPECT_EQ(follower.core()->Stats().models(), 80);
+}
+
+// The log cursor a TailLog stream keeps open: what it returns while writes
+// go on (and across a new log file, which a flush starts) must be the log
+// exactly: the oracle is a fresh cursor reading everything at the end.
+TEST(LogCursorTest, ReadsOnlyWhatIsNewAcrossPollsAndLogFiles) {
+  TempDir tmp;
+  Node primary(tmp.path() + "/primary");
+  ASSERT_TRUE(primary.Start().ok());
+  Storage& storage = primary.core()->storage();
+  const std::vector<TestModel> models = MakeModels(40, 4, 17);
+  LogCursor cursor(storage, LatestSequence(storage) + 1);
+  std::vector<LoggedBatch> seen;
+  auto poll = [&](size_t max_bytes) {
+    absl::StatusOr<std::vector<LoggedBatch>> got = cursor.Read(max_bytes);
+    EXPECT_TRUE(got.ok()) << got.status();
+    if (!got.ok()) return size_t{0};
+    seen.insert(seen.end(), got->begin(), got->end());
+    return got->size();
+  };
+  const uint64_t first = LatestSequence(storage) + 1;
+  EXPECT_EQ(poll(1 << 20), 0u);  // nothing written yet
+  Ingest(primary.core(), {models.begin(), models.begin() + 5});
+  EXPECT_EQ(poll(1 << 20), 5u);  // one batch per upsert
+  EXPECT_EQ(poll(1 << 20), 0u);
+  Ingest(primary.core(), {models.begin() + 5, models.begin() + 8});
+  EXPECT_EQ(poll(1), 1u);  // max_bytes: one batch at least, then stop
+  EXPECT_EQ(poll(1 << 20), 2u);
+  // A checkpoint flushes: the writes after it go to a new log file, which
+  // the open iterator cannot see; the cursor opens a new one.
+  ASSERT_TRUE(CreateCheckpoint(storage, tmp.path() + "/checkpoint").ok());
+  Ingest(primary.core(), {models.begin() + 8, models.begin() + 12});
+  EXPECT_EQ(poll(1 << 20), 4u);
+  ASSERT_TRUE(primary.core()->Delete(models[2].id).ok());
+  EXPECT_EQ(poll(1 << 20), 1u);
+  EXPECT_EQ(cursor.next(), LatestSequence(storage) + 1);
+
+  LogCursor oracle(storage, first);
+  absl::StatusOr<std::vector<LoggedBatch>> all = oracle.Read(64 << 20);
+  ASSERT_TRUE(all.ok()) << all.status();
+  ASSERT_EQ(all->size(), seen.size());
+  for (size_t i = 0; i < seen.size(); ++i) {
+    EXPECT_EQ(seen[i].sequence, (*all)[i].sequence) << i;
+    EXPECT_EQ(seen[i].count, (*all)[i].count) << i;
+    EXPECT_EQ(seen[i].data, (*all)[i].data) << i;
+    if (i > 0) {
+      EXPECT_EQ(seen[i].sequence, seen[i - 1].sequence + seen[i - 1].count) << i;
+    }
+  }
+}
+
+TEST(LogCursorTest, ASequenceNoLongerKeptIsOutOfRange) {
+  TempDir tmp;
+  Node primary(tmp.path() + "/primary", "", NoArchive());
+  ASSERT_TRUE(primary.Start().ok());
+  Storage& storage = primary.core()->storage();
+  const std::vector<TestModel> models = MakeModels(6, 2, 19);
+  Ingest(primary.core(), {models.begin(), models.begin() + 3});
+  ASSERT_TRUE(CreateCheckpoint(storage, tmp.path() + "/checkpoint").ok());  // flushes
+  Ingest(primary.core(), {models.begin() + 3, models.end()});
+  LogCursor cursor(storage, 1);
+  absl::StatusOr<std::vector<LoggedBatch>> got = cursor.Read(1 << 20);
+  EXPECT_TRUE(absl::IsOutOfRange(got.status())) << got.status();
+  EXPECT_NE(got.status().message().find("sequence 1 is no longer"), std::string::npos)
+      << got.status();
+}
+
+// A follower's store records the identity of the database it copied; a
+// primary that is another database (restored from a backup, or the wrong
+// address) is refused: nothing applied, NOT_SERVING with both identities
+// named, the copy kept.
+TEST(FollowerTest, RefusesToTailAnotherDatabase) {
+  TempDir tmp;
+  const std::vector<TestModel> models = MakeModels(60, 3, 41);
+  auto primary = std::make_unique<Node>(tmp.path() + "/primary");
+  ASSERT_TRUE(primary->Start().ok());
+  Ingest(primary->core(), {models.begin(), models.begin() + 20});
+  tpr::v1::BackupRequest backup;
+  backup.set_backup_dir(tmp.path() + "/backups");
+  tpr::v1::BackupResponse ignored;
+  ASSERT_TRUE(Call(*primary, backup, &ignored).ok());
+  Ingest(primary->core(), {models.begin() + 20, models.begin() + 30});
+  absl::StatusOr<std::string> primary_id = DatabaseIdentity(primary->core()->storage());
+  ASSERT_TRUE(primary_id.ok() && !primary_id->empty());
+
+  const std::string follower_dir = tmp.path() + "/follower";
+  uint64_t applied = 0;
+  {
+    Node follower(follower_dir, primary->address());
+    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
+    ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+    const tpr::v1::ReplicationStatusResponse status = follower.follower()->Status();
+    EXPECT_EQ(status.db_identity(), *primary_id);
+    EXPECT_EQ(status.error(), "");
+    // The copy is a database of its own (a promoted follower is not its
+    // former primary).
+    absl::StatusOr<std::string> own = DatabaseIdentity(follower.core()->storage());
+    ASSERT_TRUE(own.ok());
+    EXPECT_NE(*own, *primary_id);
+    applied = status.applied_sequence();
+  }
+
+  // The primary is restored from its backup (fewer models, a new history)
+  // and written to beyond the follower's sequence; then a wholly different
+  // primary. Both are refused.
+  const std::string restored_dir = tmp.path() + "/restored";
+  tpr::v1::RestoreRequest restore;
+  restore.set_backup_dir(tmp.path() + "/backups");
+  restore.set_data_dir(restored_dir);
+  tpr::v1::RestoreResponse restored;
+  ASSERT_TRUE(Call(*primary, restore, &restored).ok());
+  primary.reset();
+  Node restored_primary(restored_dir);
+  ASSERT_TRUE(restored_primary.Start().ok());
+  Ingest(restored_primary.core(), {models.begin() + 30, models.end()});
+  ASSERT_GT(LatestSequence(restored_primary.core()->storage()), applied);
+  absl::StatusOr<std::string> restored_id =
+      DatabaseIdentity(restored_primary.core()->storage());
+  ASSERT_TRUE(restored_id.ok());
+  EXPECT_NE(*restored_id, *primary_id);
+
+  Node other(tmp.path() + "/other");
+  ASSERT_TRUE(other.Start().ok());
+  Ingest(other.core(), MakeModels(80, 2, 43));
+
+  for (Node* wrong : {&restored_primary, &other}) {
+    Node follower(follower_dir, wrong->address());
+    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
+    ASSERT_TRUE(WaitFor([&] { return !follower.follower()->Status().error().empty(); }));
+    const std::string reason = follower.follower()->Readiness();
+    EXPECT_NE(reason.find("refuses to be tailed"), std::string::npos) << reason;
+    EXPECT_NE(reason.find(*primary_id), std::string::npos) << reason;
+    absl::StatusOr<std::string> wrong_id = DatabaseIdentity(wrong->core()->storage());
+    ASSERT_TRUE(wrong_id.ok());
+    EXPECT_NE(reason.find(*wrong_id), std::string::npos) << reason;
+    // Nothing applied: the copy of the original is intact.
+    EXPECT_EQ(follower.follower()->Status().applied_sequence(), applied);
+    EXPECT_EQ(follower.core()->Stats().models(), 30);
+    EXPECT_FALSE(follower.resync());
+  }
 }
 
 TEST(FollowerTest, RefusesADirectoryHoldingAPrimarysData) {
