@@ -1,9 +1,10 @@
 // tpr-gateway benchmarks, one indexer against S = 4 shards behind the
 // gateway, measured side by side in one run (all servers in this process,
 // on loopback gRPC, sharing the machine's cores):
-//  * BM_Knn10SingleVsGateway/N: a 10-NN query over N models (the same
+//  * BM_Knn10SingleVsGateway/N/Q: a 10-NN query over N models (the same
 //    query, alternately) to one tpr-indexer and to the gateway over 4 shards
-//    holding the same N models. Counters: p50 latency of each (ms, wall),
+//    holding the same N models; Q = 0: queries of the stored classes (not
+//    stored themselves), Q = 1: queries of other prototypes (worst case). Counters: p50 latency of each (ms, wall),
 //    their ratio (target <= 1.5 on a 2-core machine), EMDs per query of the
 //    single indexer, and per shard (each shard's full 10-NN on its part, run
 //    in process for the same queries: the most a shard does for one query;
@@ -16,7 +17,7 @@
 //    for 4 s; how long until the follower has applied each write (ms) and
 //    how many keys it was behind when sampled.
 //
-//   bench_gateway --benchmark_filter='BM_Knn10SingleVsGateway/100000|BM_Ingest.*/10000|BM_FollowerLag'
+//   bench_gateway --benchmark_filter='BM_Knn10SingleVsGateway/100000/0|BM_Ingest.*/10000|BM_FollowerLag'
 //
 // Signatures: tests/indexer/signature_testing.h, 20 clustered classes, 30
 // features x 20 bands (the paper's average size), as bench_service.
@@ -99,7 +100,8 @@ struct KnnSetup {
   std::unique_ptr<Indexer> single;
   std::vector<std::unique_ptr<Indexer>> shards;
   std::unique_ptr<Gateway> gateway;
-  std::vector<tpr::v1::SearchRequest> queries;
+  // [0]: in-class queries (InClassQueries), [1]: foreign ones (KnnQueries).
+  std::vector<tpr::v1::SearchRequest> queries[2];
 };
 
 KnnSetup* KnnWith(int n) {
@@ -128,7 +130,8 @@ KnnSetup* KnnWith(int n) {
   s.single->core->WaitForRebuild();
   for (auto& shard : s.shards) shard->core->WaitForRebuild();
   s.gateway = StartGateway(s.shards);
-  s.queries = bench::KnnQueries();
+  s.queries[0] = bench::InClassQueries(n, 7);
+  s.queries[1] = bench::KnnQueries();
   return slot.get();
 }
 
@@ -148,19 +151,20 @@ double TimedSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::SearchRequest& q
 
 void BM_Knn10SingleVsGateway(benchmark::State& state) {
   KnnSetup* s = KnnWith(static_cast<int>(state.range(0)));
+  const std::vector<tpr::v1::SearchRequest>& queries = s->queries[state.range(1) == 0 ? 0 : 1];
   std::vector<double> single_ms, gateway_ms;
   // Work per query: the single indexer's, and each shard's full 10-NN on
   // its part (measured once per distinct query, outside the timing).
   std::vector<double> single_emds, shard_emds_max, shard_emds_mean;
   size_t i = 0;
   for (auto _ : state) {
-    const size_t qi = i++ % s->queries.size();
-    const tpr::v1::SearchRequest& q = s->queries[qi];
+    const size_t qi = i++ % queries.size();
+    const tpr::v1::SearchRequest& q = queries[qi];
     int a = 0, b = 0;
     single_ms.push_back(TimedSearch(s->single->stub.get(), q, &a, state));
     gateway_ms.push_back(TimedSearch(s->gateway->stub.get(), q, &b, state));
     if (a != 10 || b != 10) state.SkipWithError("fewer than 10 neighbours");
-    if (i <= s->queries.size()) {
+    if (i <= queries.size()) {
       state.PauseTiming();
       auto run = [&](IndexerCore* core) {
         auto session = core->StartSearch(q, nullptr);
@@ -190,11 +194,16 @@ void BM_Knn10SingleVsGateway(benchmark::State& state) {
   state.counters["shard_emds_max"] = Percentile(shard_emds_max, 0.5);
   state.counters["shard_emds_mean"] = Percentile(shard_emds_mean, 0.5);
 }
-// 16 iterations: 16 distinct queries per repetition, the same 16 each time.
+// Args (N, queries): 0 in-class queries (a known kind of shape, the
+// realistic case), 1 foreign ones (far from every class: little pruning,
+// the worst case; each costs seconds at 100k). 16 iterations: 16 distinct
+// queries per repetition, the same 16 each time.
 BENCHMARK(BM_Knn10SingleVsGateway)
-    ->Arg(2000)
-    ->Arg(20000)
-    ->Arg(100000)
+    ->Args({2000, 0})
+    ->Args({20000, 0})
+    ->Args({100000, 0})
+    ->Args({2000, 1})
+    ->Args({100000, 1})
     ->Iterations(16)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
@@ -302,6 +311,9 @@ void BM_FollowerLag(benchmark::State& state) {
     state.PauseTiming();
     auto primary = StartReplicaNode("");
     auto follower = StartReplicaNode(primary->address());
+    // Made before the clock starts, so the writes keep their pace.
+    std::vector<tpr::v1::UpsertRequest> all =
+        UpsertRequests(batch * (4000 / period_ms + 2), 5, "lag");
     state.ResumeTiming();
     const auto start = std::chrono::steady_clock::now();
     const auto end = start + std::chrono::seconds(4);
@@ -331,8 +343,6 @@ void BM_FollowerLag(benchmark::State& state) {
         std::this_thread::sleep_for(std::chrono::microseconds(500));
       }
     });
-    std::vector<tpr::v1::UpsertRequest> all =
-        UpsertRequests(batch * (4000 / period_ms + 2), 5, "lag");
     size_t next = 0;
     for (auto t = start; t < end && next + batch <= all.size(); t += std::chrono::milliseconds(period_ms)) {
       std::this_thread::sleep_until(t);
@@ -364,10 +374,12 @@ void BM_FollowerLag(benchmark::State& state) {
   state.counters["models_per_s"] = benchmark::Counter(static_cast<double>(written),
                                                       benchmark::Counter::kIsRate);
 }
-// (batch, period ms): 16 models every 50 ms (320/s), 64 every 50 ms (1280/s).
+// (batch, period ms): 16 models every 50 ms (320/s), 64 (1280/s), 256
+// (5120/s, beyond what one durable primary takes on this machine).
 BENCHMARK(BM_FollowerLag)
     ->Args({16, 50})
     ->Args({64, 50})
+    ->Args({256, 50})
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();

@@ -68,6 +68,26 @@ inline std::vector<tpr::v1::SearchRequest> KnnQueries() {
   return queries;
 }
 
+// InClassQueries: 64 10-NN queries drawn as the models of
+// UpsertRequests(n, seed, ...) are (members of the same 20 classes, the
+// draws that would follow model n-1) but not stored: the realistic case, a
+// query shaped like a known kind of model. KnnQueries' signatures come from
+// other prototypes (seed 99), far from every stored class, where the
+// VP-tree prunes little: the worst case.
+inline std::vector<tpr::v1::SearchRequest> InClassQueries(int n, uint64_t seed) {
+  tpr::index::testing::SignatureGeneratorOptions o;
+  o.seed = seed;
+  o.classes = 20;
+  tpr::index::testing::SignatureGenerator gen(o);
+  for (int i = 0; i < n; ++i) gen.Next();
+  std::vector<tpr::v1::SearchRequest> queries(64);
+  for (tpr::v1::SearchRequest& q : queries) {
+    *q.mutable_signature() = tpr::indexer::testing::ToWire(gen.Next());
+    q.set_k(10);
+  }
+  return queries;
+}
+
 // FreshDir makes a new directory under the system's temporary folder,
 // removed when the process exits (set-ups cached for the whole run live
 // until then). Aborts when it cannot.
