@@ -413,6 +413,35 @@ TEST_F(GatewayTest, StatsSumsAndListsEachShard) {
   EXPECT_EQ(sum, got.models());
 }
 
+// Search statistics through the gateway are the shards' own, summed: each
+// shard asked directly with the same request is the oracle. k above the
+// corpus, so that every shard's stream runs to its end (a stream cancelled
+// once k neighbours are sent reports no statistics).
+TEST_F(GatewayTest, SearchStatisticsAreTheShardsSums) {
+  for (auto& shard : shards_) shard->core()->WaitForRebuild();
+  for (size_t q : {size_t{0}, size_t{57}, size_t{131}}) {
+    tpr::v1::SearchRequest request;
+    *request.mutable_signature() = ToWire(models_[q].signature);
+    request.set_k(1000);
+    request.set_label(q == 57 ? "class1" : "");
+    SearchResult got = RunSearch(gateway_.get(), request);
+    ASSERT_TRUE(got.status.ok()) << got.status.error_message();
+    ASSERT_TRUE(got.got_stats);
+    int64_t emds = 0, bounds = 0, nodes = 0;
+    for (auto& shard : shards_) {
+      SearchResult one = RunSearch(shard->stub(), request);
+      ASSERT_TRUE(one.status.ok() && one.got_stats);
+      emds += one.stats.emd_computations();
+      bounds += one.stats.lower_bounds();
+      nodes += one.stats.nodes_visited();
+    }
+    EXPECT_GT(emds, 0);
+    EXPECT_EQ(got.stats.emd_computations(), emds) << "query " << q;
+    EXPECT_EQ(got.stats.lower_bounds(), bounds) << "query " << q;
+    EXPECT_EQ(got.stats.nodes_visited(), nodes) << "query " << q;
+  }
+}
+
 TEST_F(GatewayTest, AStoppedShardFailsTheCallNamingIt) {
   shards_[1]->Stop();
   tpr::v1::SearchRequest request;
