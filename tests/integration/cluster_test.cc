@@ -6,7 +6,8 @@
 // - exactness: every query answers the same (id, distance) list through the
 //   gateway as from the single indexer, bit for bit (ties, radius, label
 //   filter, exclude_self, k above the corpus, after deletes), with models
-//   extracted through haproxy as well as generated signatures;
+//   extracted through haproxy as well as generated signatures; `tpr eval`
+//   through the gateway reports what it reports against the single indexer;
 // - a killed shard makes queries fail with UNAVAILABLE naming it, never
 //   return fewer neighbours;
 // - kill -9 of a shard primary during batch ingest through the gateway loses
@@ -22,7 +23,9 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <fstream>
+#include <regex>
 #include <set>
 #include <thread>
 
@@ -341,6 +344,33 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
     ExpectSame(request);
   }
   EXPECT_GT(queries_, 90);
+}
+
+// `tpr eval` works unchanged through the gateway: the same labelled set,
+// extracted through haproxy, evaluated once against the gateway over the
+// shards and once against the single indexer, reports the same metrics
+// (every number of the JSON report but the timings and the output folder).
+TEST_F(ClusterTest, TprEvalThroughTheGatewayReportsAsOneIndexer) {
+  const std::string synth = absl::StrCat(BinaryPath("tpr-synth"), " --out ", Path("set"),
+                                         " --classes 3 --poses 3 --vertices 1200 --seed 5",
+                                         " --jobs 2 > /dev/null 2>&1");
+  ASSERT_EQ(std::system(synth.c_str()), 0) << synth;
+  auto eval = [&](const std::string& indexer, const std::string& out) {
+    auto [code, json] = Tpr(absl::StrCat("--json --extractor 127.0.0.1:", front_port_,
+                                         " --indexer ", indexer, " eval --jobs 2 --out ",
+                                         Path(out), " ", Path("set")));
+    EXPECT_EQ(code, 0) << json << tpr::testing::ReadText(Path("tpr.err"));
+    // What may differ: where the pictures went and how long it took.
+    for (const char* pattern : {"\"out\":\"[^\"]*\",?", "\"(extract|query)_seconds\":[0-9.e+-]+,?"}) {
+      json = std::regex_replace(json, std::regex(pattern), "");
+    }
+    return json;
+  };
+  const std::string through_gateway = eval(gateway_.address(), "out-gateway");
+  const std::string one_indexer = eval(reference_.address(), "out-single");
+  EXPECT_NE(through_gateway.find("\"models\":9"), std::string::npos) << through_gateway;
+  EXPECT_NE(through_gateway.find("\"per_class\""), std::string::npos) << through_gateway;
+  EXPECT_EQ(through_gateway, one_indexer);
 }
 
 TEST_F(ClusterTest, AKilledShardFailsQueriesNeverShortensThem) {

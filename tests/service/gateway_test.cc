@@ -5,7 +5,8 @@
 // bit of every distance (ties, radius, label filter, exclude_self, k above
 // the corpus, after deletes), and both against the brute-force oracle;
 // List pages, Stats sums, Get/Upsert/Delete errors; a stopped shard fails
-// the call with UNAVAILABLE naming it.
+// the call with UNAVAILABLE naming it; search statistics are the shards'
+// sums; reads go to any serving replica and writes to the primary.
 #include "indexer/gateway/gateway_service.h"
 
 #include <gtest/gtest.h>
@@ -440,6 +441,88 @@ TEST_F(GatewayTest, SearchStatisticsAreTheShardsSums) {
     EXPECT_EQ(got.stats.lower_bounds(), bounds) << "query " << q;
     EXPECT_EQ(got.stats.nodes_visited(), nodes) << "query " << q;
   }
+}
+
+// Replicas: reads go to any serving copy of a shard, writes only to its
+// primary. One shard with a primary and a replica holding the same models
+// (the gateway cannot tell a follower from any other copy); the replica also
+// holds one model the primary lacks, so that which copy answered shows.
+TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
+  InProcessIndexer primary(dir_.path() + "/r-primary");
+  InProcessIndexer replica(dir_.path() + "/r-replica");
+  ASSERT_TRUE(primary.Start().ok());
+  ASSERT_TRUE(replica.Start().ok());
+  const std::vector<TestModel> corpus(models_.begin(), models_.begin() + 40);
+  tpr::v1::BatchUpsertResponse ignored;
+  ASSERT_TRUE(Ingest(primary.stub(), corpus, &ignored).ok());
+  ASSERT_TRUE(Ingest(replica.stub(), corpus, &ignored).ok());
+  std::vector<TestModel> marker = MakeModels(1, 1, 99, "only-on-replica");
+  ASSERT_TRUE(Ingest(replica.stub(), marker, &ignored).ok());
+
+  GatewayOptions options;
+  options.shards.shards.push_back({primary.address(), {replica.address()}});
+  options.health_interval_ms = 0;
+  GatewayService service(options);
+  // Replicas are read only once a health check has found them SERVING (a
+  // follower still catching up is not); the test runs the checks itself.
+  service.shards().CheckNow();
+  tpr::common::ServerOptions server_options;
+  server_options.shutdown_grace_ms = 1000;
+  absl::StatusOr<tpr::common::StartedServer> started =
+      tpr::common::StartServer(server_options, {&service});
+  ASSERT_TRUE(started.ok()) << started.status();
+  auto gateway = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
+      absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+  auto get = [&](const std::string& id) {
+    grpc::ClientContext context;
+    tpr::v1::GetRequest request;
+    request.set_id(id);
+    tpr::v1::Model model;
+    return gateway->Get(&context, request, &model).error_code();
+  };
+  auto models = [&]() -> int64_t {
+    grpc::ClientContext context;
+    tpr::v1::StatsResponse stats;
+    return gateway->Stats(&context, {}, &stats).ok() ? stats.models() : -1;
+  };
+
+  // Both serving: reads alternate between the two copies.
+  int on_replica = 0;
+  for (int i = 0; i < 8; ++i) on_replica += get(marker[0].id) == grpc::StatusCode::OK;
+  EXPECT_GT(on_replica, 0);
+  EXPECT_LT(on_replica, 8);
+
+  // A write reaches the primary only.
+  std::vector<TestModel> fresh = MakeModels(1, 1, 98, "written");
+  {
+    grpc::ClientContext context;
+    tpr::v1::UpsertResponse upserted;
+    ASSERT_TRUE(gateway->Upsert(&context, ToRequest(fresh[0]), &upserted).ok());
+  }
+  EXPECT_TRUE(primary.core()->Get(fresh[0].id).ok());
+  EXPECT_TRUE(absl::IsNotFound(replica.core()->Get(fresh[0].id).status()));
+
+  // The primary stops: every read is served by the replica; writes fail
+  // naming the shard, never landing on the replica.
+  primary.Stop();
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(get(marker[0].id), grpc::StatusCode::OK);
+  EXPECT_EQ(models(), 41);
+  tpr::v1::SearchRequest search;
+  *search.mutable_signature() = ToWire(corpus[3].signature);
+  search.set_k(5);
+  SearchResult found = RunSearch(gateway.get(), search);
+  EXPECT_TRUE(found.status.ok()) << found.status.error_message();
+  EXPECT_EQ(found.neighbors.size(), 5u);
+  {
+    grpc::ClientContext context;
+    tpr::v1::UpsertResponse upserted;
+    grpc::Status refused = gateway->Upsert(&context, ToRequest(fresh[0], true), &upserted);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::UNAVAILABLE);
+    EXPECT_NE(refused.error_message().find("shard 0"), std::string::npos)
+        << refused.error_message();
+  }
+  EXPECT_TRUE(absl::IsNotFound(replica.core()->Get(fresh[0].id).status()));
+  tpr::common::ShutdownGracefully(*started, server_options);
 }
 
 TEST_F(GatewayTest, AStoppedShardFailsTheCallNamingIt) {
