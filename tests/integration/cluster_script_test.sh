@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# scripts/cluster end to end (CTest cluster_script, label integration): `up`
+# with 2 extractors, 2 shards and one follower each; the two export lines it
+# prints (and `env` prints the same); meshes added with `tpr add` through
+# haproxy and the gateway; `tpr stats` counting them over the shards; a
+# query by id; `status` listing every recorded process as running; `down`
+# stopping every recorded PID (each exits within its drain) and --purge
+# removing the state directory. Exit 77 (skipped) without haproxy.
+#
+#   tests/integration/cluster_script_test.sh BUILD_DIR
+set -euo pipefail
+BUILD="$(cd "${1:?usage: cluster_script_test.sh BUILD_DIR}" && pwd)"
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+command -v haproxy >/dev/null 2>&1 || [ -x /usr/sbin/haproxy ] ||
+  { echo "haproxy is not installed (scripts/setup): skipped"; exit 77; }
+PATH="$PATH:/usr/sbin"
+WORK="$(mktemp -d "${TMPDIR:-/tmp}/tpr-cluster-script.XXXXXX")"
+export TPR_BUILD_DIR="$BUILD" TPR_CLUSTER_DIR="$WORK/state"
+CLUSTER="$ROOT/scripts/cluster"
+TPR="$BUILD/client/tpr"
+cleanup() { "$CLUSTER" down --purge >/dev/null 2>&1 || true; rm -rf "$WORK"; }
+trap cleanup EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+up="$("$CLUSTER" up --shards 2 --replicas 1 --extractors 2)" || fail "up failed"
+echo "$up"
+exports="$(grep '^export TPR_' <<<"$up")"
+[ "$(wc -l <<<"$exports")" = 2 ] || fail "up printed no two export lines"
+[ "$("$CLUSTER" env)" = "$exports" ] || fail "env prints other lines than up"
+eval "$exports"
+
+status="$("$CLUSTER" status)"
+echo "$status"
+# haproxy, 2 extractors, 2 shards, 2 followers, 1 gateway
+[ "$(grep -c ' running$' <<<"$status")" = 8 ] || fail "not every process is running"
+mapfile -t pids < <(awk '{ print $2 }' "$TPR_CLUSTER_DIR/pids")
+
+"$BUILD/extractor/tpr-synth" --out "$WORK/set" --classes 2 --poses 3 --vertices 800 \
+  --seed 3 --jobs 2 >/dev/null 2>&1 || fail "tpr-synth failed"
+"$TPR" add "$WORK/set" >"$WORK/add.log" 2>&1 || { cat "$WORK/add.log"; fail "tpr add failed"; }
+stats="$("$TPR" --json stats)" || fail "tpr stats failed"
+echo "$stats"
+models="$(python3 -c 'import json, sys; print(int(json.load(sys.stdin)["models"]))' <<<"$stats")"
+[ "$models" = 6 ] || fail "stats counts $models models, not 6"
+first="$(sed -n '1s/ .*//p' "$WORK/set/MANIFEST.txt")"
+hits="$("$TPR" --json query --id "$first" -k 3)" || fail "tpr query failed"
+[ "$(grep -c '"rank"' <<<"$hits")" = 3 ] || fail "query returned other than 3 neighbours: $hits"
+
+"$CLUSTER" down --purge || fail "down failed"
+# Gone, or a zombie its new parent has not reaped yet.
+for pid in "${pids[@]}"; do
+  if [ -d "/proc/$pid" ] && ! grep -q '^State:.*Z' "/proc/$pid/status" 2>/dev/null; then
+    fail "process $pid still runs after down"
+  fi
+done
+[ ! -e "$TPR_CLUSTER_DIR" ] || fail "--purge left $TPR_CLUSTER_DIR"
+echo "cluster_script: passed"
