@@ -1,12 +1,15 @@
 // CentroidTable: the centroids of many prepared signatures in one flat,
-// slot-indexed array, so that the centroid lower bound of the EMD (Rubner
-// et al. [22], used by Tam & Lau 2007 section 6.2 to prune the VP-tree
-// search) reads one contiguous row per item instead of chasing a pointer to
-// the item's PreparedSignature and then to its centroid vector.
+// slot-indexed float32 array, so that the centroid lower bound of the EMD
+// (Rubner et al. [22], used by Tam & Lau 2007 section 6.2 to prune the
+// VP-tree search) reads one contiguous row per item instead of chasing a
+// pointer to the item's PreparedSignature. The table is the only copy of an
+// index item's centroid (PreparedSignature keeps none).
 //
 //   CentroidTable table = CentroidTable::Build(
 //       items.size(), [&](uint32_t i) { return &items[i]; });
-//   double lb = table.LowerBound(query, i);  // == EmdLowerBound(query, items[i])
+//   std::vector<double> q = Centroid(query);             // once per query
+//   double lb = table.LowerBound(q.data(), query.bands(), i);
+//   // lb <= EmdLowerBound(query, items[i]) <= Emd(query, items[i])
 #ifndef TPR_INDEXER_LIB_CENTROID_TABLE_H_
 #define TPR_INDEXER_LIB_CENTROID_TABLE_H_
 
@@ -32,38 +35,43 @@ class CentroidTable {
 
   // Build returns the table of `n` slots; item(i) gives the signature of
   // slot i, or nullptr for an absent slot. item is called once per slot, in
-  // slot order, from the calling thread. Cost O(n x bands) time and
-  // 8 (1 + 3 B) n bytes, B the largest bands() of the items; no EMD.
+  // slot order, from the calling thread. Cost O(n x features x bands) time
+  // and 4 (2 + 3 B) n bytes, B the largest bands() of the items; no EMD.
   static CentroidTable Build(
       size_t n, const std::function<const PreparedSignature*(uint32_t)>& item);
 
   // size returns the number of slots.
   size_t size() const { return width_ == 0 ? 0 : rows_.size() / width_; }
   // MemoryBytes returns the heap bytes this table holds.
-  size_t MemoryBytes() const { return rows_.capacity() * sizeof(double); }
+  size_t MemoryBytes() const { return rows_.capacity() * sizeof(float); }
 
-  // LowerBound returns EmdLowerBound(query, s) (emd.h) for the signature s
-  // of slot i, bit for bit, or 0.0 when the slot is absent (no bound
-  // known). Precondition: i < size(). Cost O(bands), no allocation;
-  // thread-safe.
-  double LowerBound(const PreparedSignature& query, uint32_t i) const {
-    const double* cb = rows_.data() + static_cast<size_t>(i) * width_;
-    if (std::isnan(cb[0])) return 0.0;  // absent slot
-    // CentroidBound is EmdLowerBound's own arithmetic, so the value is
-    // identical: a row is padded with zeros to bands_ per block,
-    // and (x - 0) * (x - 0) == x * x and s + 0 * 0 == s exactly, so where
-    // the item has fewer bands than bands_ the padding terms reproduce the
-    // "d >= common" tails of EmdLowerBound term for term.
-    return CentroidBound(query.centroid(), query.bands(), cb, bands_);
+  // LowerBound returns a lower bound of EmdLowerBound(query, s) (emd.h),
+  // hence of Emd(query, s), for the signature s of slot i, given the
+  // query's centroid `query_centroid` (Centroid(query), emd.h) and bands;
+  // 0.0 when the slot is absent (no bound known). It is
+  //   max(0, N(q - fl32(c)) - e),  e >= N(c - fl32(c)),
+  // so by the triangle inequality of the norm N it never exceeds
+  // N(q - c) = EmdLowerBound, and it is below it by at most 2e, where
+  // e <= 2^-24 N(c) (float32 rounding of each value). Precondition:
+  // i < size(). Cost O(bands), no allocation; thread-safe.
+  double LowerBound(const double* query_centroid, int query_bands,
+                    uint32_t i) const {
+    const float* row = rows_.data() + static_cast<size_t>(i) * width_;
+    if (std::isnan(row[0])) return 0.0;  // absent slot
+    // A row is padded with zeros to bands_ per block, and a zero band
+    // contributes to N exactly what a missing one does (emd.h).
+    const double bound = CentroidBound(query_centroid, query_bands, row + 1, bands_) -
+                         static_cast<double>(row[0]);
+    return bound > 0.0 ? bound : 0.0;
   }
 
  private:
   int bands_ = 0;      // largest bands() over present items
-  size_t width_ = 0;   // 1 + 3 bands_ doubles per row
-  // Row i: centroid row 0, then the K, A and H blocks each zero-padded to
-  // bands_ values; an absent slot has a NaN in its first value (a present
-  // centroid is finite: Prepare rejects non-finite coordinates).
-  std::vector<double> rows_;
+  size_t width_ = 0;   // 2 + 3 bands_ floats per row
+  // Row i: e (the rounding radius above, rounded up to float32; NaN for an
+  // absent slot), then the centroid in float32: row 0 (g), then the K, A
+  // and H blocks each zero-padded to bands_ values.
+  std::vector<float> rows_;
 };
 
 }  // namespace tpr::index

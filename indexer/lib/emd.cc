@@ -810,23 +810,63 @@ double RelaxedTransportBound(const PreparedSignature& a,
 // This holds for every plan, so also for the optimal one, whose cost is the
 // EMD (total flow 1, so no normalization). Equal masses are essential: with
 // unequal totals the first equality fails.
-double CentroidBound(const double* ca, int ba, const double* cb, int bb) {
+namespace {
+
+// N(x - y) for centroids given as row accessors x(r), y(r) (double values):
+// the one arithmetic behind every form of the centroid bound, so that they
+// agree bit for bit.
+template <typename X, typename Y>
+double CentroidNorm(const X& x, int ba, const Y& y, int bb) {
   const int common = std::min(ba, bb);
-  double result = std::abs(ca[0] - cb[0]);
+  double result = std::abs(x(0) - y(0));
   for (int block = 0; block < 3; ++block) {
-    const double* x = ca + 1 + block * ba;
-    const double* y = cb + 1 + block * bb;
+    const int xr = 1 + block * ba;
+    const int yr = 1 + block * bb;
     double s = 0.0;
-    for (int d = 0; d < common; ++d) s += (x[d] - y[d]) * (x[d] - y[d]);
-    for (int d = common; d < ba; ++d) s += x[d] * x[d];
-    for (int d = common; d < bb; ++d) s += y[d] * y[d];
+    for (int d = 0; d < common; ++d) {
+      const double diff = x(xr + d) - y(yr + d);
+      s += diff * diff;
+    }
+    for (int d = common; d < ba; ++d) s += x(xr + d) * x(xr + d);
+    for (int d = common; d < bb; ++d) s += y(yr + d) * y(yr + d);
     result += std::sqrt(s);
   }
   return result;
 }
 
+// Row r of the centroid of p: sum_i w_i phi32(U_i)_r in double. The
+// products of a double weight and a float32 coordinate are summed in
+// feature order.
+double CentroidRow(const PreparedSignature& p, int r) {
+  const int n = p.size();
+  const float* x = p.coords() + static_cast<size_t>(r) * static_cast<size_t>(n);
+  const double* w = p.weights();
+  double c = 0.0;
+  for (int i = 0; i < n; ++i) c += w[i] * static_cast<double>(x[i]);
+  return c;
+}
+
+}  // namespace
+
+double CentroidBound(const double* ca, int ba, const double* cb, int bb) {
+  return CentroidNorm([ca](int r) { return ca[r]; }, ba,
+                      [cb](int r) { return cb[r]; }, bb);
+}
+
+double CentroidBound(const double* ca, int ba, const float* cb, int bb) {
+  return CentroidNorm([ca](int r) { return ca[r]; }, ba,
+                      [cb](int r) { return static_cast<double>(cb[r]); }, bb);
+}
+
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
-  return CentroidBound(a.centroid(), a.bands(), b.centroid(), b.bands());
+  return CentroidNorm([&a](int r) { return CentroidRow(a, r); }, a.bands(),
+                      [&b](int r) { return CentroidRow(b, r); }, b.bands());
+}
+
+std::vector<double> Centroid(const PreparedSignature& p) {
+  std::vector<double> c(static_cast<size_t>(p.rows()));
+  for (int r = 0; r < p.rows(); ++r) c[static_cast<size_t>(r)] = CentroidRow(p, r);
+  return c;
 }
 
 }  // namespace tpr::index

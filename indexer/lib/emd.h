@@ -79,11 +79,20 @@ class EmdSolver {
 // Same preconditions and cost; thread-safe.
 double Emd(const PreparedSignature& a, const PreparedSignature& b);
 
-// EmdLowerBound returns N(centroid(a) - centroid(b)) <= Emd(a, b), the
+// EmdLowerBound returns N(Centroid(a) - Centroid(b)) <= Emd(a, b), the
 // centroid bound of Rubner et al. [22], where N is the norm of which the
-// ground distance is the difference norm (see ground_distance.h).
-// Cost O(bands), no allocation; thread-safe.
+// ground distance is the difference norm (see ground_distance.h). Both
+// centroids are computed on the fly (a search computes the query's once
+// and reads its items' from a CentroidTable instead).
+// Cost O((a.size() + b.size()) x bands), no allocation; thread-safe.
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b);
+
+// Centroid returns sum_i weight(i) phi32(U_i) of `p`, computed in double
+// from coords() in the order EmdLowerBound uses (so CentroidBound on two
+// Centroid results equals EmdLowerBound bit for bit): p.rows() values in
+// row order [g, K x bands, A x bands, H x bands]. Cost O(size x bands);
+// thread-safe.
+std::vector<double> Centroid(const PreparedSignature& p);
 
 // RelaxedTransportBound returns the relaxed transport bound of Kusner et
 // al. (2015, "From word embeddings to document distances", RWMD):
@@ -97,11 +106,14 @@ double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b);
 double RelaxedTransportBound(const PreparedSignature& a,
                              const PreparedSignature& b);
 
-// CentroidBound is EmdLowerBound on raw centroids laid out as
-// PreparedSignature::centroid() does ([g, K x ba, A x ba, H x ba] and the
-// same for b with bb bands; missing bands count as zero). For callers that
-// keep centroids apart from their signatures (CentroidTable). Thread-safe.
+// CentroidBound returns N(ca - cb) for raw centroids laid out as Centroid
+// returns them ([g, K x ba, A x ba, H x ba] and the same for b with bb
+// bands; missing bands count as zero): EmdLowerBound for callers that keep
+// centroids apart from their signatures. The float32 form reads a
+// CentroidTable row (converted to double term by term). O(bands), no
+// allocation; thread-safe.
 double CentroidBound(const double* ca, int ba, const double* cb, int bb);
+double CentroidBound(const double* ca, int ba, const float* cb, int bb);
 
 }  // namespace tpr::index
 

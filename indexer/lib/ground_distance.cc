@@ -121,10 +121,10 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   const int n = p.size_;
   const int bands = p.bands_;
   const size_t un = static_cast<size_t>(n);
-  const size_t rows = static_cast<size_t>(p.Rows());
+  const size_t rows = static_cast<size_t>(p.rows());
   std::vector<double> spectral = SpectralEmbedding(signature.spectrum, options.spectral);
   p.spectral_size_ = static_cast<int>(spectral.size());
-  p.scalars_.assign(un + rows + spectral.size(), 0.0);
+  p.scalars_.assign(un + spectral.size(), 0.0);
 
   double sum = 0.0;
   for (const Feature& x : f) sum += x.weight;
@@ -155,14 +155,7 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
       }
     }
   }
-  // The centroid of the rounded points, in double (exact inputs).
-  double* centroid = p.scalars_.data() + un;
-  for (size_t r = 0; r < rows; ++r) {
-    double c = 0.0;
-    for (size_t i = 0; i < un; ++i) c += p.scalars_[i] * p.coords_[r * un + i];
-    centroid[r] = c;
-  }
-  std::copy(spectral.begin(), spectral.end(), centroid + rows);
+  std::copy(spectral.begin(), spectral.end(), p.scalars_.data() + un);
   return p;
 }
 

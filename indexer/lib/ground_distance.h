@@ -104,16 +104,17 @@ inline constexpr int kMaxFeatures = 200;
 
 // PreparedSignature: what the index stores for one signature. An immutable,
 // flat structure-of-arrays copy holding the scaled coordinates phi(U) of
-// every feature (dimension-major), the masses normalized to sum to 1, the
-// centroid sum_i w_i phi(U_i) used by EmdLowerBound and the spectral
-// embedding. Copyable and movable; built only by Prepare. Thread-safe to
-// read from any number of threads.
+// every feature (dimension-major), the masses normalized to sum to 1 and
+// the spectral embedding. Copyable and movable; built only by Prepare.
+// Thread-safe to read from any number of threads.
 //
-// Compact storage (issue 14: about 4 KB per model). The coordinates are
+// Compact storage (issue 14: at most 4 KB per model). The coordinates are
 // the bulk of a signature (1 + 3 bands values per feature) and are kept in
-// float32, unpadded; everything else (masses, centroid, spectral
-// embedding) is double and shares one allocation, so a model costs two
-// heap blocks. Every distance is computed in double from these float32
+// float32, unpadded; the masses and the spectral embedding are double and
+// share one allocation, so a model costs two heap blocks. The centroid
+// sum_i w_i phi(U_i) of the centroid bound is not stored: Centroid (emd.h)
+// computes it in O(size x bands) when a query starts, and the index keeps
+// its items' centroids once, in its CentroidTable. Every distance is computed in double from these float32
 // coordinates, so the index's distance is exactly the EMD of Eq. 7 between
 // the rounded points phi32(U) = fl32(phi(U)): still a metric (ground
 // distance is N(phi32(U1) - phi32(U2)), a norm of a difference), and it
@@ -143,7 +144,7 @@ class PreparedSignature {
   // spectral returns the spectral embedding E(spectrum) (spectral.h) of
   // spectral_size() values: options.spectral.eigenvalues, or 0 when the
   // spectral weight is 0. metric.h compares it.
-  const double* spectral() const { return scalars_.data() + size_ + Rows(); }
+  const double* spectral() const { return scalars_.data() + size_; }
   int spectral_size() const { return spectral_size_; }
 
   // Layout (for emd.cc and the lower bound; not a stable interface):
@@ -162,22 +163,21 @@ class PreparedSignature {
   // for work derived from the content (EmdSolver reuses a ground-distance
   // matrix across a bound and the EMD of the same pair).
   uint64_t serial() const { return serial_; }
-  // centroid returns sum_i weight(i) phi32(U_i), computed in double from
-  // coords(): 1 + 3 bands() values in row order.
-  const double* centroid() const { return scalars_.data() + size_; }
+  // rows returns the number of coordinate rows, 1 + 3 bands(): the length
+  // of the centroid (emd.h, Centroid).
+  int rows() const { return 1 + 3 * bands_; }
 
  private:
   friend absl::StatusOr<PreparedSignature> Prepare(
       const Signature& signature, const GroundDistanceOptions& options);
-  int Rows() const { return 1 + 3 * bands_; }
 
   int size_ = 0;
   int bands_ = 0;
   int spectral_size_ = 0;
   uint64_t serial_ = 0;
-  // weights (size_), centroid (Rows()), spectral embedding (spectral_size_).
+  // weights (size_), then the spectral embedding (spectral_size_).
   std::vector<double> scalars_;
-  std::vector<float> coords_;  // Rows() x size_
+  std::vector<float> coords_;  // rows() x size_
 };
 
 // Prepare validates `signature` and `options` (see ValidateSignature and

@@ -193,6 +193,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       : pool_(std::move(pool)),
         snapshot_(std::move(snapshot)),
         query_(std::move(query)),
+        query_centroid_(Centroid(query_)),
         filter_(std::move(filter)) {
     const SignatureIndex::Snapshot* s = snapshot_.get();
     const TreePart* t = s->tree.get();
@@ -215,7 +216,8 @@ class IndexCursor : public SignatureIndex::Cursor {
       if (i >= n_tree_) {
         return DistanceLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
       }
-      const double centroid = t->centroids.LowerBound(query_, i);
+      const double centroid =
+          t->centroids.LowerBound(query_centroid_.data(), query_.bands(), i);
       const PreparedSignature* p = spectral ? t->prepared[i].get() : nullptr;
       return p == nullptr ? centroid : centroid + SpectralDistance(query_, *p);
     });
@@ -266,6 +268,7 @@ class IndexCursor : public SignatureIndex::Cursor {
   std::shared_ptr<SignatureIndex::SearchPool> pool_;
   std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
   PreparedSignature query_;
+  std::vector<double> query_centroid_;  // Centroid(query_), for the table
   std::function<bool(const std::string&)> filter_;
   uint32_t n_tree_ = 0;
   // Last: its callbacks point into the members above.

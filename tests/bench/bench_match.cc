@@ -268,12 +268,16 @@ Db& GetDb(const DbKey& key) {
 QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
+  // The query's centroid, computed once per query as the index does.
+  auto qc = std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
   if (q.spectral_size() == 0) {
-    spec.lower_bounds.push_back(
-        [&db, &q](uint32_t i) { return db.centroids.LowerBound(q, i); });
+    spec.lower_bounds.push_back([&db, &q, qc](uint32_t i) {
+      return db.centroids.LowerBound(qc->data(), q.bands(), i);
+    });
   } else {
-    spec.lower_bounds.push_back([&db, &q](uint32_t i) {
-      return db.centroids.LowerBound(q, i) + SpectralDistance(q, db.items[i]);
+    spec.lower_bounds.push_back([&db, &q, qc](uint32_t i) {
+      return db.centroids.LowerBound(qc->data(), q.bands(), i) +
+             SpectralDistance(q, db.items[i]);
     });
   }
   if (bounds >= 2) {
