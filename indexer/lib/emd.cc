@@ -853,11 +853,6 @@ double CentroidBound(const double* ca, int ba, const double* cb, int bb) {
                       [cb](int r) { return cb[r]; }, bb);
 }
 
-double CentroidBound(const double* ca, int ba, const float* cb, int bb) {
-  return CentroidNorm([ca](int r) { return ca[r]; }, ba,
-                      [cb](int r) { return static_cast<double>(cb[r]); }, bb);
-}
-
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
   return CentroidNorm([&a](int r) { return CentroidRow(a, r); }, a.bands(),
                       [&b](int r) { return CentroidRow(b, r); }, b.bands());

@@ -109,11 +109,9 @@ double RelaxedTransportBound(const PreparedSignature& a,
 // CentroidBound returns N(ca - cb) for raw centroids laid out as Centroid
 // returns them ([g, K x ba, A x ba, H x ba] and the same for b with bb
 // bands; missing bands count as zero): EmdLowerBound for callers that keep
-// centroids apart from their signatures. The float32 form reads a
-// CentroidTable row (converted to double term by term). O(bands), no
-// allocation; thread-safe.
+// centroids apart from their signatures. O(bands), no allocation;
+// thread-safe.
 double CentroidBound(const double* ca, int ba, const double* cb, int bb);
-double CentroidBound(const double* ca, int ba, const float* cb, int bb);
 
 }  // namespace tpr::index
 

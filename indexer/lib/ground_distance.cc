@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cassert>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "absl/strings/str_cat.h"
@@ -108,6 +109,22 @@ absl::Status ValidateSignature(const Signature& signature) {
   return absl::OkStatus();
 }
 
+PreparedSignature::PreparedSignature(const PreparedSignature& other)
+    : size_(other.size_),
+      bands_(other.bands_),
+      spectral_size_(other.spectral_size_),
+      serial_(other.serial_) {
+  if (other.block_ != nullptr) {
+    block_ = std::make_unique<std::byte[]>(BlockBytes());
+    std::memcpy(block_.get(), other.block_.get(), BlockBytes());
+  }
+}
+
+PreparedSignature& PreparedSignature::operator=(const PreparedSignature& other) {
+  if (this != &other) *this = PreparedSignature(other);
+  return *this;
+}
+
 absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
                                           const GroundDistanceOptions& options) {
   if (absl::Status s = ValidateOptions(options); !s.ok()) return s;
@@ -124,38 +141,46 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   const size_t rows = static_cast<size_t>(p.rows());
   std::vector<double> spectral = SpectralEmbedding(signature.spectrum, options.spectral);
   p.spectral_size_ = static_cast<int>(spectral.size());
-  p.scalars_.assign(un + spectral.size(), 0.0);
+  p.block_ = std::make_unique<std::byte[]>(p.BlockBytes());
+  double* weights = reinterpret_cast<double*>(p.block_.get());
+  float* spectral32 = reinterpret_cast<float*>(p.block_.get() + sizeof(double) * un);
+  float* coords = spectral32 + spectral.size();
 
   double sum = 0.0;
   for (const Feature& x : f) sum += x.weight;
-  for (size_t i = 0; i < un; ++i) p.scalars_[i] = f[i].weight / sum;
+  for (size_t i = 0; i < un; ++i) weights[i] = f[i].weight / sum;
+  for (size_t i = 0; i < spectral.size(); ++i) {
+    spectral32[i] = static_cast<float>(spectral[i]);
+    if (!std::isfinite(spectral32[i])) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "spectrum[", i, "] is too large (beyond float32 range once embedded)"));
+    }
+  }
 
   // phi(U) of ground_distance.h, dimension-major, rounded to float32.
-  p.coords_.assign(rows * un, 0.0f);
   const double ck = options.w2 * options.k_scale;
   const double ca = options.w3 * options.a_scale;
   const double ch = options.w4 * options.h_scale;
   for (size_t i = 0; i < un; ++i) {
     const Feature& x = f[i];
-    p.coords_[i] = static_cast<float>(options.w1 * x.integral_geodesic);
+    coords[i] = static_cast<float>(options.w1 * x.integral_geodesic);
     for (size_t b = 0; b < static_cast<size_t>(bands); ++b) {
-      p.coords_[(1 + b) * un + i] = static_cast<float>(ck * x.curvature[b]);
-      p.coords_[(1 + bands + b) * un + i] = static_cast<float>(ca * x.area[b]);
-      p.coords_[(1 + 2 * bands + b) * un + i] = static_cast<float>(ch * x.distance[b]);
+      coords[(1 + b) * un + i] = static_cast<float>(ck * x.curvature[b]);
+      coords[(1 + bands + b) * un + i] = static_cast<float>(ca * x.area[b]);
+      coords[(1 + 2 * bands + b) * un + i] = static_cast<float>(ch * x.distance[b]);
     }
   }
   // A finite double beyond float32's range (about 3.4e38) would become
   // infinite in storage and poison every distance to it.
   for (size_t r = 0; r < rows; ++r) {
     for (size_t i = 0; i < un; ++i) {
-      if (!std::isfinite(p.coords_[r * un + i])) {
+      if (!std::isfinite(coords[r * un + i])) {
         return absl::InvalidArgumentError(absl::StrCat(
             "feature ", i, ": ", r == 0 ? "integral geodesic" : "a band value",
             " is too large (beyond float32 range once weighted)"));
       }
     }
   }
-  std::copy(spectral.begin(), spectral.end(), p.scalars_.data() + un);
   return p;
 }
 

@@ -37,6 +37,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -108,25 +109,35 @@ inline constexpr int kMaxFeatures = 200;
 // the spectral embedding. Copyable and movable; built only by Prepare.
 // Thread-safe to read from any number of threads.
 //
-// Compact storage (issue 14: at most 4 KB per model). The coordinates are
-// the bulk of a signature (1 + 3 bands values per feature) and are kept in
-// float32, unpadded; the masses and the spectral embedding are double and
-// share one allocation, so a model costs two heap blocks. The centroid
-// sum_i w_i phi(U_i) of the centroid bound is not stored: Centroid (emd.h)
-// computes it in O(size x bands) when a query starts, and the index keeps
-// its items' centroids once, in its CentroidTable. Every distance is computed in double from these float32
-// coordinates, so the index's distance is exactly the EMD of Eq. 7 between
-// the rounded points phi32(U) = fl32(phi(U)): still a metric (ground
-// distance is N(phi32(U1) - phi32(U2)), a norm of a difference), and it
+// Compact storage (issue 14: at most 4 KB per model). One heap block per
+// model holds the masses in double, then the spectral embedding and the
+// coordinates in float32, unpadded: the coordinates (1 + 3 bands values per
+// feature) are the bulk of a signature. The centroid sum_i w_i phi(U_i) of
+// the centroid bound is not stored: Centroid (emd.h) computes it in
+// O(size x bands) when a query starts, and the index keeps its items'
+// centroids once, in its CentroidTable.
+//
+// Every distance is computed in double from the float32 values, so the
+// index's distance is exactly the distance of metric.h between the rounded
+// points phi32(U) = fl32(phi(U)) and rounded embeddings fl32(E): still a
+// metric (the ground distance is N(phi32(U1) - phi32(U2)), a norm of a
+// difference, and the spectral term a Euclidean distance), and its EMD
 // differs from the EMD on double coordinates by at most
 //   2^-24 (max_i N(phi(a_i)) + max_j N(phi(b_j)))
 // (each coordinate moves by at most 2^-24 of itself, so each ground
 // distance by at most the norms of the two moves, and an EMD is a convex
-// combination of ground distances: ground_distance_test checks the bound
-// and that rankings on real signatures do not change).
+// combination of ground distances), its spectral term by at most
+// 2^-24 (||E(a)|| + ||E(b)||): EmdTest.Float32StorageErrorWithinBound and
+// MetricTest.DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper check the
+// bounds, ExtractedSignaturesTest that rankings on real signatures do not
+// change.
 class PreparedSignature {
  public:
   PreparedSignature() = default;
+  PreparedSignature(const PreparedSignature& other);
+  PreparedSignature& operator=(const PreparedSignature& other);
+  PreparedSignature(PreparedSignature&&) noexcept = default;
+  PreparedSignature& operator=(PreparedSignature&&) noexcept = default;
 
   // size returns the number of features (0 only for a default-constructed
   // object, which no function below accepts).
@@ -134,17 +145,20 @@ class PreparedSignature {
   // bands returns the length of the K, A and H vectors.
   int bands() const { return bands_; }
   // weight returns the normalized mass of feature i, 0 <= i < size().
-  double weight(int i) const { return scalars_[static_cast<size_t>(i)]; }
+  double weight(int i) const { return weights()[i]; }
   // weights returns all masses (size() values summing to 1).
-  const double* weights() const { return scalars_.data(); }
-  // MemoryBytes returns the heap bytes this object holds.
-  size_t MemoryBytes() const {
-    return scalars_.capacity() * sizeof(double) + coords_.capacity() * sizeof(float);
+  const double* weights() const {
+    return reinterpret_cast<const double*>(block_.get());
   }
-  // spectral returns the spectral embedding E(spectrum) (spectral.h) of
-  // spectral_size() values: options.spectral.eigenvalues, or 0 when the
-  // spectral weight is 0. metric.h compares it.
-  const double* spectral() const { return scalars_.data() + size_; }
+  // MemoryBytes returns the heap bytes this object holds.
+  size_t MemoryBytes() const { return BlockBytes(); }
+  // spectral returns the spectral embedding E(spectrum) (spectral.h),
+  // rounded to float32, of spectral_size() values:
+  // options.spectral.eigenvalues, or 0 when the spectral weight is 0.
+  // metric.h compares it.
+  const float* spectral() const {
+    return reinterpret_cast<const float*>(block_.get() + sizeof(double) * Size(size_));
+  }
   int spectral_size() const { return spectral_size_; }
 
   // Layout (for emd.cc and the lower bound; not a stable interface):
@@ -152,7 +166,7 @@ class PreparedSignature {
   // (dimension-major, no padding): row 0 holds W1 G'; rows 1 .. bands()
   // hold W2 c_K K; the next bands() rows W3 c_A A; the next bands() rows
   // W4 c_H H. Row r, feature i is coords()[r * size() + i].
-  const float* coords() const { return coords_.data(); }
+  const float* coords() const { return spectral() + spectral_size_; }
   // stride returns the row length of this signature's ground-distance
   // matrix as the column side (GroundDistanceMatrix's out_stride): size()
   // rounded up to a multiple of 8, so that matrix rows are whole SIMD
@@ -170,14 +184,21 @@ class PreparedSignature {
  private:
   friend absl::StatusOr<PreparedSignature> Prepare(
       const Signature& signature, const GroundDistanceOptions& options);
+  static size_t Size(int n) { return static_cast<size_t>(n); }
+  size_t BlockBytes() const {
+    return sizeof(double) * Size(size_) +
+           sizeof(float) * (Size(spectral_size_) + Size(rows()) * Size(size_));
+  }
 
   int size_ = 0;
   int bands_ = 0;
   int spectral_size_ = 0;
   uint64_t serial_ = 0;
-  // weights (size_), then the spectral embedding (spectral_size_).
-  std::vector<double> scalars_;
-  std::vector<float> coords_;  // rows() x size_
+  // BlockBytes() bytes: weights (size_ doubles), then the spectral
+  // embedding (spectral_size_ floats), then the coordinates (rows() x size_
+  // floats). operator new[] aligns it for double; size_ doubles keep the
+  // floats aligned.
+  std::unique_ptr<std::byte[]> block_;
 };
 
 // Prepare validates `signature` and `options` (see ValidateSignature and

@@ -49,7 +49,7 @@ uint64_t Fingerprint(const PreparedSignature& p) {
   h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
   const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
   h = Fnv1a(p.coords(), sizeof(float) * rows * static_cast<size_t>(p.size()), h);
-  h = Fnv1a(p.spectral(), sizeof(double) * static_cast<size_t>(p.spectral_size()), h);
+  h = Fnv1a(p.spectral(), sizeof(float) * static_cast<size_t>(p.spectral_size()), h);
   return h;
 }
 
@@ -70,7 +70,15 @@ struct TreePart {
   std::vector<std::string> ids;       // item order, strictly increasing
   std::vector<PreparedPtr> prepared;  // null: signature unavailable
   std::vector<uint64_t> fingerprints;
-  std::unordered_map<std::string, uint32_t> item_of;
+
+  // ItemOf returns the item whose id is `id`, or -1: a binary search of the
+  // sorted ids (O(log n) comparisons), which costs no memory per model
+  // where a hash map of the ids cost about 60 bytes.
+  int64_t ItemOf(const std::string& id) const {
+    auto it = std::lower_bound(ids.begin(), ids.end(), id);
+    if (it == ids.end() || *it != id) return -1;
+    return it - ids.begin();
+  }
   // The centroids of `prepared` (absent where null), read by the search's
   // lower bound; built once the prepared signatures are final.
   CentroidTable centroids;
@@ -95,9 +103,9 @@ struct SignatureIndex::Snapshot {
   }
   // The live tree item for `id`, or -1.
   int64_t LiveTreeItem(const std::string& id) const {
-    auto it = tree->item_of.find(id);
-    if (it == tree->item_of.end() || Dead(it->second)) return -1;
-    return it->second;
+    const int64_t item = tree->ItemOf(id);
+    if (item < 0 || Dead(static_cast<uint32_t>(item))) return -1;
+    return item;
   }
   bool Upsert(const std::string& id, PreparedPtr prepared, uint64_t fingerprint) {
     const int64_t item = LiveTreeItem(id);
@@ -419,8 +427,7 @@ size_t SignatureIndex::MemoryBytes() const {
   const TreePart& t = *s->tree;
   // A shared_ptr'd object with make_shared costs its control block (two
   // counters and a vtable pointer) beside it; a std::string its heap
-  // buffer when longer than the small-string capacity; an unordered_map
-  // node its key, value, hash and next pointer, plus a bucket pointer.
+  // buffer when longer than the small-string capacity.
   constexpr size_t kControlBlock = 3 * sizeof(void*);
   auto string_bytes = [](const std::string& id) {
     return id.capacity() > 15 ? id.capacity() + 1 : 0;
@@ -428,11 +435,9 @@ size_t SignatureIndex::MemoryBytes() const {
   size_t bytes = t.tree.MemoryBytes() + t.centroids.MemoryBytes() +
                  t.ids.capacity() * sizeof(std::string) +
                  t.prepared.capacity() * sizeof(PreparedPtr) +
-                 t.fingerprints.capacity() * sizeof(uint64_t) +
-                 t.item_of.bucket_count() * sizeof(void*);
+                 t.fingerprints.capacity() * sizeof(uint64_t);
   for (size_t i = 0; i < t.ids.size(); ++i) {
-    bytes += 2 * string_bytes(t.ids[i]);  // the id and its item_of key
-    bytes += sizeof(std::string) + sizeof(uint32_t) + 2 * sizeof(void*);
+    bytes += string_bytes(t.ids[i]);
     if (t.prepared[i] != nullptr) {
       bytes += sizeof(PreparedSignature) + kControlBlock +
                t.prepared[i]->MemoryBytes();
@@ -511,8 +516,10 @@ void SignatureIndex::Rebuild() {
   std::sort(live.begin(), live.end(),
             [](const Live& a, const Live& b) { return *a.id < *b.id; });
   auto part = std::make_shared<TreePart>();
+  part->ids.reserve(live.size());  // exact capacities: MemoryBytes counts them
+  part->prepared.reserve(live.size());
+  part->fingerprints.reserve(live.size());
   for (const Live& l : live) {
-    part->item_of.emplace(*l.id, static_cast<uint32_t>(part->ids.size()));
     part->ids.push_back(*l.id);
     part->prepared.push_back(l.prepared);
     part->fingerprints.push_back(l.fingerprint);
@@ -642,7 +649,6 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     if (id.empty() || (i > 0 && !(part->ids[i - 1] < part->ids[i]))) {
       return Corrupt("ids not strictly increasing");
     }
-    part->item_of.emplace(part->ids[i], static_cast<uint32_t>(i));
   }
   uint64_t tree_len;
   absl::string_view tree_part;
@@ -671,10 +677,10 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     }
     const uint64_t fingerprint = Fingerprint(*prepared);
     auto shared = std::make_shared<const PreparedSignature>(*std::move(prepared));
-    auto it = part->item_of.find(id);
-    if (it != part->item_of.end() && part->fingerprints[it->second] == fingerprint) {
-      part->prepared[it->second] = std::move(shared);
-      seen[it->second] = true;
+    const int64_t item = part->ItemOf(id);
+    if (item >= 0 && part->fingerprints[static_cast<size_t>(item)] == fingerprint) {
+      part->prepared[static_cast<size_t>(item)] = std::move(shared);
+      seen[static_cast<size_t>(item)] = true;
     } else {
       // New, or changed since the tree was built: the stored distances do
       // not describe it, so it is searched linearly until the next rebuild.

@@ -70,13 +70,26 @@ std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
   return e;
 }
 
-double SpectralDistance(const double* a, const double* b, size_t n) {
+namespace {
+
+template <typename T>
+double EuclideanDistance(const T* a, const T* b, size_t n) {
   double s = 0.0;
   for (size_t i = 0; i < n; ++i) {
-    const double d = a[i] - b[i];
+    const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
     s += d * d;
   }
   return std::sqrt(s);
+}
+
+}  // namespace
+
+double SpectralDistance(const double* a, const double* b, size_t n) {
+  return EuclideanDistance(a, b, n);
+}
+
+double SpectralDistance(const float* a, const float* b, size_t n) {
+  return EuclideanDistance(a, b, n);
 }
 
 }  // namespace tpr::index

@@ -82,9 +82,11 @@ absl::Status ValidateSpectralOptions(const SpectralOptions& options);
 std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
                                       const SpectralOptions& options);
 
-// SpectralDistance returns ||a - b||_2 over n coordinates (0 for n = 0).
-// O(n); thread-safe.
+// SpectralDistance returns ||a - b||_2 over n coordinates (0 for n = 0),
+// computed in double; the float32 form reads PreparedSignature's stored
+// embeddings. O(n); thread-safe.
 double SpectralDistance(const double* a, const double* b, size_t n);
+double SpectralDistance(const float* a, const float* b, size_t n);
 
 }  // namespace tpr::index
 
