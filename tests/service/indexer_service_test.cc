@@ -1,7 +1,7 @@
 // tpr-indexer over the wire (in-process server on a loopback port): CRUD
 // round trips, searches against the brute-force EMD oracle, error codes,
 // concurrency, health, cancellation; and IndexerCore under concurrent
-// writers and searchers without the wire (the part ThreadSanitizer runs).
+// writers and searchers without the wire.
 #include <atomic>
 #include <cmath>
 #include <map>
@@ -53,9 +53,7 @@ class IndexerServiceTest : public ::testing::Test {
     if (kThreadSanitizer) {
       // Debian's gRPC is not instrumented: TSan cannot see it hand a call
       // between its threads and reports hundreds of races per call, with
-      // our interceptors' and handlers' frames on top. The concurrency
-      // these tests reach is IndexerCore's, which
-      // IndexerCoreConcurrencyTest runs under TSan without the wire.
+      // our interceptors' and handlers' frames on top.
       GTEST_SKIP() << "gRPC (Debian, not instrumented) hides its synchronization from TSan";
     }
     CoreOptions core;
@@ -679,8 +677,7 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
   }
 }
 
-// IndexerCore without the wire (what ThreadSanitizer runs, see the fixture
-// above): writers (single upserts), a batch writer (group commits), a
+// IndexerCore without the wire: writers (single upserts), a batch writer (group commits), a
 // deleter and searchers at once, on a small rebuild threshold so that the
 // tree is rebuilt in the background meanwhile, with two search threads per
 // query. Every id has one signature for its whole life, so each neighbour
@@ -688,6 +685,13 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
 // torn read), in ascending order; afterwards searches equal brute force
 // over the final state.
 TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
+  if (kThreadSanitizer) {
+    // IndexerCore guards its state with absl::Mutex, whose Lock and Unlock
+    // live in Debian's uninstrumented libabsl_synchronization: TSan sees no
+    // lock and reports every guarded access (seen: outdated_, read in
+    // StartSearch and erased in WriteGroupLocked, both under view_mu_).
+    GTEST_SKIP() << "absl::Mutex (Debian, not instrumented) is invisible to TSan";
+  }
   TempDir dir;
   CoreOptions options;
   options.data_dir = dir.path() + "/data";
