@@ -175,8 +175,14 @@ grpc::Status IndexerService::Stream(grpc::ServerContext* context, SearchSession&
       return Finish("Search", absl::CancelledError("client stopped reading the stream"));
     }
   }
-  if (context->IsCancelled() || std::chrono::system_clock::now() >= context->deadline()) {
-    return Finish("Search", absl::CancelledError("call cancelled or deadline exceeded"));
+  // The probe compares the deadline itself, so the search may stop before
+  // gRPC's own timer has ended the call: then the status sent is the
+  // client's, DEADLINE_EXCEEDED (CANCELLED here reached clients under load).
+  if (std::chrono::system_clock::now() >= context->deadline()) {
+    return Finish("Search", absl::DeadlineExceededError("the search reached the call's deadline"));
+  }
+  if (context->IsCancelled()) {
+    return Finish("Search", absl::CancelledError("call cancelled"));
   }
   *response.mutable_stats() = session.Stats();
   writer->Write(response);
