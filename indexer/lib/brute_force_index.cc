@@ -53,15 +53,7 @@ std::unique_ptr<NeighborCursor> BruteForceIndex::Search(QuerySpec spec) const {
 
 std::vector<ItemNeighbor> BruteForceIndex::Knn(QuerySpec spec, size_t k,
                                                SearchStats* stats) const {
-  std::unique_ptr<NeighborCursor> cursor = Search(std::move(spec));
-  std::vector<ItemNeighbor> out;
-  while (out.size() < k) {
-    std::optional<ItemNeighbor> next = cursor->Next();
-    if (!next) break;
-    out.push_back(*next);
-  }
-  if (stats != nullptr) *stats = cursor->stats();
-  return out;
+  return TakeNeighbors(*Search(std::move(spec)), k, stats);
 }
 
 std::vector<ItemNeighbor> BruteForceIndex::Range(QuerySpec spec,

@@ -612,13 +612,18 @@ std::vector<ItemNeighbor> VpTree::Knn(QuerySpec spec, size_t k,
     if (stats != nullptr) *stats = SearchStats{};
     return out;
   }
-  std::unique_ptr<NeighborCursor> cursor = Search(std::move(spec));
+  return TakeNeighbors(*Search(std::move(spec)), k, stats);
+}
+
+std::vector<ItemNeighbor> TakeNeighbors(NeighborCursor& cursor, size_t k,
+                                        SearchStats* stats) {
+  std::vector<ItemNeighbor> out;
   while (out.size() < k) {
-    std::optional<ItemNeighbor> next = cursor->Next();
+    std::optional<ItemNeighbor> next = cursor.Next();
     if (!next) break;
     out.push_back(*next);
   }
-  if (stats != nullptr) *stats = cursor->stats();
+  if (stats != nullptr) *stats = cursor.stats();
   return out;
 }
 

@@ -57,11 +57,10 @@ struct ItemNeighbor {
 struct VpTreeOptions {
   // Largest bucket at a leaf. Bucket items cost no metric evaluation until
   // their stored distances and the cheap bounds fail to exclude them, while
-  // each internal node visited costs one. On signatures extracted from
-  // generated shapes (bench_match BM_KnnVpTreeExtractedLeaf, 100k models,
-  // 10-NN, one run) 128 took 12.1 ms CPU against 15.0 ms at 512 (fewer
-  // bounds per visited bucket; 32 and 64 no better) for a 29% longer
-  // build; see docs/search-cost.md. Default: 128.
+  // each internal node visited costs one. Smaller buckets mean fewer bounds
+  // per visited bucket and a longer build; 128 was the fastest 10-NN on
+  // extracted signatures at 100k (bench_match BM_KnnVpTreeExtractedLeaf,
+  // figures in docs/search-cost.md). Default: 128.
   size_t leaf_size = 128;
   // Vantage-point candidates drawn at random per node; the one whose
   // distances to a sample have the largest spread wins. 1 = random choice.
@@ -134,6 +133,12 @@ class NeighborCursor {
   // stats returns the work done so far.
   virtual const SearchStats& stats() const = 0;
 };
+
+// TakeNeighbors returns the first k results of `cursor` (fewer when it runs
+// out) and, when stats is non-null, the work done meanwhile: Knn and Range
+// of every index. Cost: what k calls of Next cost.
+std::vector<ItemNeighbor> TakeNeighbors(NeighborCursor& cursor, size_t k,
+                                        SearchStats* stats);
 
 // VpTree is immutable once built; searches on one tree may run concurrently.
 class VpTree {

@@ -348,7 +348,8 @@ TEST_F(GatewayOpsTest, MetricsCountEachShardsCalls) {
   client::IndexerClient writer = Client(gateway, keys_[Role::kWrite]);
   std::vector<int> upserts(kShards, 0);
   for (const v1::Model& m : models) {
-    ASSERT_TRUE(writer.Upsert(m, true).ok());
+    const auto upserted = writer.Upsert(m, true);
+    ASSERT_TRUE(upserted.ok()) << upserted.status();
     ++upserts[static_cast<size_t>(gateway::ShardOf(m.id(), kShards))];
   }
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(writer.Stats().ok());
