@@ -96,6 +96,15 @@ class ServiceProcess {
   absl::Status Start(const std::string& binary, std::vector<std::string> args,
                      const std::string& log_path,
                      const std::string& listen = "127.0.0.1:0") {
+    if (absl::Status s = Launch(binary, std::move(args), log_path, listen); !s.ok()) return s;
+    return WaitForPort(binary);
+  }
+
+  // Launch starts the process and returns at once, without waiting for the
+  // "(port N)" line: for a server that is not expected to serve yet (it
+  // listens on `listen`, a fixed address, meanwhile).
+  absl::Status Launch(const std::string& binary, std::vector<std::string> args,
+                      const std::string& log_path, const std::string& listen) {
     log_path_ = log_path;
     args.insert(args.begin(), binary);
     args.push_back("--listen");
@@ -117,6 +126,12 @@ class ServiceProcess {
       execv(argv[0], argv.data());
       _exit(127);
     }
+    return absl::OkStatus();
+  }
+
+ private:
+  absl::Status WaitForPort(const std::string& binary) {
+    const std::string& log_path = log_path_;
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
     while (std::chrono::steady_clock::now() < give_up) {
       std::ifstream in(log_path);
@@ -137,6 +152,8 @@ class ServiceProcess {
     }
     return absl::DeadlineExceededError(absl::StrCat(binary, " did not report its port"));
   }
+
+ public:
 
   // Sends `signo` and waits for the exit; returns the exit code, or 128 +
   // signal when killed by a signal, or -1 after `timeout` (then SIGKILLs).

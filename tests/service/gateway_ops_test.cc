@@ -273,6 +273,46 @@ TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
   EXPECT_NE(log.find("cannot copy a checkpoint"), std::string::npos) << log;
 }
 
+// Readiness through the real binary: a follower that has not copied its
+// primary yet (here none listens at the address, so it keeps retrying) is
+// alive ("" SERVING) but not ready (tpr.v1.Indexer NOT_SERVING), so a load
+// balancer or the gateway sends it nothing; AFollowerReachesItsTlsPrimary...
+// above sees it turn SERVING once it has copied and caught up.
+TEST_F(GatewayOpsTest, AFollowerIsAliveButNotReadyUntilItHasCopiedItsPrimary) {
+  const std::string nowhere = absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
+  const std::string listen = absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
+  ServiceProcess follower;
+  // The real server, and its "(port N)" line, come only after the copy;
+  // meanwhile the loading server answers probes on `listen`.
+  ASSERT_TRUE(follower
+                  .Launch(BinaryPath("tpr-indexer"),
+                          {"--data-dir", Path("lonely"), "--follow", nowhere},
+                          Path("lonely.log"), listen)
+                  .ok());
+  std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateChannel(listen, grpc::InsecureChannelCredentials());
+  // Bounded wait for the loading server to listen.
+  absl::StatusOr<int> ready = absl::UnavailableError("not asked yet");
+  for (int i = 0; i < 300 && !ready.ok(); ++i) {
+    ready = HealthStatus(channel, "tpr.v1.Indexer");
+    if (!ready.ok()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(ready.ok()) << ready.status() << ReadText(Path("lonely.log"));
+  for (int i = 0; i < 5; ++i) {  // over a second: several copy attempts
+    absl::StatusOr<int> live = HealthStatus(channel, "");
+    ready = HealthStatus(channel, "tpr.v1.Indexer");
+    ASSERT_TRUE(live.ok()) << live.status();
+    ASSERT_TRUE(ready.ok()) << ready.status();
+    EXPECT_EQ(*live, 1) << "liveness: SERVING";
+    EXPECT_EQ(*ready, 2) << "readiness: NOT_SERVING before the copy";
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  }
+  const std::string log = ReadText(Path("lonely.log"));
+  EXPECT_NE(log.find("cannot copy a checkpoint of " + nowhere), std::string::npos) << log;
+  EXPECT_EQ(log.find("(port "), std::string::npos) << "no real server before the copy";
+  follower.Stop(SIGTERM);
+}
+
 TEST_F(GatewayOpsTest, RequestIdTravelsToTheShardsAndBack) {
   ServiceProcess gateway;
   StartGateway(&gateway, "gateway", keys_[Role::kWrite]);
