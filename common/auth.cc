@@ -1,5 +1,10 @@
 #include "common/auth.h"
 
+#include <grpc/grpc.h>
+#include <grpc/grpc_security.h>
+#include <grpc/slice.h>
+#include <openssl/rand.h>
+#include <openssl/sha.h>
 #include <sys/stat.h>
 
 #include <chrono>
@@ -7,12 +12,6 @@
 #include <sstream>
 #include <utility>
 #include <vector>
-
-#include <grpc/grpc.h>
-#include <grpc/grpc_security.h>
-#include <grpc/slice.h>
-#include <openssl/rand.h>
-#include <openssl/sha.h>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -49,7 +48,8 @@ class KeyProcessor final : public grpc::AuthMetadataProcessor {
   bool IsBlocking() const override { return false; }
 
   grpc::Status Process(const InputMetadata& md, grpc::AuthContext* /*context*/,
-                       OutputMetadata* consumed, OutputMetadata* /*response*/) override {
+                       OutputMetadata* consumed,
+                       OutputMetadata* /*response*/) override {
     absl::string_view method;
     absl::string_view authorization;
     if (auto it = md.find(":path"); it != md.end()) {
@@ -74,7 +74,8 @@ class KeyProcessor final : public grpc::AuthMetadataProcessor {
 // filter) with a C trampoline into the C++ processor.
 class InsecureWithAuth final : public grpc::ServerCredentials {
  public:
-  explicit InsecureWithAuth(std::shared_ptr<grpc::AuthMetadataProcessor> processor)
+  explicit InsecureWithAuth(
+      std::shared_ptr<grpc::AuthMetadataProcessor> processor)
       : processor_(std::move(processor)) {}
 
   void SetAuthMetadataProcessor(
@@ -95,32 +96,39 @@ class InsecureWithAuth final : public grpc::ServerCredentials {
     return port;
   }
 
-  static void ProcessC(void* state, grpc_auth_context* /*context*/, const grpc_metadata* md,
-                       size_t num_md, grpc_process_auth_metadata_done_cb cb, void* user_data) {
+  static void ProcessC(void* state, grpc_auth_context* /*context*/,
+                       const grpc_metadata* md, size_t num_md,
+                       grpc_process_auth_metadata_done_cb cb, void* user_data) {
     auto* processor = static_cast<grpc::AuthMetadataProcessor*>(state);
     grpc::AuthMetadataProcessor::InputMetadata input;
     for (size_t i = 0; i < num_md; ++i) {
       input.emplace(
-          grpc::string_ref(reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].key)),
-                           GRPC_SLICE_LENGTH(md[i].key)),
-          grpc::string_ref(reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].value)),
-                           GRPC_SLICE_LENGTH(md[i].value)));
+          grpc::string_ref(
+              reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].key)),
+              GRPC_SLICE_LENGTH(md[i].key)),
+          grpc::string_ref(
+              reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].value)),
+              GRPC_SLICE_LENGTH(md[i].value)));
     }
     grpc::AuthMetadataProcessor::OutputMetadata consumed;
     grpc::AuthMetadataProcessor::OutputMetadata response;
-    const grpc::Status status = processor->Process(input, nullptr, &consumed, &response);
+    const grpc::Status status =
+        processor->Process(input, nullptr, &consumed, &response);
     if (!status.ok()) {
-      cb(user_data, nullptr, 0, nullptr, 0, static_cast<grpc_status_code>(status.error_code()),
+      cb(user_data, nullptr, 0, nullptr, 0,
+         static_cast<grpc_status_code>(status.error_code()),
          status.error_message().c_str());
       return;
     }
     std::vector<grpc_metadata> consumed_md;
     for (size_t i = 0; i < num_md; ++i) {
-      const absl::string_view key(reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].key)),
-                                  GRPC_SLICE_LENGTH(md[i].key));
+      const absl::string_view key(
+          reinterpret_cast<const char*>(GRPC_SLICE_START_PTR(md[i].key)),
+          GRPC_SLICE_LENGTH(md[i].key));
       if (consumed.count(std::string(key)) > 0) consumed_md.push_back(md[i]);
     }
-    cb(user_data, consumed_md.data(), consumed_md.size(), nullptr, 0, GRPC_STATUS_OK, nullptr);
+    cb(user_data, consumed_md.data(), consumed_md.size(), nullptr, 0,
+       GRPC_STATUS_OK, nullptr);
   }
 
   std::shared_ptr<grpc::AuthMetadataProcessor> processor_;
@@ -132,16 +140,20 @@ absl::StatusOr<Role> ParseRole(absl::string_view name) {
   if (name == "read") return Role::kRead;
   if (name == "write") return Role::kWrite;
   if (name == "admin") return Role::kAdmin;
-  return absl::InvalidArgumentError(
-      absl::StrCat("unknown role '", name, "' (expected read, write or admin)"));
+  return absl::InvalidArgumentError(absl::StrCat(
+      "unknown role '", name, "' (expected read, write or admin)"));
 }
 
 absl::string_view RoleName(Role role) {
   switch (role) {
-    case Role::kRead: return "read";
-    case Role::kWrite: return "write";
-    case Role::kAdmin: return "admin";
-    case Role::kNone: break;
+    case Role::kRead:
+      return "read";
+    case Role::kWrite:
+      return "write";
+    case Role::kAdmin:
+      return "admin";
+    case Role::kNone:
+      break;
   }
   return "none";
 }
@@ -152,10 +164,14 @@ Role RequiredRole(absl::string_view method) {
     return Role::kNone;
   }
   static const auto* const kRoles = new std::unordered_map<std::string, Role>{
-      {"/tpr.v1.Indexer/Search", Role::kRead},   {"/tpr.v1.Indexer/Get", Role::kRead},
-      {"/tpr.v1.Indexer/List", Role::kRead},     {"/tpr.v1.Indexer/Stats", Role::kRead},
-      {"/tpr.v1.Extractor/Extract", Role::kRead}, {"/tpr.v1.Indexer/Upsert", Role::kWrite},
-      {"/tpr.v1.Indexer/BatchUpsert", Role::kWrite}, {"/tpr.v1.Indexer/Delete", Role::kWrite},
+      {"/tpr.v1.Indexer/Search", Role::kRead},
+      {"/tpr.v1.Indexer/Get", Role::kRead},
+      {"/tpr.v1.Indexer/List", Role::kRead},
+      {"/tpr.v1.Indexer/Stats", Role::kRead},
+      {"/tpr.v1.Extractor/Extract", Role::kRead},
+      {"/tpr.v1.Indexer/Upsert", Role::kWrite},
+      {"/tpr.v1.Indexer/BatchUpsert", Role::kWrite},
+      {"/tpr.v1.Indexer/Delete", Role::kWrite},
   };
   auto it = kRoles->find(std::string(method));
   return it == kRoles->end() ? Role::kAdmin : it->second;
@@ -171,11 +187,13 @@ absl::StatusOr<std::string> NewApiKey() {
 
 std::string HashApiKey(absl::string_view key) {
   unsigned char digest[SHA256_DIGEST_LENGTH];
-  SHA256(reinterpret_cast<const unsigned char*>(key.data()), key.size(), digest);
+  SHA256(reinterpret_cast<const unsigned char*>(key.data()), key.size(),
+         digest);
   return absl::StrCat(kHashPrefix, Hex(digest, sizeof(digest)));
 }
 
-std::string KeyFileLine(absl::string_view key, Role role, absl::string_view name) {
+std::string KeyFileLine(absl::string_view key, Role role,
+                        absl::string_view name) {
   std::string line = absl::StrCat(HashApiKey(key), " ", RoleName(role));
   if (!name.empty()) absl::StrAppend(&line, " ", name);
   return line;
@@ -191,21 +209,25 @@ absl::StatusOr<KeyTable> ParseKeyFile(absl::string_view text) {
     std::vector<absl::string_view> fields =
         absl::StrSplit(line, absl::ByAnyChar(" \t"), absl::SkipEmpty());
     if (fields.size() < 2) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("line ", line_number, ": expected 'sha256:<hex> <role> [name]'"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "line ", line_number, ": expected 'sha256:<hex> <role> [name]'"));
     }
     absl::string_view hash = fields[0];
-    if (!absl::StartsWith(hash, kHashPrefix) || hash.size() != kHashPrefix.size() + 64 ||
+    if (!absl::StartsWith(hash, kHashPrefix) ||
+        hash.size() != kHashPrefix.size() + 64 ||
         !IsLowerHex(hash.substr(kHashPrefix.size()))) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "line ", line_number, ": the hash must be 'sha256:' and 64 lower-case hex digits"));
+          "line ", line_number,
+          ": the hash must be 'sha256:' and 64 lower-case hex digits"));
     }
     absl::StatusOr<Role> role = ParseRole(fields[1]);
     if (!role.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("line ", line_number, ": ", role.status().message()));
+      return absl::InvalidArgumentError(
+          absl::StrCat("line ", line_number, ": ", role.status().message()));
     }
     if (!table.emplace(std::string(hash), *role).second) {
-      return absl::InvalidArgumentError(absl::StrCat("line ", line_number, ": duplicate key"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("line ", line_number, ": duplicate key"));
     }
   }
   return table;
@@ -216,11 +238,14 @@ ApiKeyAuthenticator::ApiKeyAuthenticator(std::string path, std::string log_name)
 
 absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> ApiKeyAuthenticator::Open(
     const std::string& path, std::string log_name, int watch_interval_ms) {
-  std::shared_ptr<ApiKeyAuthenticator> auth(new ApiKeyAuthenticator(path, std::move(log_name)));
+  std::shared_ptr<ApiKeyAuthenticator> auth(
+      new ApiKeyAuthenticator(path, std::move(log_name)));
   if (absl::Status s = auth->Reload(); !s.ok()) return s;
   auth->processor_ = std::make_shared<KeyProcessor>(auth.get());
   if (watch_interval_ms > 0) {
-    auth->watcher_ = std::thread([raw = auth.get(), watch_interval_ms] { raw->Watch(watch_interval_ms); });
+    auth->watcher_ = std::thread([raw = auth.get(), watch_interval_ms] {
+      raw->Watch(watch_interval_ms);
+    });
   }
   return auth;
 }
@@ -237,8 +262,11 @@ ApiKeyAuthenticator::~ApiKeyAuthenticator() {
 absl::Status ApiKeyAuthenticator::Reload() {
   struct stat info;
   if (stat(path_.c_str(), &info) != 0) {
-    absl::Status s = absl::NotFoundError(absl::StrCat("cannot read keys file ", path_));
-    if (keys_ != nullptr) LogWarning(log_name_, absl::StrCat(s.message(), "; keeping the current keys"));
+    absl::Status s =
+        absl::NotFoundError(absl::StrCat("cannot read keys file ", path_));
+    if (keys_ != nullptr)
+      LogWarning(log_name_,
+                 absl::StrCat(s.message(), "; keeping the current keys"));
     return s;
   }
   std::ifstream in(path_, std::ios::binary);
@@ -249,14 +277,17 @@ absl::Status ApiKeyAuthenticator::Reload() {
   mtime_ns_ = int64_t{info.st_mtim.tv_sec} * 1000000000 + info.st_mtim.tv_nsec;
   size_ = info.st_size;
   if (!table.ok()) {
-    absl::Status s = absl::InvalidArgumentError(absl::StrCat("keys file ", path_, ": ", table.status().message()));
-    if (keys_ != nullptr) LogWarning(log_name_, absl::StrCat(s.message(), "; keeping the current keys"));
+    absl::Status s = absl::InvalidArgumentError(
+        absl::StrCat("keys file ", path_, ": ", table.status().message()));
+    if (keys_ != nullptr)
+      LogWarning(log_name_,
+                 absl::StrCat(s.message(), "; keeping the current keys"));
     return s;
   }
   const bool first = keys_ == nullptr;
   keys_ = std::make_shared<const KeyTable>(*std::move(table));
-  LogEvent(log_name_, absl::StrCat(first ? "loaded " : "reloaded ", keys_->size(),
-                                   " API keys from ", path_));
+  LogEvent(log_name_, absl::StrCat(first ? "loaded " : "reloaded ",
+                                   keys_->size(), " API keys from ", path_));
   return absl::OkStatus();
 }
 
@@ -266,7 +297,8 @@ void ApiKeyAuthenticator::Watch(int interval_ms) {
                              [&] { return stopping_; })) {
     struct stat info;
     if (stat(path_.c_str(), &info) != 0) continue;
-    const int64_t mtime = int64_t{info.st_mtim.tv_sec} * 1000000000 + info.st_mtim.tv_nsec;
+    const int64_t mtime =
+        int64_t{info.st_mtim.tv_sec} * 1000000000 + info.st_mtim.tv_nsec;
     bool changed;
     {
       std::lock_guard<std::mutex> keys_lock(mu_);
@@ -281,11 +313,12 @@ absl::Status ApiKeyAuthenticator::Check(absl::string_view method,
   const Role needed = RequiredRole(method);
   if (needed == Role::kNone) return absl::OkStatus();
   auto refuse = [&](absl::Status status) {
-    (status.code() == absl::StatusCode::kUnauthenticated ? unauthenticated_ : permission_denied_)
+    (status.code() == absl::StatusCode::kUnauthenticated ? unauthenticated_
+                                                         : permission_denied_)
         .fetch_add(1, std::memory_order_relaxed);
     LogWarning(log_name_, absl::StrCat("rpc=", method, " refused: ",
-                                       absl::StatusCodeToString(status.code()), " (",
-                                       status.message(), ")"));
+                                       absl::StatusCodeToString(status.code()),
+                                       " (", status.message(), ")"));
     return status;
   };
   if (authorization.empty()) {
@@ -298,18 +331,20 @@ absl::Status ApiKeyAuthenticator::Check(absl::string_view method,
     return refuse(absl::UnauthenticatedError(
         "malformed authorization header: expected 'Bearer <key>'"));
   }
-  const std::string hash = HashApiKey(absl::StripAsciiWhitespace(authorization.substr(kBearer.size())));
+  const std::string hash = HashApiKey(
+      absl::StripAsciiWhitespace(authorization.substr(kBearer.size())));
   std::shared_ptr<const KeyTable> keys;
   {
     std::lock_guard<std::mutex> lock(mu_);
     keys = keys_;
   }
   auto it = keys->find(hash);
-  if (it == keys->end()) return refuse(absl::UnauthenticatedError("unknown API key"));
+  if (it == keys->end())
+    return refuse(absl::UnauthenticatedError("unknown API key"));
   if (it->second < needed) {
     return refuse(absl::PermissionDeniedError(
-        absl::StrCat(method, " needs the ", RoleName(needed), " role; this key has ",
-                     RoleName(it->second))));
+        absl::StrCat(method, " needs the ", RoleName(needed),
+                     " role; this key has ", RoleName(it->second))));
   }
   return absl::OkStatus();
 }

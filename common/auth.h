@@ -13,7 +13,8 @@
 // hash per call.
 //
 // Roles nest: read < write < admin.
-//   read:  Search, Get, List, Stats (tpr.v1.Indexer), Extract (tpr.v1.Extractor)
+//   read:  Search, Get, List, Stats (tpr.v1.Indexer),
+//          Extract (tpr.v1.Extractor)
 //   write: read + Upsert, BatchUpsert, Delete
 //   admin: write + every other method (backup, restore, ... as they come)
 // Health checks (grpc.health.v1) and reflection stay open. Every other call
@@ -29,6 +30,9 @@
 #ifndef TPR_COMMON_AUTH_H_
 #define TPR_COMMON_AUTH_H_
 
+#include <grpcpp/security/auth_metadata_processor.h>
+#include <grpcpp/security/server_credentials.h>
+
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -37,9 +41,6 @@
 #include <string>
 #include <thread>
 #include <unordered_map>
-
-#include <grpcpp/security/auth_metadata_processor.h>
-#include <grpcpp/security/server_credentials.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -68,7 +69,8 @@ absl::StatusOr<std::string> NewApiKey();
 std::string HashApiKey(absl::string_view key);
 
 // KeyFileLine returns the keys-file line for `key` ("sha256:... role name").
-std::string KeyFileLine(absl::string_view key, Role role, absl::string_view name);
+std::string KeyFileLine(absl::string_view key, Role role,
+                        absl::string_view name);
 
 // KeyTable: hash -> role, as read from a keys file.
 using KeyTable = std::unordered_map<std::string, Role>;
@@ -85,9 +87,9 @@ class ApiKeyAuthenticator {
   // Open reads `path` (NOT_FOUND / INVALID_ARGUMENT with the path and line)
   // and, when watch_interval_ms > 0, starts a thread that reloads the file
   // when it changes. `log_name` prefixes the reload log lines.
-  static absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> Open(const std::string& path,
-                                                                   std::string log_name,
-                                                                   int watch_interval_ms = 1000);
+  static absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> Open(
+      const std::string& path, std::string log_name,
+      int watch_interval_ms = 1000);
   ~ApiKeyAuthenticator();
 
   // Reload re-reads the file; on error the current keys stay and the error
@@ -98,7 +100,8 @@ class ApiKeyAuthenticator {
   // value, "" when absent). Returns OK, UNAUTHENTICATED or PERMISSION_DENIED
   // (messages never contain the key). Cost: one SHA-256 and one hash-map
   // lookup, about a microsecond. Thread-safe.
-  absl::Status Check(absl::string_view method, absl::string_view authorization) const;
+  absl::Status Check(absl::string_view method,
+                     absl::string_view authorization) const;
 
   // Calls refused so far (UNAUTHENTICATED, PERMISSION_DENIED).
   uint64_t unauthenticated() const { return unauthenticated_.load(); }

@@ -15,7 +15,9 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
  public:
   CallInterceptor(grpc::experimental::ServerRpcInfo* info,
                   std::shared_ptr<const CallInterceptorOptions> options)
-      : info_(info), options_(std::move(options)), start_(std::chrono::steady_clock::now()) {
+      : info_(info),
+        options_(std::move(options)),
+        start_(std::chrono::steady_clock::now()) {
     record_.method = info->method() != nullptr ? info->method() : "";
   }
 
@@ -28,31 +30,37 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
     }
   }
 
-  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+  void Intercept(
+      grpc::experimental::InterceptorBatchMethods* methods) override {
     if (methods->QueryInterceptionHookPoint(
             InterceptionHookPoints::POST_RECV_INITIAL_METADATA)) {
       // The peer is known from here on, not when the interceptor is made.
-      if (info_->server_context() != nullptr) record_.peer = info_->server_context()->peer();
-      std::multimap<grpc::string_ref, grpc::string_ref>* md = methods->GetRecvInitialMetadata();
+      if (info_->server_context() != nullptr)
+        record_.peer = info_->server_context()->peer();
+      std::multimap<grpc::string_ref, grpc::string_ref>* md =
+          methods->GetRecvInitialMetadata();
       auto it = md->find(kRequestIdHeader);
       if (it != md->end()) {
-        record_.request_id =
-            SanitizeRequestId(absl::string_view(it->second.data(), it->second.size()));
+        record_.request_id = SanitizeRequestId(
+            absl::string_view(it->second.data(), it->second.size()));
       }
       if (record_.request_id.empty()) {
         record_.request_id = NewRequestId();
         if (it != md->end()) md->erase(it);
         // Both strings outlive the call: the key is static, the value is
         // owned by this interceptor, which gRPC destroys with the call.
-        md->emplace(grpc::string_ref(kRequestIdHeader), grpc::string_ref(record_.request_id));
+        md->emplace(grpc::string_ref(kRequestIdHeader),
+                    grpc::string_ref(record_.request_id));
       }
     }
-    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_MESSAGE) &&
+    if (methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::POST_RECV_MESSAGE) &&
         methods->GetRecvMessage() == nullptr) {
       // No message: the end of a client stream, or bytes that did not parse.
       recv_failed_ = true;
     }
-    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
+    if (methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::PRE_SEND_STATUS)) {
       grpc::Status status = methods->GetSendStatus();
       if (recv_failed_ && status.error_code() == grpc::StatusCode::INTERNAL &&
           status.error_message().empty()) {
@@ -60,15 +68,17 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
         // message (proto_utils.h); it is the caller's input at fault.
         status = grpc::Status(
             grpc::StatusCode::INVALID_ARGUMENT,
-            absl::StrCat("the request does not parse as ", record_.method,
-                         "'s message: malformed protobuf bytes, or a string field "
-                         "(such as an id or label) that is not valid UTF-8"));
+            absl::StrCat(
+                "the request does not parse as ", record_.method,
+                "'s message: malformed protobuf bytes, or a string field "
+                "(such as an id or label) that is not valid UTF-8"));
         methods->ModifySendStatus(status);
       }
       record_.code = static_cast<int>(status.error_code());
       record_.status_message = status.error_message();
       if (!record_.request_id.empty()) {
-        methods->GetSendTrailingMetadata()->emplace(kRequestIdHeader, record_.request_id);
+        methods->GetSendTrailingMetadata()->emplace(kRequestIdHeader,
+                                                    record_.request_id);
       }
       Finish();
     }
@@ -82,7 +92,8 @@ class CallInterceptor final : public grpc::experimental::Interceptor {
                               std::chrono::steady_clock::now() - start_)
                               .count();
     for (const CallObserver& observer : options_->observers) observer(record_);
-    if (options_->log_calls && !absl::StartsWith(record_.method, "/grpc.health.") &&
+    if (options_->log_calls &&
+        !absl::StartsWith(record_.method, "/grpc.health.") &&
         !absl::StartsWith(record_.method, "/grpc.reflection.")) {
       LogCall(options_->service, record_);
     }
@@ -100,7 +111,8 @@ class CallInterceptorFactory final
     : public grpc::experimental::ServerInterceptorFactoryInterface {
  public:
   explicit CallInterceptorFactory(CallInterceptorOptions options)
-      : options_(std::make_shared<const CallInterceptorOptions>(std::move(options))) {}
+      : options_(std::make_shared<const CallInterceptorOptions>(
+            std::move(options))) {}
 
   grpc::experimental::Interceptor* CreateServerInterceptor(
       grpc::experimental::ServerRpcInfo* info) override {

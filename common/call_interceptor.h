@@ -14,13 +14,13 @@
 #ifndef TPR_COMMON_CALL_INTERCEPTOR_H_
 #define TPR_COMMON_CALL_INTERCEPTOR_H_
 
+#include <grpcpp/server_context.h>
+#include <grpcpp/support/server_interceptor.h>
+
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <grpcpp/server_context.h>
-#include <grpcpp/support/server_interceptor.h>
 
 #include "common/logging.h"
 

@@ -29,8 +29,8 @@ class EnvOverFileToml final : public CLI::ConfigTOML {
     items.erase(std::remove_if(items.begin(), items.end(),
                                [&](const CLI::ConfigItem& item) {
                                  if (!item.parents.empty()) return false;
-                                 const char* value =
-                                     std::getenv(EnvName(prefix_, item.name).c_str());
+                                 const char* value = std::getenv(
+                                     EnvName(prefix_, item.name).c_str());
                                  return value != nullptr && value[0] != '\0';
                                }),
                 items.end());
@@ -45,7 +45,8 @@ class EnvOverFileToml final : public CLI::ConfigTOML {
 // (JSON string escaping is valid TOML basic-string escaping).
 std::string TomlValue(const std::string& value) {
   double number;
-  if (value == "true" || value == "false" || absl::SimpleAtod(value, &number)) return value;
+  if (value == "true" || value == "false" || absl::SimpleAtod(value, &number))
+    return value;
   return ::tpr::eval::JsonString(value);
 }
 
@@ -71,12 +72,14 @@ ConfigSupport AddConfigSupport(CLI::App& app, const std::string& env_prefix,
   }
   auto print = std::make_shared<bool>(false);
   app.config_formatter(std::make_shared<EnvOverFileToml>(options.env_prefix));
-  app.set_config(kConfigFlag, "",
-                 "TOML file of settings, one `flag-name = value` per line (flags and "
-                 "environment variables take precedence)");
+  app.set_config(
+      kConfigFlag, "",
+      "TOML file of settings, one `flag-name = value` per line (flags and "
+      "environment variables take precedence)");
   app.allow_config_extras(CLI::config_extras_mode::error);
-  app.add_flag(kPrintFlag, *print,
-               "print the effective configuration as TOML (secrets masked) and exit");
+  app.add_flag(
+      kPrintFlag, *print,
+      "print the effective configuration as TOML (secrets masked) and exit");
   return ConfigSupport(&app, std::move(print), std::move(options));
 }
 
@@ -89,22 +92,25 @@ std::string ConfigSupport::Effective() const {
     if (name == "help" || name == "config" || name == "print-config") continue;
     std::string value;
     if (opt->get_expected_min() == 0) {  // A flag.
-      value = opt->count() > 0 ? (opt->as<bool>() ? "true" : "false")
-                               : (opt->get_default_str().empty() ? "false"
-                                                                 : opt->get_default_str());
+      value = opt->count() > 0
+                  ? (opt->as<bool>() ? "true" : "false")
+                  : (opt->get_default_str().empty() ? "false"
+                                                    : opt->get_default_str());
     } else if (opt->count() > 0) {
       value = absl::StrJoin(opt->reduced_results(), ",");
     } else {
       value = opt->get_default_str();
     }
-    const bool secret = std::find(options_.secrets.begin(), options_.secrets.end(), name) !=
-                        options_.secrets.end();
+    const bool secret =
+        std::find(options_.secrets.begin(), options_.secrets.end(), name) !=
+        options_.secrets.end();
     std::string source = opt->count() > 0 ? "" : "  # default";
     if (value.empty() && opt->count() == 0) {
       absl::StrAppend(&out, "# ", name, " = (not set)\n");
       continue;
     }
-    absl::StrAppend(&out, name, " = ", secret ? "\"***\"" : TomlValue(value), source, "\n");
+    absl::StrAppend(&out, name, " = ", secret ? "\"***\"" : TomlValue(value),
+                    source, "\n");
   }
   return out;
 }

@@ -13,18 +13,20 @@
 //   tpr::common::ConfigSupport config =
 //       tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
 //   CLI11_PARSE(app, argc, argv);
-//   if (config.print_requested()) { std::cout << config.Effective(); return 0; }
+//   if (config.print_requested()) {
+//     std::cout << config.Effective();
+//     return 0;
+//   }
 //
 // A key of the file that names no flag is an error (CLI11 reports it and
 // the command exits 2), so a misspelt setting never passes silently.
 #ifndef TPR_COMMON_CONFIG_H_
 #define TPR_COMMON_CONFIG_H_
 
+#include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 namespace tpr::common {
 
@@ -42,7 +44,8 @@ struct ConfigOptions {
 // parsing. Cheap to copy; refers to the app, which must outlive it.
 class ConfigSupport {
  public:
-  ConfigSupport(const CLI::App* app, std::shared_ptr<bool> print, ConfigOptions options)
+  ConfigSupport(const CLI::App* app, std::shared_ptr<bool> print,
+                ConfigOptions options)
       : app_(app), print_(std::move(print)), options_(std::move(options)) {}
 
   // print_requested is true when --print-config was given.

@@ -4,7 +4,8 @@
 // mapping is the identity on code and message; this header exists so that
 // every service and the client SDK convert in exactly one place.
 //
-//   grpc::Status s = tpr::common::ToGrpcStatus(LoadMeshFromBuffer(...).status());
+//   grpc::Status s =
+//       tpr::common::ToGrpcStatus(LoadMeshFromBuffer(...).status());
 //   absl::Status a = tpr::common::FromGrpcStatus(stub->Extract(&ctx, ...));
 //   if (absl::IsInvalidArgument(a)) { ... }
 //
@@ -12,9 +13,9 @@
 #ifndef TPR_COMMON_GRPC_STATUS_H_
 #define TPR_COMMON_GRPC_STATUS_H_
 
-#include <string>
-
 #include <grpcpp/support/status.h>
+
+#include <string>
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
@@ -29,9 +30,9 @@ inline grpc::Status ToGrpcStatus(const absl::Status& status) {
   if (status.ok()) return grpc::Status::OK;
   const int code = static_cast<int>(status.code());
   // absl and gRPC share the numbering 0..16 (both follow google.rpc.Code).
-  const grpc::StatusCode grpc_code =
-      (code > 0 && code <= 16) ? static_cast<grpc::StatusCode>(code)
-                               : grpc::StatusCode::UNKNOWN;
+  const grpc::StatusCode grpc_code = (code > 0 && code <= 16)
+                                         ? static_cast<grpc::StatusCode>(code)
+                                         : grpc::StatusCode::UNKNOWN;
   return grpc::Status(grpc_code, std::string(status.message()));
 }
 

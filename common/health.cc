@@ -1,23 +1,26 @@
 #include "common/health.h"
 
+#include <grpcpp/health_check_service_interface.h>
+
 #include <chrono>
 #include <utility>
-
-#include <grpcpp/health_check_service_interface.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/logging.h"
 
 namespace tpr::common {
 
-void SetReadiness(grpc::Server& server, const std::string& service, bool ready) {
-  if (grpc::HealthCheckServiceInterface* health = server.GetHealthCheckService()) {
+void SetReadiness(grpc::Server& server, const std::string& service,
+                  bool ready) {
+  if (grpc::HealthCheckServiceInterface* health =
+          server.GetHealthCheckService()) {
     health->SetServingStatus(service, ready);
   }
 }
 
 ReadinessMonitor::ReadinessMonitor(grpc::Server* server, std::string service,
-                                   ReadinessCheck check, int poll_ms, std::string log_name)
+                                   ReadinessCheck check, int poll_ms,
+                                   std::string log_name)
     : server_(server),
       service_(std::move(service)),
       check_(std::move(check)),
@@ -45,13 +48,15 @@ void ReadinessMonitor::PollOnce() {
   if (reason == last_reason_) return;
   last_reason_ = reason;
   SetReadiness(*server_, service_, reason.empty());
-  LogEvent(log_name_, reason.empty() ? absl::StrCat(service_, " ready")
-                                     : absl::StrCat(service_, " not ready: ", reason));
+  LogEvent(log_name_, reason.empty()
+                          ? absl::StrCat(service_, " ready")
+                          : absl::StrCat(service_, " not ready: ", reason));
 }
 
 void ReadinessMonitor::Run() {
   std::unique_lock<std::mutex> lock(mu_);
-  while (!cv_.wait_for(lock, std::chrono::milliseconds(poll_ms_), [&] { return stopping_; })) {
+  while (!cv_.wait_for(lock, std::chrono::milliseconds(poll_ms_),
+                       [&] { return stopping_; })) {
     lock.unlock();
     PollOnce();
     lock.lock();

@@ -10,13 +10,13 @@
 #ifndef TPR_COMMON_HEALTH_H_
 #define TPR_COMMON_HEALTH_H_
 
+#include <grpcpp/server.h>
+
 #include <condition_variable>
 #include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
-
-#include <grpcpp/server.h>
 
 namespace tpr::common {
 
@@ -36,8 +36,8 @@ void SetReadiness(grpc::Server& server, const std::string& service, bool ready);
 // and leaves the status NOT_SERVING (draining). Thread-safe.
 class ReadinessMonitor {
  public:
-  ReadinessMonitor(grpc::Server* server, std::string service, ReadinessCheck check,
-                   int poll_ms, std::string log_name);
+  ReadinessMonitor(grpc::Server* server, std::string service,
+                   ReadinessCheck check, int poll_ms, std::string log_name);
   ~ReadinessMonitor();
   ReadinessMonitor(const ReadinessMonitor&) = delete;
   ReadinessMonitor& operator=(const ReadinessMonitor&) = delete;

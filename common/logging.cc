@@ -33,8 +33,9 @@ std::string UtcNow() {
   const time_t seconds = static_cast<time_t>(micros / 1000000);
   struct tm utc;
   gmtime_r(&seconds, &utc);
-  return absl::StrFormat("%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", utc.tm_year + 1900,
-                         utc.tm_mon + 1, utc.tm_mday, utc.tm_hour, utc.tm_min, utc.tm_sec,
+  return absl::StrFormat("%04d-%02d-%02dT%02d:%02d:%02d.%03dZ",
+                         utc.tm_year + 1900, utc.tm_mon + 1, utc.tm_mday,
+                         utc.tm_hour, utc.tm_min, utc.tm_sec,
                          static_cast<int>((micros / 1000) % 1000));
 }
 
@@ -45,7 +46,8 @@ void WriteLine(const std::string& line) {
   std::fflush(stderr);
 }
 
-void Event(absl::string_view level, absl::string_view service, absl::string_view message) {
+void Event(absl::string_view level, absl::string_view service,
+           absl::string_view message) {
   if (Format().load(std::memory_order_relaxed) == LogFormat::kJson) {
     WriteLine(absl::StrCat("{\"time\":\"", UtcNow(), "\",\"level\":\"", level,
                            "\",\"service\":", JsonString(service),
@@ -79,25 +81,30 @@ void LogCall(absl::string_view service, const CallRecord& call) {
   const bool quiet_code = call.code == 0 || call.code == 1 || call.code == 5;
   const absl::string_view level = quiet_code ? "info" : "warning";
   // gRPC and absl share the canonical codes and their names.
-  const std::string code = absl::StatusCodeToString(static_cast<absl::StatusCode>(call.code));
+  const std::string code =
+      absl::StatusCodeToString(static_cast<absl::StatusCode>(call.code));
   if (Format().load(std::memory_order_relaxed) == LogFormat::kJson) {
     std::string line = absl::StrCat(
-        "{\"time\":\"", UtcNow(), "\",\"level\":\"", level, "\",\"service\":",
-        JsonString(service), ",\"rpc\":", JsonString(call.method),
+        "{\"time\":\"", UtcNow(), "\",\"level\":\"", level,
+        "\",\"service\":", JsonString(service),
+        ",\"rpc\":", JsonString(call.method),
         ",\"peer\":", JsonString(call.peer), ",\"status\":\"", code, "\"");
     if (!call.status_message.empty()) {
       absl::StrAppend(&line, ",\"error\":", JsonString(call.status_message));
     }
-    absl::StrAppend(&line, ",\"duration_ms\":", absl::StrFormat("%.3f", call.duration_ms),
-                    ",\"request_id\":", JsonString(call.request_id), "}\n");
+    absl::StrAppend(
+        &line, ",\"duration_ms\":", absl::StrFormat("%.3f", call.duration_ms),
+        ",\"request_id\":", JsonString(call.request_id), "}\n");
     WriteLine(line);
   } else {
-    std::string line = absl::StrCat(UtcNow(), " ", service, ": rpc=", call.method,
-                                    " peer=", call.peer, " status=", code);
+    std::string line =
+        absl::StrCat(UtcNow(), " ", service, ": rpc=", call.method,
+                     " peer=", call.peer, " status=", code);
     if (!call.status_message.empty()) {
       absl::StrAppend(&line, " error=", JsonString(call.status_message));
     }
-    absl::StrAppend(&line, " duration_ms=", absl::StrFormat("%.3f", call.duration_ms),
+    absl::StrAppend(&line,
+                    " duration_ms=", absl::StrFormat("%.3f", call.duration_ms),
                     " request_id=", call.request_id, "\n");
     WriteLine(line);
   }
@@ -111,8 +118,8 @@ std::string NewRequestId() {
 std::string SanitizeRequestId(absl::string_view id) {
   if (id.empty() || id.size() > 128) return "";
   for (char c : id) {
-    if (!absl::ascii_isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '_' &&
-        c != ':' && c != '-') {
+    if (!absl::ascii_isalnum(static_cast<unsigned char>(c)) && c != '.' &&
+        c != '_' && c != ':' && c != '-') {
       return "";
     }
   }

@@ -27,7 +27,8 @@ namespace tpr::common {
 // LogFormat: how LogEvent and LogCall write a line.
 enum class LogFormat {
   kText,  // "2026-11-30T03:50:00.123Z tpr-indexer: message"
-  kJson,  // {"time":"...","level":"info","service":"tpr-indexer","msg":"message"}
+  // {"time":"...","level":"info","service":"tpr-indexer","msg":"message"}
+  kJson,
 };
 
 // ParseLogFormat maps "text" or "json" to a LogFormat. Returns

@@ -1,21 +1,20 @@
 #include "common/metrics.h"
 
+#include <google/protobuf/descriptor.h>
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/wire_format_lite.h>
+#include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/proto_buffer_reader.h>
+#include <prometheus/collectable.h>
+#include <prometheus/exposer.h>
+#include <prometheus/text_serializer.h>
+
 #include <array>
 #include <chrono>
 #include <exception>
 #include <sstream>
 #include <unordered_map>
 #include <utility>
-
-#include <prometheus/collectable.h>
-#include <prometheus/exposer.h>
-#include <prometheus/text_serializer.h>
-
-#include <google/protobuf/descriptor.h>
-#include <google/protobuf/io/coded_stream.h>
-#include <google/protobuf/wire_format_lite.h>
-#include <grpcpp/support/byte_buffer.h>
-#include <grpcpp/support/proto_buffer_reader.h>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -25,22 +24,26 @@
 namespace tpr::common {
 
 const prometheus::Histogram::BucketBoundaries& SecondsBuckets() {
-  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
-      0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30};
+  static const auto* const buckets =
+      new prometheus::Histogram::BucketBoundaries{
+          0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1,
+          0.25,   0.5,   1,      2.5,   5,    10,    30};
   return *buckets;
 }
 
 const prometheus::Histogram::BucketBoundaries& FineSecondsBuckets() {
-  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
-      1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 0.01, 0.025, 0.05, 0.1,
-      0.25, 1};
+  static const auto* const buckets =
+      new prometheus::Histogram::BucketBoundaries{
+          1e-5, 2.5e-5, 5e-5,  1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3,
+          5e-3, 0.01,   0.025, 0.05, 0.1,    0.25, 1};
   return *buckets;
 }
 
 // Counts per search, 1 to 100000 (an exhaustive search of a large index).
 const prometheus::Histogram::BucketBoundaries& CountBuckets() {
-  static const auto* const buckets = new prometheus::Histogram::BucketBoundaries{
-      1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000, 100000};
+  static const auto* const buckets =
+      new prometheus::Histogram::BucketBoundaries{
+          1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000, 100000};
   return *buckets;
 }
 
@@ -50,24 +53,28 @@ struct Metrics::Families {
                      .Name("tpr_rpc_requests_total")
                      .Help("Calls finished, by method and gRPC status code")
                      .Register(r)),
-        duration(prometheus::BuildHistogram()
-                     .Name("tpr_rpc_duration_seconds")
-                     .Help("Call duration from metadata to status, by method and code")
-                     .Register(r)),
+        duration(
+            prometheus::BuildHistogram()
+                .Name("tpr_rpc_duration_seconds")
+                .Help(
+                    "Call duration from metadata to status, by method and code")
+                .Register(r)),
         in_flight(prometheus::BuildGauge()
                       .Name("tpr_rpc_in_flight")
                       .Help("Calls started and not yet finished, by method")
                       .Register(r)),
         stage(prometheus::BuildHistogram()
                   .Name("tpr_extractor_stage_duration_seconds")
-                  .Help("Duration of each extraction stage (ExtractResponse.timings)")
+                  .Help("Duration of each extraction stage "
+                        "(ExtractResponse.timings)")
                   .Register(r)),
         mesh_bytes(prometheus::BuildHistogram()
                        .Name("tpr_extractor_mesh_bytes")
                        .Help("Size of each uploaded mesh, in bytes")
                        .Register(r)
-                       .Add({}, prometheus::Histogram::BucketBoundaries{
-                                    1e3, 1e4, 1e5, 1e6, 1e7, 1e8})),
+                       .Add({},
+                            prometheus::Histogram::BucketBoundaries{
+                                1e3, 1e4, 1e5, 1e6, 1e7, 1e8})),
         emds(prometheus::BuildHistogram()
                  .Name("tpr_indexer_search_emd_computations")
                  .Help("Full EMD computations per search (SearchStats)")
@@ -78,11 +85,12 @@ struct Metrics::Families {
                          .Help("Lower bounds computed per search (SearchStats)")
                          .Register(r)
                          .Add({}, CountBuckets())),
-        search_seconds(prometheus::BuildHistogram()
-                           .Name("tpr_indexer_search_duration_seconds")
-                           .Help("Server-side time of each search (SearchStats)")
-                           .Register(r)
-                           .Add({}, SecondsBuckets())) {}
+        search_seconds(
+            prometheus::BuildHistogram()
+                .Name("tpr_indexer_search_duration_seconds")
+                .Help("Server-side time of each search (SearchStats)")
+                .Register(r)
+                .Add({}, SecondsBuckets())) {}
 
   prometheus::Family<prometheus::Counter>& requests;
   prometheus::Family<prometheus::Histogram>& duration;
@@ -135,24 +143,28 @@ struct Metrics::Families {
   // tpr.v1 services, reflection) or is one of gRPC's health checks (whose
   // generated code is not Protobuf's).
   static bool KnownMethod(const std::string& method) {
-    if (method == "/grpc.health.v1.Health/Check" || method == "/grpc.health.v1.Health/Watch") {
+    if (method == "/grpc.health.v1.Health/Check" ||
+        method == "/grpc.health.v1.Health/Watch") {
       return true;
     }
     const size_t slash = method.rfind('/');
     if (method.size() < 2 || method[0] != '/' || slash == 0) return false;
-    const std::string full_name =
-        absl::StrCat(method.substr(1, slash - 1), ".", method.substr(slash + 1));
-    return google::protobuf::DescriptorPool::generated_pool()->FindMethodByName(full_name) !=
-           nullptr;
+    const std::string full_name = absl::StrCat(method.substr(1, slash - 1), ".",
+                                               method.substr(slash + 1));
+    return google::protobuf::DescriptorPool::generated_pool()->FindMethodByName(
+               full_name) != nullptr;
   }
   // Code(method, code): that call outcome's counter and histogram.
   // Thread-safe.
-  CodeSeries Code(const std::string& method, MethodSeries& m, grpc::StatusCode code) {
+  CodeSeries Code(const std::string& method, MethodSeries& m,
+                  grpc::StatusCode code) {
     auto make = [&] {
       const prometheus::Labels labels = {
           {"method", method},
-          {"code", absl::StatusCodeToString(static_cast<absl::StatusCode>(code))}};
-      return CodeSeries{&requests.Add(labels), &duration.Add(labels, SecondsBuckets())};
+          {"code",
+           absl::StatusCodeToString(static_cast<absl::StatusCode>(code))}};
+      return CodeSeries{&requests.Add(labels),
+                        &duration.Add(labels, SecondsBuckets())};
     };
     const size_t c = static_cast<size_t>(code);
     if (c >= kCodes) return make();  // Not a code gRPC defines: not cached.
@@ -172,7 +184,8 @@ class Metrics::GaugeCallbacks final : public prometheus::Collectable {
   void Add(std::string name, std::string help, std::function<double()> read,
            prometheus::MetricType type = prometheus::MetricType::Gauge) {
     std::lock_guard<std::mutex> lock(mu_);
-    gauges_.push_back({std::move(name), std::move(help), std::move(read), type});
+    gauges_.push_back(
+        {std::move(name), std::move(help), std::move(read), type});
   }
 
   std::vector<prometheus::MetricFamily> Collect() const override {
@@ -217,13 +230,15 @@ size_t UploadBytes(grpc::ByteBuffer* raw) {
   using google::protobuf::internal::WireFormatLite;
   grpc::ProtoBufferReader reader(raw);
   google::protobuf::io::CodedInputStream in(&reader);
-  const uint32_t data_tag = WireFormatLite::MakeTag(tpr::v1::ExtractRequest::kDataFieldNumber,
-                                                    WireFormatLite::WIRETYPE_LENGTH_DELIMITED);
+  const uint32_t data_tag =
+      WireFormatLite::MakeTag(tpr::v1::ExtractRequest::kDataFieldNumber,
+                              WireFormatLite::WIRETYPE_LENGTH_DELIMITED);
   size_t total = 0;
   while (const uint32_t tag = in.ReadTag()) {
     if (tag == data_tag) {
       uint32_t length = 0;
-      if (!in.ReadVarint32(&length) || !in.Skip(static_cast<int>(length))) return 0;
+      if (!in.ReadVarint32(&length) || !in.Skip(static_cast<int>(length)))
+        return 0;
       total += length;
     } else if (!WireFormatLite::SkipField(&in, tag)) {
       return 0;
@@ -236,9 +251,11 @@ enum class Kind { kOther, kExtract, kSearch };
 
 class MetricsInterceptor final : public grpc::experimental::Interceptor {
  public:
-  MetricsInterceptor(grpc::experimental::ServerRpcInfo* info, Metrics::Families* families)
+  MetricsInterceptor(grpc::experimental::ServerRpcInfo* info,
+                     Metrics::Families* families)
       : families_(families), start_(std::chrono::steady_clock::now()) {
-    series_ = &families_->Of(info->method() != nullptr ? info->method() : "", &method_);
+    series_ = &families_->Of(info->method() != nullptr ? info->method() : "",
+                             &method_);
     series_->in_flight->Increment();
     if (method_ == "/tpr.v1.Extractor/Extract") kind_ = Kind::kExtract;
     if (method_ == "/tpr.v1.Indexer/Search") kind_ = Kind::kSearch;
@@ -249,36 +266,47 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
     series_->in_flight->Decrement();
   }
 
-  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+  void Intercept(
+      grpc::experimental::InterceptorBatchMethods* methods) override {
     if (kind_ == Kind::kExtract &&
-        methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_MESSAGE)) {
+        methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::POST_RECV_MESSAGE)) {
       // The extractor reads its upload as raw bytes (common/stream_messages.h),
       // so the received message is a grpc::ByteBuffer holding one serialized
       // ExtractRequest.
-      if (auto* raw = static_cast<grpc::ByteBuffer*>(methods->GetRecvMessage())) {
+      if (auto* raw =
+              static_cast<grpc::ByteBuffer*>(methods->GetRecvMessage())) {
         upload_bytes_ += UploadBytes(raw);
       }
     }
     if (kind_ != Kind::kOther &&
-        methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_MESSAGE)) {
+        methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::PRE_SEND_MESSAGE)) {
       const void* message = methods->GetSendMessage();
       if (message != nullptr && kind_ == Kind::kExtract) {
-        const auto* response = static_cast<const tpr::v1::ExtractResponse*>(message);
+        const auto* response =
+            static_cast<const tpr::v1::ExtractResponse*>(message);
         for (const tpr::v1::StageTiming& t : response->timings()) {
-          families_->stage.Add({{"stage", t.stage()}}, SecondsBuckets()).Observe(t.milliseconds() / 1000);
+          families_->stage.Add({{"stage", t.stage()}}, SecondsBuckets())
+              .Observe(t.milliseconds() / 1000);
         }
         families_->mesh_bytes.Observe(static_cast<double>(upload_bytes_));
       }
       if (message != nullptr && kind_ == Kind::kSearch) {
-        const auto* response = static_cast<const tpr::v1::SearchResponse*>(message);
+        const auto* response =
+            static_cast<const tpr::v1::SearchResponse*>(message);
         if (response->has_stats()) {
-          families_->emds.Observe(static_cast<double>(response->stats().emd_computations()));
-          families_->lower_bounds.Observe(static_cast<double>(response->stats().lower_bounds()));
-          families_->search_seconds.Observe(response->stats().milliseconds() / 1000);
+          families_->emds.Observe(
+              static_cast<double>(response->stats().emd_computations()));
+          families_->lower_bounds.Observe(
+              static_cast<double>(response->stats().lower_bounds()));
+          families_->search_seconds.Observe(response->stats().milliseconds() /
+                                            1000);
         }
       }
     }
-    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
+    if (methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::PRE_SEND_STATUS)) {
       Finish(methods->GetSendStatus().error_code());
     }
     methods->Proceed();
@@ -288,8 +316,10 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
   void Finish(grpc::StatusCode code) {
     finished_ = true;
     const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    const Metrics::Families::CodeSeries s = families_->Code(method_, *series_, code);
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_)
+            .count();
+    const Metrics::Families::CodeSeries s =
+        families_->Code(method_, *series_, code);
     s.requests->Increment();
     s.duration->Observe(seconds);
   }
@@ -306,7 +336,8 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
 class MetricsInterceptorFactory final
     : public grpc::experimental::ServerInterceptorFactoryInterface {
  public:
-  explicit MetricsInterceptorFactory(Metrics::Families* families) : families_(families) {}
+  explicit MetricsInterceptorFactory(Metrics::Families* families)
+      : families_(families) {}
   grpc::experimental::Interceptor* CreateServerInterceptor(
       grpc::experimental::ServerRpcInfo* info) override {
     return new MetricsInterceptor(info, families_);
@@ -329,8 +360,8 @@ absl::Status Metrics::Serve(const std::string& listen) {
   try {
     exposer_ = std::make_unique<prometheus::Exposer>(listen);
   } catch (const std::exception& e) {
-    return absl::UnavailableError(
-        absl::StrCat("--metrics-listen: cannot serve /metrics on ", listen, ": ", e.what()));
+    return absl::UnavailableError(absl::StrCat(
+        "--metrics-listen: cannot serve /metrics on ", listen, ": ", e.what()));
   }
   exposer_->RegisterCollectable(registry_);
   exposer_->RegisterCollectable(callbacks_);
@@ -348,7 +379,8 @@ void Metrics::AddGaugeCallback(const std::string& name, const std::string& help,
   callbacks_->Add(name, help, std::move(read));
 }
 
-void Metrics::AddCounterCallback(const std::string& name, const std::string& help,
+void Metrics::AddCounterCallback(const std::string& name,
+                                 const std::string& help,
                                  std::function<double()> read) {
   callbacks_->Add(name, help, std::move(read), prometheus::MetricType::Counter);
 }

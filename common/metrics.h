@@ -29,18 +29,18 @@
 #ifndef TPR_COMMON_METRICS_H_
 #define TPR_COMMON_METRICS_H_
 
-#include <functional>
-#include <memory>
-#include <mutex>
-#include <string>
-#include <vector>
-
 #include <grpcpp/support/server_interceptor.h>
 #include <prometheus/counter.h>
 #include <prometheus/family.h>
 #include <prometheus/gauge.h>
 #include <prometheus/histogram.h>
 #include <prometheus/registry.h>
+
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 
@@ -94,7 +94,8 @@ class Metrics {
   // InterceptorFactory returns the server interceptor factory that records
   // the calls of a server into these metrics. The Metrics must outlive the
   // server.
-  std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> InterceptorFactory();
+  std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
+  InterceptorFactory();
 
   // For the interceptor (metrics.cc).
   struct Families;

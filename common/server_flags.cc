@@ -9,8 +9,9 @@
 namespace tpr::common {
 
 void AddListenFlags(CLI::App& app, ServerOptions* options) {
-  app.add_option("--listen", options->listen_address,
-                 "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
+  app.add_option(
+         "--listen", options->listen_address,
+         "HOST:PORT to listen on; port 0 picks a free one (logged on stderr)")
       ->capture_default_str();
   app.add_option("--shutdown-grace-ms", options->shutdown_grace_ms,
                  "on SIGTERM/SIGINT, how long in-flight calls may finish (ms)")
@@ -27,7 +28,8 @@ void AddServerThreadsFlag(CLI::App& app, ServerFlags* flags) {
 
 void AddServerFlags(CLI::App& app, ServerFlags* flags) {
   app.add_option("--log-format", flags->log_format,
-                 "log lines as 'text' or 'json' (time, level, service, rpc, peer, status, "
+                 "log lines as 'text' or 'json' (time, level, service, rpc, "
+                 "peer, status, "
                  "duration_ms, request_id)")
       ->capture_default_str()
       ->check(CLI::IsMember({"text", "json"}));
@@ -35,30 +37,40 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
                "log one line per call (health checks and reflection excepted)")
       ->default_str(flags->log_calls ? "true" : "false");
   app.add_option("--api-keys", flags->api_keys,
-                 "file of hashed API keys with roles (tpr key new); when given, every call but "
-                 "health and reflection needs 'authorization: Bearer KEY'; reloaded on SIGHUP "
+                 "file of hashed API keys with roles (tpr key new); when "
+                 "given, every call but "
+                 "health and reflection needs 'authorization: Bearer KEY'; "
+                 "reloaded on SIGHUP "
                  "and when the file changes");
   app.add_option("--tls-cert", flags->tls.cert_file,
-                 "PEM certificate chain: serve TLS (with --tls-key); re-read when it changes");
-  app.add_option("--tls-key", flags->tls.key_file, "PEM private key of --tls-cert");
-  app.add_option("--tls-client-ca", flags->tls.client_ca_file,
-                 "PEM authority: require client certificates it signed (mutual TLS)");
+                 "PEM certificate chain: serve TLS (with --tls-key); re-read "
+                 "when it changes");
+  app.add_option("--tls-key", flags->tls.key_file,
+                 "PEM private key of --tls-cert");
+  app.add_option(
+      "--tls-client-ca", flags->tls.client_ca_file,
+      "PEM authority: require client certificates it signed (mutual TLS)");
   app.add_option("--tls-refresh-s", flags->tls.refresh_interval_s,
                  "how often the TLS files are checked for changes (seconds)")
       ->capture_default_str()
       ->check(CLI::Range(1, 86400));
   app.add_option("--metrics-listen", flags->metrics_listen,
-                 "HOST:PORT serving Prometheus metrics at /metrics (port 0: a free one, logged)");
+                 "HOST:PORT serving Prometheus metrics at /metrics (port 0: a "
+                 "free one, logged)");
 }
 
-absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) {
+absl::Status ApplyServerFlags(const ServerFlags& flags,
+                              ServerOptions* options) {
   absl::StatusOr<LogFormat> format = ParseLogFormat(flags.log_format);
-  if (!format.ok()) return absl::InvalidArgumentError(absl::StrCat("--log-format: ", format.status().message()));
+  if (!format.ok())
+    return absl::InvalidArgumentError(
+        absl::StrCat("--log-format: ", format.status().message()));
   SetLogFormat(*format);
   options->log_calls = flags.log_calls;
   if (flags.server_threads > 0) options->max_threads = flags.server_threads + 2;
   const TlsServerOptions& tls = flags.tls;
-  if (!tls.cert_file.empty() || !tls.key_file.empty() || !tls.client_ca_file.empty()) {
+  if (!tls.cert_file.empty() || !tls.key_file.empty() ||
+      !tls.client_ca_file.empty()) {
     absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
         MakeTlsServerCredentials(tls);
     if (!credentials.ok()) return credentials.status();
@@ -66,32 +78,37 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options) 
   }
   if (!flags.metrics_listen.empty()) {
     auto metrics = std::make_shared<Metrics>();
-    if (absl::Status s = metrics->Serve(flags.metrics_listen); !s.ok()) return s;
-    const std::string host = flags.metrics_listen.substr(0, flags.metrics_listen.rfind(':'));
-    LogEvent(options->log_name,
-             absl::StrCat("metrics: http://", host, ":", metrics->port(), "/metrics"));
+    if (absl::Status s = metrics->Serve(flags.metrics_listen); !s.ok())
+      return s;
+    const std::string host =
+        flags.metrics_listen.substr(0, flags.metrics_listen.rfind(':'));
+    LogEvent(options->log_name, absl::StrCat("metrics: http://", host, ":",
+                                             metrics->port(), "/metrics"));
     options->metrics = std::move(metrics);
   }
   if (!flags.api_keys.empty()) {
     absl::StatusOr<std::shared_ptr<ApiKeyAuthenticator>> keys =
         ApiKeyAuthenticator::Open(flags.api_keys, options->log_name);
     if (!keys.ok()) {
-      return absl::Status(keys.status().code(),
-                          absl::StrCat("--api-keys: ", keys.status().message()));
+      return absl::Status(
+          keys.status().code(),
+          absl::StrCat("--api-keys: ", keys.status().message()));
     }
     options->api_keys = *std::move(keys);
   }
   return absl::OkStatus();
 }
 
-std::optional<int> FinishServerFlags(const ConfigSupport& config, const ServerFlags& flags,
+std::optional<int> FinishServerFlags(const ConfigSupport& config,
+                                     const ServerFlags& flags,
                                      ServerOptions* options) {
   if (config.print_requested()) {
     std::fputs(config.Effective().c_str(), stdout);
     return 0;
   }
   if (absl::Status s = ApplyServerFlags(flags, options); !s.ok()) {
-    std::fprintf(stderr, "%s: %s\n", options->log_name.c_str(), std::string(s.message()).c_str());
+    std::fprintf(stderr, "%s: %s\n", options->log_name.c_str(),
+                 std::string(s.message()).c_str());
     return 2;
   }
   return std::nullopt;

@@ -4,7 +4,8 @@
 // API keys, TLS and metrics in a few lines:
 //
 //   tpr::common::ServerFlags ops;
-//   tpr::common::AddListenFlags(app, &server_options);  // --listen, --shutdown-grace-ms
+//   // --listen, --shutdown-grace-ms:
+//   tpr::common::AddListenFlags(app, &server_options);
 //   ... the service's own options ...
 //   tpr::common::AddServerFlags(app, &ops);
 //   auto config = tpr::common::AddConfigSupport(app, "TPR_INDEXER_");
@@ -16,10 +17,9 @@
 #ifndef TPR_COMMON_SERVER_FLAGS_H_
 #define TPR_COMMON_SERVER_FLAGS_H_
 
+#include <CLI/CLI.hpp>
 #include <optional>
 #include <string>
-
-#include <CLI/CLI.hpp>
 
 #include "absl/status/status.h"
 #include "common/config.h"
@@ -78,7 +78,8 @@ absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
 // otherwise it applies the flags (ApplyServerFlags) and returns nullopt
 // (serve), or prints the error to stderr under options->log_name and
 // returns 2.
-std::optional<int> FinishServerFlags(const ConfigSupport& config, const ServerFlags& flags,
+std::optional<int> FinishServerFlags(const ConfigSupport& config,
+                                     const ServerFlags& flags,
                                      ServerOptions* options);
 
 }  // namespace tpr::common

@@ -6,8 +6,10 @@
 // per call, observers such as metrics: common/call_interceptor.h); the
 // service's own health status is readiness (common/health.h).
 //
-//   tpr::common::ServerOptions options;  options.listen_address = "127.0.0.1:7002";
-//   absl::StatusOr<tpr::common::StartedServer> s = StartServer(options, {&service});
+//   tpr::common::ServerOptions options;
+//   options.listen_address = "127.0.0.1:7002";
+//   absl::StatusOr<tpr::common::StartedServer> s =
+//       StartServer(options, {&service});
 //   if (s.ok()) return ServeUntilSignal(*s->server, options, s->port);
 //
 // Header-only; it needs tpr_server_common (common/*.cc), gRPC::grpc++ and
@@ -16,6 +18,13 @@
 #define TPR_COMMON_SERVER_LIFECYCLE_H_
 
 #include <errno.h>
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/generic/async_generic_service.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/resource_quota.h>
+#include <grpcpp/security/server_credentials.h>
+#include <grpcpp/server.h>
+#include <grpcpp/server_builder.h>
 #include <signal.h>
 #include <time.h>
 #include <unistd.h>
@@ -28,14 +37,6 @@
 #include <mutex>
 #include <string>
 #include <vector>
-
-#include <grpcpp/ext/proto_server_reflection_plugin.h>
-#include <grpcpp/generic/async_generic_service.h>
-#include <grpcpp/health_check_service_interface.h>
-#include <grpcpp/resource_quota.h>
-#include <grpcpp/security/server_credentials.h>
-#include <grpcpp/server.h>
-#include <grpcpp/server_builder.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -103,7 +104,8 @@ inline std::shared_ptr<grpc::ServerCredentials> ListeningCredentials(
   std::shared_ptr<grpc::ServerCredentials> credentials = options.credentials;
   if (options.api_keys != nullptr) {
     if (credentials == nullptr) {
-      credentials = InsecureServerCredentialsWithAuth(options.api_keys->Processor());
+      credentials =
+          InsecureServerCredentialsWithAuth(options.api_keys->Processor());
     } else {
       credentials->SetAuthMetadataProcessor(options.api_keys->Processor());
     }
@@ -136,7 +138,8 @@ struct StartedServer {
 // Cost: thread start-up, a few milliseconds. Not thread-safe with respect to
 // other StartServer calls (it flips gRPC's process-wide plugin switches).
 inline absl::StatusOr<StartedServer> StartServer(
-    const ServerOptions& options, std::initializer_list<grpc::Service*> services) {
+    const ServerOptions& options,
+    std::initializer_list<grpc::Service*> services) {
   if (options.listen_address.empty()) {
     return absl::InvalidArgumentError("listen address is empty");
   }
@@ -147,17 +150,20 @@ inline absl::StatusOr<StartedServer> StartServer(
   StartedServer started;
   started.api_keys = options.api_keys;
   started.metrics = options.metrics;
-  std::shared_ptr<grpc::ServerCredentials> credentials = internal::ListeningCredentials(options);
+  std::shared_ptr<grpc::ServerCredentials> credentials =
+      internal::ListeningCredentials(options);
   builder.AddListeningPort(options.listen_address, credentials, &started.port);
   {
     CallInterceptorOptions calls;
     calls.service = options.log_name;
     calls.log_calls = options.log_calls;
     calls.observers = options.call_observers;
-    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
+    std::vector<
+        std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
-    if (options.metrics != nullptr) interceptors.push_back(options.metrics->InterceptorFactory());
+    if (options.metrics != nullptr)
+      interceptors.push_back(options.metrics->InterceptorFactory());
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
@@ -169,7 +175,8 @@ inline absl::StatusOr<StartedServer> StartServer(
   }
   // Sync-API pollers wake this often; Shutdown() waits for each to notice,
   // so gRPC's default of 10 s made every graceful stop take seconds.
-  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
+  builder.SetSyncServerOption(
+      grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   for (grpc::Service* service : services) builder.RegisterService(service);
   started.server = builder.BuildAndStart();
   if (started.server == nullptr || started.port == 0) {
@@ -183,8 +190,8 @@ inline absl::StatusOr<StartedServer> StartServer(
   }
   if (!options.readiness_service.empty()) {
     started.readiness = std::make_unique<ReadinessMonitor>(
-        started.server.get(), options.readiness_service, options.readiness_check,
-        options.readiness_poll_ms, options.log_name);
+        started.server.get(), options.readiness_service,
+        options.readiness_check, options.readiness_poll_ms, options.log_name);
   }
   return started;
 }
@@ -195,8 +202,10 @@ namespace internal {
 // server: every call but health checks) with UNAVAILABLE and a message.
 class UnavailableGenericService final : public grpc::CallbackGenericService {
  public:
-  explicit UnavailableGenericService(std::string message) : message_(std::move(message)) {}
-  grpc::ServerGenericBidiReactor* CreateReactor(grpc::GenericCallbackServerContext*) override {
+  explicit UnavailableGenericService(std::string message)
+      : message_(std::move(message)) {}
+  grpc::ServerGenericBidiReactor* CreateReactor(
+      grpc::GenericCallbackServerContext*) override {
     class Reactor final : public grpc::ServerGenericBidiReactor {
      public:
       explicit Reactor(const std::string& message) {
@@ -251,10 +260,12 @@ inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
   loading->service = std::make_unique<internal::UnavailableGenericService>(
       absl::StrCat(options.log_name, " is not ready: ", reason));
   grpc::ServerBuilder builder;
-  std::shared_ptr<grpc::ServerCredentials> credentials = internal::ListeningCredentials(options);
+  std::shared_ptr<grpc::ServerCredentials> credentials =
+      internal::ListeningCredentials(options);
   builder.AddListeningPort(options.listen_address, credentials, &loading->port);
   builder.RegisterCallbackGenericService(loading->service.get());
-  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
+  builder.SetSyncServerOption(
+      grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   loading->server = builder.BuildAndStart();
   if (loading->server == nullptr || loading->port == 0) {
     loading->server.reset();
@@ -262,14 +273,16 @@ inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
         absl::StrCat("cannot listen on ", options.listen_address,
                      " (address in use or not resolvable)"));
   }
-  if (grpc::HealthCheckServiceInterface* health = loading->server->GetHealthCheckService()) {
+  if (grpc::HealthCheckServiceInterface* health =
+          loading->server->GetHealthCheckService()) {
     health->SetServingStatus(true);
     if (!options.readiness_service.empty()) {
       health->SetServingStatus(options.readiness_service, false);
     }
   }
-  LogEvent(options.log_name, absl::StrCat("not ready: ", reason, "; health answers on port ",
-                                          loading->port));
+  LogEvent(options.log_name,
+           absl::StrCat("not ready: ", reason, "; health answers on port ",
+                        loading->port));
   return loading;
 }
 
@@ -277,8 +290,9 @@ inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
 // replaced by `port`.
 inline std::string ListenAddressWithPort(const std::string& address, int port) {
   const size_t colon = address.rfind(':');
-  return absl::StrCat(colon == std::string::npos ? address : address.substr(0, colon), ":",
-                      port);
+  return absl::StrCat(
+      colon == std::string::npos ? address : address.substr(0, colon), ":",
+      port);
 }
 
 namespace internal {
@@ -307,7 +321,8 @@ inline void OnShutdownSignal(int signo) {
 // number. Each SIGHUP calls `on_hangup` (when set) and waits on. SIGPIPE is
 // ignored as a side effect (a vanished client must not kill the server).
 // Thread-safe to call from one thread at a time.
-inline int WaitForShutdownSignal(const std::function<void()>& on_hangup = nullptr) {
+inline int WaitForShutdownSignal(
+    const std::function<void()>& on_hangup = nullptr) {
   int* fds = internal::SignalPipe();
   if (fds[0] < 0) {
     if (pipe(fds) != 0) return -1;
@@ -338,8 +353,10 @@ inline int WaitForShutdownSignal(const std::function<void()>& on_hangup = nullpt
 // see the cancellation and return), and waits until the server has stopped.
 // The health service reports NOT_SERVING from the first moment. Blocks for at
 // most the grace period plus the handlers' reaction time.
-inline void ShutdownGracefully(grpc::Server& server, const ServerOptions& options) {
-  if (grpc::HealthCheckServiceInterface* health = server.GetHealthCheckService()) {
+inline void ShutdownGracefully(grpc::Server& server,
+                               const ServerOptions& options) {
+  if (grpc::HealthCheckServiceInterface* health =
+          server.GetHealthCheckService()) {
     health->SetServingStatus(false);
   }
   server.Shutdown(std::chrono::system_clock::now() +
@@ -349,7 +366,8 @@ inline void ShutdownGracefully(grpc::Server& server, const ServerOptions& option
 
 // ShutdownGracefully for a StartedServer: stops the readiness monitor first
 // (readiness NOT_SERVING), then as above.
-inline void ShutdownGracefully(StartedServer& started, const ServerOptions& options) {
+inline void ShutdownGracefully(StartedServer& started,
+                               const ServerOptions& options) {
   if (started.readiness) started.readiness->Stop();
   ShutdownGracefully(*started.server, options);
 }
@@ -359,9 +377,10 @@ namespace internal {
 // ServeUntilSignalWith logs, waits for SIGTERM/SIGINT, calls `shut_down`,
 // logs again; returns 0.
 template <typename ShutDown>
-int ServeUntilSignalWith(const ServerOptions& options, int port, ShutDown shut_down) {
-  LogEvent(options.log_name,
-           absl::StrCat("serving on ", options.listen_address, " (port ", port, ")"));
+int ServeUntilSignalWith(const ServerOptions& options, int port,
+                         ShutDown shut_down) {
+  LogEvent(options.log_name, absl::StrCat("serving on ", options.listen_address,
+                                          " (port ", port, ")"));
   const int signo = WaitForShutdownSignal([&options] {
     if (options.api_keys == nullptr) return;
     LogEvent(options.log_name, "SIGHUP: reloading the API keys");
@@ -382,15 +401,16 @@ int ServeUntilSignalWith(const ServerOptions& options, int port, ShutDown shut_d
 // each step. Returns the process exit code to use: 0.
 inline int ServeUntilSignal(grpc::Server& server, const ServerOptions& options,
                             int port) {
-  return internal::ServeUntilSignalWith(options, port,
-                                        [&] { ShutdownGracefully(server, options); });
+  return internal::ServeUntilSignalWith(
+      options, port, [&] { ShutdownGracefully(server, options); });
 }
 
 // ServeUntilSignal for a StartedServer (its readiness monitor stops, and
 // readiness turns NOT_SERVING, when draining starts).
-inline int ServeUntilSignal(StartedServer& started, const ServerOptions& options) {
-  return internal::ServeUntilSignalWith(options, started.port,
-                                        [&] { ShutdownGracefully(started, options); });
+inline int ServeUntilSignal(StartedServer& started,
+                            const ServerOptions& options) {
+  return internal::ServeUntilSignalWith(
+      options, started.port, [&] { ShutdownGracefully(started, options); });
 }
 
 }  // namespace tpr::common

@@ -12,10 +12,10 @@
 #ifndef TPR_COMMON_TLS_H_
 #define TPR_COMMON_TLS_H_
 
+#include <grpcpp/security/server_credentials.h>
+
 #include <memory>
 #include <string>
-
-#include <grpcpp/security/server_credentials.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -44,8 +44,8 @@ absl::Status CheckTlsFiles(const TlsServerOptions& options);
 // MakeTlsServerCredentials checks the files (CheckTlsFiles) and returns TLS
 // server credentials over a FileWatcherCertificateProvider. Errors: those of
 // CheckTlsFiles.
-absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeTlsServerCredentials(
-    const TlsServerOptions& options);
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>>
+MakeTlsServerCredentials(const TlsServerOptions& options);
 
 }  // namespace tpr::common
 

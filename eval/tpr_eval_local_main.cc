@@ -64,7 +64,7 @@ struct Model {
   std::string path;  // empty for synthetic models
   int synthetic_pose = -1;
   int identity_body = -1;  // identity mode (synth.h): label is the body
-  int copy = 0;  // 0 original; 1..3 the paper's invariance copies
+  int copy = 0;            // 0 original; 1..3 the paper's invariance copies
 };
 
 // What one model contributes to each descriptor.
@@ -121,13 +121,15 @@ absl::StatusOr<std::vector<Model>> SyntheticModels(const std::string& spec) {
   if (std::sscanf(dims.c_str(), "%dx%d", &classes, &poses) != 2 ||
       classes < 1 || poses < 1 ||
       (identity && classes > synth::kMaxIdentityBodies)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--synthetic takes CLASSESxPOSES (e.g. 8x10) or identity:BODIESxPOSES; got '", spec,
-        "'"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("--synthetic takes CLASSESxPOSES (e.g. 8x10) or "
+                     "identity:BODIESxPOSES; got '",
+                     spec, "'"));
   }
   std::vector<std::string> names;
   if (identity) {
-    for (int b = 0; b < classes; ++b) names.push_back(synth::IdentityBodyName(b));
+    for (int b = 0; b < classes; ++b)
+      names.push_back(synth::IdentityBodyName(b));
   } else {
     names = synth::ClassNames();
   }
@@ -173,12 +175,13 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   const extract::Options& e = config.extract;
   key << " bands=" << e.bands << (e.bands_per_feature_extent ? "" : "/diameter")
       << " cycle=" << e.cycle_min_vertices << "/" << e.cycle_search_hops
-      << " ring=" << e.ring_length_threshold << " prominence=" << e.point_min_prominence
-      << " stop=" << e.ring_stop_at_centre_saddles << " spectrum=" << e.spectrum_eigenvalues
-      << "/" << e.spectrum.max_vertices << "/" << e.spectrum.dense_max_vertices
-      << " d2=" << config.d2.pairs
-      << "/" << config.d2.bins << "/" << config.d2.range << "/"
-      << config.d2.seed;
+      << " ring=" << e.ring_length_threshold
+      << " prominence=" << e.point_min_prominence
+      << " stop=" << e.ring_stop_at_centre_saddles
+      << " spectrum=" << e.spectrum_eigenvalues << "/"
+      << e.spectrum.max_vertices << "/" << e.spectrum.dense_max_vertices
+      << " d2=" << config.d2.pairs << "/" << config.d2.bins << "/"
+      << config.d2.range << "/" << config.d2.seed;
   return key.str();
 }
 
@@ -222,7 +225,8 @@ Described Describe(const Model& model, const Config& config, size_t index) {
     shape.seed = config.seed;
     absl::StatusOr<extract::Mesh> mesh =
         model.identity_body >= 0
-            ? synth::GenerateIdentity(model.identity_body, model.synthetic_pose, shape)
+            ? synth::GenerateIdentity(model.identity_body, model.synthetic_pose,
+                                      shape)
             : synth::GenerateShape(model.label, model.synthetic_pose, shape);
     if (!mesh.ok()) {
       out.error = std::string(mesh.status().message());
@@ -291,9 +295,10 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   Config& c = f->config;
   app->add_option("--manifest", f->manifest,
                   "MANIFEST.txt: '<relative path> <class>' per line");
-  app->add_option("--synthetic", f->synthetic,
-                  "generate CLASSESxPOSES synthetic models instead, or "
-                  "identity:BODIESxPOSES (bodies of one skeleton, class = body)");
+  app->add_option(
+      "--synthetic", f->synthetic,
+      "generate CLASSESxPOSES synthetic models instead, or "
+      "identity:BODIESxPOSES (bodies of one skeleton, class = body)");
   app->add_option("--synthetic-vertices", c.synthetic_vertices,
                   "vertices per synthetic model");
   app->add_option("--out", f->out_dir,
@@ -315,9 +320,11 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--ring-threshold", c.extract.ring_length_threshold,
                   "ring length threshold (4.6.2)");
   app->add_option("--point-prominence", c.extract.point_min_prominence,
-                  "smallest protrusion holding a topological point, / sqrt(area) (0 = paper)");
-  app->add_option("--spectral-weight", c.ground.spectral.weight,
-                  "w_s: weight of the spectral term (0: the paper's TPR distance)");
+                  "smallest protrusion holding a topological point, / "
+                  "sqrt(area) (0 = paper)");
+  app->add_option(
+      "--spectral-weight", c.ground.spectral.weight,
+      "w_s: weight of the spectral term (0: the paper's TPR distance)");
   app->add_option("--spectral-transform", f->spectral_transform,
                   "phi of the spectral term: raw, by_index or log");
   app->add_option("--spectral-eigenvalues", c.ground.spectral.eigenvalues,
@@ -335,9 +342,10 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--a-scale", c.ground.a_scale, "Eq. 7 L2norm scale of area");
   app->add_option("--h-scale", c.ground.h_scale,
                   "Eq. 7 L2norm scale of thickness");
-  app->add_option("--save-matrices", f->save_matrices,
-                  "write names, classes, spectra and the EMD and D2 matrices to this file "
-                  "(saved_set.h), for tpr-tune-spectral");
+  app->add_option(
+      "--save-matrices", f->save_matrices,
+      "write names, classes, spectra and the EMD and D2 matrices to this file "
+      "(saved_set.h), for tpr-tune-spectral");
   app->add_option("--dump", f->dump,
                   "write every model's features (text) to this file");
 }
@@ -529,13 +537,15 @@ DistanceMatrix SpectralMatrix(const std::vector<Described>& described,
 DistanceMatrix Sum(const DistanceMatrix& a, double w, const DistanceMatrix& b) {
   DistanceMatrix out(a.size());
   for (size_t i = 0; i < a.size(); ++i) {
-    for (size_t j = i + 1; j < a.size(); ++j) out.Set(i, j, a(i, j) + w * b(i, j));
+    for (size_t j = i + 1; j < a.size(); ++j)
+      out.Set(i, j, a(i, j) + w * b(i, j));
   }
   return out;
 }
 
 Matching MatchAll(const std::vector<Described>& described,
-                  const std::vector<int>& kept, const Config& config, int threads) {
+                  const std::vector<int>& kept, const Config& config,
+                  int threads) {
   Matching m;
   const Clock::time_point start = Clock::now();
   // One EMD per pair: the spectral term is added afterwards, which equals
@@ -741,23 +751,28 @@ std::string Tune(const std::vector<Model>& models,
 
 // WithinBetween returns "mean distance within classes W, between B, ratio
 // W / B" (distance_matrix.h Separation: lower separates better).
-std::string WithinBetween(const std::vector<std::string>& labels, const DistanceMatrix& d) {
+std::string WithinBetween(const std::vector<std::string>& labels,
+                          const DistanceMatrix& d) {
   const ClassSeparation s = Separation(labels, d);
-  return absl::StrFormat("mean distance within classes %.4g, between %.4g, ratio %.4f", s.within,
-                         s.between, s.Ratio());
+  return absl::StrFormat(
+      "mean distance within classes %.4g, between %.4g, ratio %.4f", s.within,
+      s.between, s.Ratio());
 }
 
 std::string TprTitle(const Config& c) {
-  return absl::StrFormat("TPR + spectrum (EMD of Eq. 7 + %g x ||phi(spec)||, phi = %s, %d eigenvalues)",
-                         c.ground.spectral.weight,
-                         index::SpectralTransformName(c.ground.spectral.transform),
-                         c.ground.spectral.eigenvalues);
+  return absl::StrFormat(
+      "TPR + spectrum (EMD of Eq. 7 + %g x ||phi(spec)||, phi = %s, %d "
+      "eigenvalues)",
+      c.ground.spectral.weight,
+      index::SpectralTransformName(c.ground.spectral.transform),
+      c.ground.spectral.eigenvalues);
 }
 
 std::string ShapeDnaTitle(const Config& c) {
-  return absl::StrFormat("ShapeDNA (spectrum alone, phi = %s, %d eigenvalues, L2)",
-                         index::SpectralTransformName(c.ground.spectral.transform),
-                         c.ground.spectral.eigenvalues);
+  return absl::StrFormat(
+      "ShapeDNA (spectrum alone, phi = %s, %d eigenvalues, L2)",
+      index::SpectralTransformName(c.ground.spectral.transform),
+      c.ground.spectral.eigenvalues);
 }
 
 // Everything a run measured, for the files of --out.
@@ -780,7 +795,8 @@ std::string TablesMarkdown(const Results& r,
   for (int i : s.kept) features += described[i].points + described[i].rings;
   std::string md =
       ScoresMarkdown(TprTitle(r.config), r.tpr, s.models_per_class) +
-      ScoresMarkdown("Paper TPR (EMD of Eq. 7, w_s = 0)", r.paper, s.models_per_class) +
+      ScoresMarkdown("Paper TPR (EMD of Eq. 7, w_s = 0)", r.paper,
+                     s.models_per_class) +
       ScoresMarkdown(ShapeDnaTitle(r.config), r.shapedna, s.models_per_class) +
       ScoresMarkdown("D2 (Osada et al. 2001, L1)", r.d2, s.models_per_class);
   md +=
@@ -851,8 +867,7 @@ absl::Status WriteOutputs(const std::string& out_dir, const Results& r,
       ",\"per_class\":", PerClassJson(r.paper, s.models_per_class),
       "},\"shapedna\":{\"overall\":", MetricsJson(r.shapedna.overall),
       ",\"per_class\":", PerClassJson(r.shapedna, s.models_per_class), "}",
-      r.tune_json.empty() ? "" : ",\"tuning\":" + r.tune_json,
-      "}\n");
+      r.tune_json.empty() ? "" : ",\"tuning\":" + r.tune_json, "}\n");
   const fs::path out(out_dir);
   const std::vector<std::pair<std::string, std::string>> files = {
       {"results.json", json},
@@ -896,7 +911,8 @@ int Run(int argc, char** argv) {
     absl::StatusOr<index::SpectralTransform> t =
         index::ParseSpectralTransform(flags.spectral_transform);
     if (!t.ok()) {
-      std::fprintf(stderr, "tpr-eval-local: %s\n", t.status().ToString().c_str());
+      std::fprintf(stderr, "tpr-eval-local: %s\n",
+                   t.status().ToString().c_str());
       return 2;
     }
     config.ground.spectral.transform = *t;
@@ -959,7 +975,8 @@ int Run(int argc, char** argv) {
 
   r.tpr = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.tpr));
   r.paper = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.emd));
-  r.shapedna = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.spectral));
+  r.shapedna =
+      Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.spectral));
   r.d2 = Evaluate(r.summary.labels, LeaveOneOutQueries(r.matching.d2));
   std::printf("\n%s\n%s", TprTitle(config).c_str(),
               ScoresTable(r.tpr, r.summary.models_per_class).c_str());

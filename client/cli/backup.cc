@@ -33,11 +33,13 @@ int RunBackup(const Globals& g, const BackupArgs& args) {
     std::printf("%s\n", ToJson(response).c_str());
     return 0;
   }
-  std::printf("backup %u of %s in %s: %lld models, %u files, %.1f MiB (%.1f MiB copied), "
-              "verified\n",
-              response.backup_id(), g.indexer.c_str(), args.dir.c_str(),
-              static_cast<long long>(response.models()), response.files(),
-              response.size_bytes() / 1048576.0, response.copied_bytes() / 1048576.0);
+  std::printf(
+      "backup %u of %s in %s: %lld models, %u files, %.1f MiB (%.1f MiB "
+      "copied), "
+      "verified\n",
+      response.backup_id(), g.indexer.c_str(), args.dir.c_str(),
+      static_cast<long long>(response.models()), response.files(),
+      response.size_bytes() / 1048576.0, response.copied_bytes() / 1048576.0);
   return 0;
 }
 
@@ -46,7 +48,8 @@ const bool kRegistered = RegisterCommand(
      [](CLI::App& sub) {
        auto args = std::make_shared<BackupArgs>();
        sub.add_option("--to", args->dir,
-                      "backup set directory on the indexer's machine (created if missing)")
+                      "backup set directory on the indexer's machine (created "
+                      "if missing)")
            ->required();
        sub.add_option("--keep-last", args->keep_last,
                       "afterwards keep only this many newest backups (0: all)")

@@ -28,7 +28,8 @@ std::string FailuresJson(const Failures& failures) {
 
 void PrintFailures(const Failures& failures) {
   for (const auto& [id, why] : failures) {
-    std::printf("  failed %s: %s\n", TextField(id).c_str(), TextField(why).c_str());
+    std::printf("  failed %s: %s\n", TextField(id).c_str(),
+                TextField(why).c_str());
   }
 }
 

@@ -2,7 +2,8 @@
 // escapers (from eval/lib/report.h), and the progress bar.
 //
 //   Progress progress(items.size(), "adding");
-//   ParallelFor(items.size(), jobs, [&](size_t i) { progress.Step(id, "added"); });
+//   ParallelFor(items.size(), jobs,
+//               [&](size_t i) { progress.Step(id, "added"); });
 //   if (!status.ok()) return Fail("add", status);
 #ifndef TPR_CLIENT_CLI_CLI_UTIL_H_
 #define TPR_CLIENT_CLI_CLI_UTIL_H_

@@ -32,10 +32,12 @@ void AddGlobalFlags(CLI::App* app, Globals* g) {
       ->envname("TPR_TLS_CERT");
   app->add_option("--tls-key", c.tls_key_file, "PEM private key of --tls-cert")
       ->envname("TPR_TLS_KEY");
-  app->add_option("--tls-server-name", c.tls_server_name,
-                  "name the server's certificate must carry, when not the address's host");
+  app->add_option(
+      "--tls-server-name", c.tls_server_name,
+      "name the server's certificate must carry, when not the address's host");
   app->add_option("--api-key", c.api_key,
-                  "API key sent as 'authorization: Bearer KEY' (prefer TPR_API_KEY: a flag "
+                  "API key sent as 'authorization: Bearer KEY' (prefer "
+                  "TPR_API_KEY: a flag "
                   "shows in ps)")
       ->envname("TPR_API_KEY");
   app->add_flag("-v,--verbose", g->verbose,
@@ -48,13 +50,14 @@ namespace {
 tpr::client::ConnectionOptions ConnectionFor(const Globals& g) {
   tpr::client::ConnectionOptions connection = g.connection;
   if (g.verbose) {
-    connection.on_call_done = [](absl::string_view method, absl::string_view request_id,
+    connection.on_call_done = [](absl::string_view method,
+                                 absl::string_view request_id,
                                  const grpc::Status& status) {
-      const std::string code =
-          absl::StatusCodeToString(static_cast<absl::StatusCode>(status.error_code()));
-      std::fprintf(stderr, "tpr: %.*s: %s request_id=%.*s\n", static_cast<int>(method.size()),
-                   method.data(), code.c_str(), static_cast<int>(request_id.size()),
-                   request_id.data());
+      const std::string code = absl::StatusCodeToString(
+          static_cast<absl::StatusCode>(status.error_code()));
+      std::fprintf(stderr, "tpr: %.*s: %s request_id=%.*s\n",
+                   static_cast<int>(method.size()), method.data(), code.c_str(),
+                   static_cast<int>(request_id.size()), request_id.data());
     };
   }
   return connection;
@@ -70,7 +73,8 @@ tpr::client::CallOptions CallOptionsFor(const Globals& g) {
 
 std::optional<tpr::client::ExtractorClient> ConnectExtractor(const Globals& g) {
   absl::StatusOr<tpr::client::ExtractorClient> client =
-      tpr::client::ExtractorClient::Connect(g.extractor, ConnectionFor(g), CallOptionsFor(g));
+      tpr::client::ExtractorClient::Connect(g.extractor, ConnectionFor(g),
+                                            CallOptionsFor(g));
   if (!client.ok()) {
     Fail("--extractor", client.status());
     return std::nullopt;
@@ -80,7 +84,8 @@ std::optional<tpr::client::ExtractorClient> ConnectExtractor(const Globals& g) {
 
 std::optional<tpr::client::IndexerClient> ConnectIndexer(const Globals& g) {
   absl::StatusOr<tpr::client::IndexerClient> client =
-      tpr::client::IndexerClient::Connect(g.indexer, ConnectionFor(g), CallOptionsFor(g));
+      tpr::client::IndexerClient::Connect(g.indexer, ConnectionFor(g),
+                                          CallOptionsFor(g));
   if (!client.ok()) {
     Fail("--indexer", client.status());
     return std::nullopt;
@@ -90,8 +95,10 @@ std::optional<tpr::client::IndexerClient> ConnectIndexer(const Globals& g) {
 
 std::optional<AdminTarget> ConnectAdmin(const Globals& g) {
   if (g.indexer.find(',') != std::string::npos) {
-    Fail("--indexer", absl::InvalidArgumentError(
-                          "admin commands address one tpr-indexer; give a single HOST:PORT"));
+    Fail(
+        "--indexer",
+        absl::InvalidArgumentError(
+            "admin commands address one tpr-indexer; give a single HOST:PORT"));
     return std::nullopt;
   }
   absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
@@ -104,8 +111,9 @@ std::optional<AdminTarget> ConnectAdmin(const Globals& g) {
   target.stub = tpr::v1::IndexerAdmin::NewStub(*channel);
   const double timeout_s = g.timeout_s;
   target.prepare = [timeout_s](grpc::ClientContext* context) {
-    context->set_deadline(std::chrono::system_clock::now() +
-                          std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+    context->set_deadline(
+        std::chrono::system_clock::now() +
+        std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
   };
   return target;
 }

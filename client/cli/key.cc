@@ -37,44 +37,57 @@ int RunKeyNew(const Globals& g, const KeyArgs& args) {
     text << in.rdbuf();
     existing = text.str();
   }
-  if (absl::StatusOr<common::KeyTable> table = common::ParseKeyFile(existing); !table.ok()) {
+  if (absl::StatusOr<common::KeyTable> table = common::ParseKeyFile(existing);
+      !table.ok()) {
     return Fail(args.keys_file, table.status());
   }
   absl::StatusOr<std::string> key = common::NewApiKey();
   if (!key.ok()) return Fail("key new", key.status());
   std::string line = common::KeyFileLine(*key, *role, args.name) + "\n";
   if (!existing.empty() && existing.back() != '\n') line = "\n" + line;
-  const int fd = open(args.keys_file.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0600);
-  if (fd < 0 || write(fd, line.data(), line.size()) != static_cast<ssize_t>(line.size()) ||
+  const int fd = open(args.keys_file.c_str(),
+                      O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0600);
+  if (fd < 0 ||
+      write(fd, line.data(), line.size()) !=
+          static_cast<ssize_t>(line.size()) ||
       fsync(fd) != 0) {
     if (fd >= 0) close(fd);
-    return Fail(args.keys_file, absl::UnavailableError("cannot append to the keys file"));
+    return Fail(args.keys_file,
+                absl::UnavailableError("cannot append to the keys file"));
   }
   close(fd);
   if (g.json) {
-    std::printf("{\"key\":%s,\"role\":%s,\"hash\":%s}\n", JsonString(*key).c_str(),
+    std::printf("{\"key\":%s,\"role\":%s,\"hash\":%s}\n",
+                JsonString(*key).c_str(),
                 JsonString(common::RoleName(*role)).c_str(),
                 JsonString(common::HashApiKey(*key)).c_str());
   } else {
     std::printf("%s\n", key->c_str());
     std::fprintf(stderr,
-                 "tpr: added a %s key to %s; it is shown only now (the file keeps its hash). "
+                 "tpr: added a %s key to %s; it is shown only now (the file "
+                 "keeps its hash). "
                  "Servers pick it up within a second or on SIGHUP.\n",
-                 std::string(common::RoleName(*role)).c_str(), args.keys_file.c_str());
+                 std::string(common::RoleName(*role)).c_str(),
+                 args.keys_file.c_str());
   }
   return 0;
 }
 
 const bool kRegistered = RegisterCommand(
-    {"key", "API keys: `tpr key new --role ROLE --keys FILE`", [](CLI::App& sub) {
+    {"key", "API keys: `tpr key new --role ROLE --keys FILE`",
+     [](CLI::App& sub) {
        auto args = std::make_shared<KeyArgs>();
        sub.require_subcommand(1);
-       CLI::App* make = sub.add_subcommand("new", "make a key, append its hash to FILE, print it once");
+       CLI::App* make = sub.add_subcommand(
+           "new", "make a key, append its hash to FILE, print it once");
        make->add_option("--role", args->role, "read, write or admin")
            ->capture_default_str()
            ->check(CLI::IsMember({"read", "write", "admin"}));
-       make->add_option("--keys", args->keys_file, "the servers' --api-keys file")->required();
-       make->add_option("--name", args->name, "a label kept next to the hash (no spaces)");
+       make->add_option("--keys", args->keys_file,
+                        "the servers' --api-keys file")
+           ->required();
+       make->add_option("--name", args->name,
+                        "a label kept next to the hash (no spaces)");
        return [args](const Globals& g) { return RunKeyNew(g, *args); };
      }});
 

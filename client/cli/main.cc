@@ -30,14 +30,18 @@ int main(int argc, char** argv) {
   // key), which CLI11 lists only in `tpr --help`.
   std::string globals;
   for (const CLI::Option* option : app.get_options()) {
-    const std::string name = option->get_name();  // the long name; "" when hidden
+    const std::string name =
+        option->get_name();  // the long name; "" when hidden
     if (name.empty() || name == "--help") continue;
     if (!globals.empty()) globals += ", ";
     globals += name;
-    if (!option->get_envname().empty()) globals += " (" + option->get_envname() + ")";
+    if (!option->get_envname().empty())
+      globals += " (" + option->get_envname() + ")";
   }
   const std::string footer =
-      "\nGlobal options, before or after the subcommand (details: tpr --help):\n  " + globals;
+      "\nGlobal options, before or after the subcommand (details: tpr "
+      "--help):\n  " +
+      globals;
   std::vector<std::pair<CLI::App*, tpr::cli::CommandAction>> actions;
   for (const tpr::cli::Command& command : tpr::cli::Commands()) {
     CLI::App* sub = app.add_subcommand(command.name, command.help);

@@ -36,22 +36,26 @@ int RunRestore(const Globals& g, const RestoreArgs& args) {
     std::printf("%s\n", ToJson(response).c_str());
     return 0;
   }
-  std::printf("restored backup %u (%lld models) into %s; start it with "
-              "tpr-indexer --data-dir %s\n",
-              response.backup_id(), static_cast<long long>(response.models()),
-              args.into.c_str(), args.into.c_str());
+  std::printf(
+      "restored backup %u (%lld models) into %s; start it with "
+      "tpr-indexer --data-dir %s\n",
+      response.backup_id(), static_cast<long long>(response.models()),
+      args.into.c_str(), args.into.c_str());
   return 0;
 }
 
 const bool kRegistered = RegisterCommand(
-    {"restore", "restore a backup into an empty data directory (admin)", [](CLI::App& sub) {
+    {"restore", "restore a backup into an empty data directory (admin)",
+     [](CLI::App& sub) {
        auto args = std::make_shared<RestoreArgs>();
-       sub.add_option("--from", args->from, "backup set directory (tpr backup --to)")
+       sub.add_option("--from", args->from,
+                      "backup set directory (tpr backup --to)")
            ->required();
        sub.add_option("--into", args->into,
                       "empty or absent data directory on the indexer's machine")
            ->required();
-       sub.add_option("--backup-id", args->backup_id, "backup to restore (0: the latest)");
+       sub.add_option("--backup-id", args->backup_id,
+                      "backup to restore (0: the latest)");
        return [args](const Globals& g) { return RunRestore(g, *args); };
      }});
 

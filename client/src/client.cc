@@ -1,5 +1,10 @@
 #include "tpr/client.h"
 
+#include <grpc/grpc.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
+
 #include <algorithm>
 #include <chrono>
 #include <fstream>
@@ -7,11 +12,6 @@
 #include <sstream>
 #include <thread>
 #include <utility>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
-#include <grpc/grpc.h>
-#include <grpcpp/support/channel_arguments.h>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -50,11 +50,13 @@ absl::StatusOr<Family> ClassifyAddress(absl::string_view address) {
     return Family::kIpv6;
   }
   const size_t colon = address.rfind(':');
-  if (colon == absl::string_view::npos || colon == 0 || colon + 1 == address.size()) {
+  if (colon == absl::string_view::npos || colon == 0 ||
+      colon + 1 == address.size()) {
     return absl::InvalidArgumentError(
         absl::StrCat("address '", address, "' needs the form HOST:PORT"));
   }
-  return IsIpv4Literal(address.substr(0, colon)) ? Family::kIpv4 : Family::kName;
+  return IsIpv4Literal(address.substr(0, colon)) ? Family::kIpv4
+                                                 : Family::kName;
 }
 
 std::chrono::system_clock::time_point DeadlineFor(const CallOptions& call) {
@@ -81,8 +83,8 @@ void BackoffWait(grpc::Channel* channel, std::chrono::microseconds wait) {
 // that the rule "retry only idempotent calls" lives next to each call and
 // the jitter does not depend on channel configuration.
 template <typename Attempt>
-grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call, bool idempotent,
-                         Attempt&& attempt) {
+grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call,
+                         bool idempotent, Attempt&& attempt) {
   const auto deadline = DeadlineFor(call);
   const int attempts = idempotent ? std::max(1, call.max_attempts) : 1;
   absl::Duration backoff = call.initial_backoff;
@@ -92,10 +94,12 @@ grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call, bool i
     grpc::ClientContext context;
     context.set_deadline(deadline);
     status = attempt(&context);
-    if (status.error_code() != grpc::StatusCode::UNAVAILABLE || i + 1 == attempts) break;
+    if (status.error_code() != grpc::StatusCode::UNAVAILABLE ||
+        i + 1 == attempts)
+      break;
     std::uniform_real_distribution<double> jitter(0.8, 1.2);
-    const auto wait = std::chrono::microseconds(
-        static_cast<int64_t>(absl::ToDoubleMicroseconds(backoff) * jitter(rng)));
+    const auto wait = std::chrono::microseconds(static_cast<int64_t>(
+        absl::ToDoubleMicroseconds(backoff) * jitter(rng)));
     if (std::chrono::system_clock::now() + wait >= deadline) break;
     BackoffWait(channel, wait);
     backoff = std::min(call.max_backoff, backoff * call.backoff_multiplier);
@@ -107,16 +111,20 @@ grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call, bool i
 
 absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
   addresses = absl::StripAsciiWhitespace(addresses);
-  if (addresses.empty()) return absl::InvalidArgumentError("no server address given");
+  if (addresses.empty())
+    return absl::InvalidArgumentError("no server address given");
   // Already a gRPC target with a resolver scheme.
-  for (absl::string_view scheme : {"dns:", "ipv4:", "ipv6:", "unix:", "unix-abstract:"}) {
+  for (absl::string_view scheme :
+       {"dns:", "ipv4:", "ipv6:", "unix:", "unix-abstract:"}) {
     if (absl::StartsWith(addresses, scheme)) return std::string(addresses);
   }
   std::vector<std::string> list;
-  for (absl::string_view a : absl::StrSplit(addresses, ',', absl::SkipWhitespace())) {
+  for (absl::string_view a :
+       absl::StrSplit(addresses, ',', absl::SkipWhitespace())) {
     list.emplace_back(absl::StripAsciiWhitespace(a));
   }
-  if (list.empty()) return absl::InvalidArgumentError("no server address given");
+  if (list.empty())
+    return absl::InvalidArgumentError("no server address given");
   std::vector<Family> families;
   for (const std::string& a : list) {
     absl::StatusOr<Family> f = ClassifyAddress(a);
@@ -125,8 +133,9 @@ absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
   }
   if (std::any_of(families.begin(), families.end(),
                   [&](Family f) { return f != families.front(); })) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "addresses '", addresses, "' mix IPv4, IPv6 and host names; list one kind"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("addresses '", addresses,
+                     "' mix IPv4, IPv6 and host names; list one kind"));
   }
   switch (families.front()) {
     case Family::kIpv4:
@@ -135,29 +144,33 @@ absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
       return absl::StrCat("ipv6:", absl::StrJoin(list, ","));
     case Family::kName:
       if (list.size() > 1) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "addresses '", addresses,
-            "' list several host names; give IP literals or one dns:///NAME:PORT"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("addresses '", addresses,
+                         "' list several host names; give IP literals or one "
+                         "dns:///NAME:PORT"));
       }
       return absl::StrCat("dns:///", list.front());
   }
   return absl::InternalError("unreachable");
 }
 
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses) {
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
+    absl::string_view addresses) {
   return MakeChannel(addresses, ConnectionOptions());
 }
 
 // --- ExtractorClient ---------------------------------------------------------
 
-ExtractorClient::ExtractorClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults)
+ExtractorClient::ExtractorClient(std::shared_ptr<grpc::Channel> channel,
+                                 CallOptions defaults)
     : channel_(std::move(channel)),
       stub_(v1::Extractor::NewStub(channel_)),
       defaults_(defaults) {}
 
-absl::StatusOr<ExtractorClient> ExtractorClient::Connect(absl::string_view addresses,
-                                                         CallOptions defaults) {
-  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = MakeChannel(addresses);
+absl::StatusOr<ExtractorClient> ExtractorClient::Connect(
+    absl::string_view addresses, CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      MakeChannel(addresses);
   if (!channel.ok()) return channel.status();
   return ExtractorClient(*std::move(channel), defaults);
 }
@@ -202,13 +215,15 @@ class FileSource final : public ChunkSource {
     in_.close();
     in_.clear();
     in_.open(path_, std::ios::binary);
-    if (!in_) return absl::NotFoundError(absl::StrCat("cannot open mesh file ", path_));
+    if (!in_)
+      return absl::NotFoundError(absl::StrCat("cannot open mesh file ", path_));
     return absl::OkStatus();
   }
   absl::StatusOr<bool> Next(std::string* chunk) override {
     chunk->resize(kChunkBytes);
     in_.read(chunk->data(), static_cast<std::streamsize>(kChunkBytes));
-    if (in_.bad()) return absl::DataLossError(absl::StrCat("cannot read mesh file ", path_));
+    if (in_.bad())
+      return absl::DataLossError(absl::StrCat("cannot read mesh file ", path_));
     chunk->resize(static_cast<size_t>(in_.gcount()));
     return !chunk->empty();
   }
@@ -219,17 +234,19 @@ class FileSource final : public ChunkSource {
 };
 
 // One Extract call streaming `source`, retried on UNAVAILABLE.
-absl::StatusOr<v1::ExtractResponse> ExtractFrom(grpc::Channel* channel, v1::Extractor::Stub* stub,
-                                                ChunkSource& source, absl::string_view file_name,
-                                                const v1::ExtractOptions& options,
-                                                v1::MeshFormat format, const CallOptions& call) {
+absl::StatusOr<v1::ExtractResponse> ExtractFrom(
+    grpc::Channel* channel, v1::Extractor::Stub* stub, ChunkSource& source,
+    absl::string_view file_name, const v1::ExtractOptions& options,
+    v1::MeshFormat format, const CallOptions& call) {
   v1::ExtractResponse response;
-  absl::Status local = absl::OkStatus();  // a failure of the source, not the call
-  grpc::Status status =
-      WithRetries(channel, call, /*idempotent=*/true, [&](grpc::ClientContext* context) {
+  absl::Status local =
+      absl::OkStatus();  // a failure of the source, not the call
+  grpc::Status status = WithRetries(
+      channel, call, /*idempotent=*/true, [&](grpc::ClientContext* context) {
         response.Clear();
         local = source.Restart();
-        if (!local.ok()) return grpc::Status(grpc::StatusCode::CANCELLED, "source");
+        if (!local.ok())
+          return grpc::Status(grpc::StatusCode::CANCELLED, "source");
         std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer =
             stub->Extract(context, &response);
         // The first message always goes out, even for an empty source, so
@@ -266,29 +283,34 @@ absl::StatusOr<v1::ExtractResponse> ExtractFrom(grpc::Channel* channel, v1::Extr
 }  // namespace
 
 absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
-    const std::string& path, const v1::ExtractOptions& options, const CallOptions* call) const {
+    const std::string& path, const v1::ExtractOptions& options,
+    const CallOptions* call) const {
   const size_t slash = path.find_last_of('/');
-  const std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
+  const std::string name =
+      slash == std::string::npos ? path : path.substr(slash + 1);
   FileSource source(path);
   return ExtractFrom(channel_.get(), stub_.get(), source, name, options,
                      v1::MESH_FORMAT_UNSPECIFIED, call ? *call : defaults_);
 }
 
 absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
-    absl::string_view bytes, absl::string_view file_name, const v1::ExtractOptions& options,
-    v1::MeshFormat format, const CallOptions* call) const {
+    absl::string_view bytes, absl::string_view file_name,
+    const v1::ExtractOptions& options, v1::MeshFormat format,
+    const CallOptions* call) const {
   BytesSource source(bytes);
-  return ExtractFrom(channel_.get(), stub_.get(), source, file_name, options, format,
-                     call ? *call : defaults_);
+  return ExtractFrom(channel_.get(), stub_.get(), source, file_name, options,
+                     format, call ? *call : defaults_);
 }
 
-// --- IndexerClient -------------------------------------------------------------
+// --- IndexerClient
+// -------------------------------------------------------------
 
 namespace {
 
 class GrpcBatchUpsertWriter final : public BatchUpsertWriter {
  public:
-  GrpcBatchUpsertWriter(std::shared_ptr<v1::Indexer::Stub> stub, const CallOptions& call)
+  GrpcBatchUpsertWriter(std::shared_ptr<v1::Indexer::Stub> stub,
+                        const CallOptions& call)
       : stub_(std::move(stub)) {
     context_.set_deadline(DeadlineFor(call));
     writer_ = stub_->BatchUpsert(&context_, &response_);
@@ -324,9 +346,14 @@ class GrpcBatchUpsertWriter final : public BatchUpsertWriter {
 
 class GrpcSearchStream final : public SearchStream {
  public:
-  GrpcSearchStream(std::shared_ptr<grpc::Channel> channel, std::shared_ptr<v1::Indexer::Stub> stub,
+  GrpcSearchStream(std::shared_ptr<grpc::Channel> channel,
+                   std::shared_ptr<v1::Indexer::Stub> stub,
                    v1::SearchRequest request, const CallOptions& call)
-      : channel_(std::move(channel)), stub_(std::move(stub)), request_(std::move(request)), call_(call), deadline_(DeadlineFor(call)) {
+      : channel_(std::move(channel)),
+        stub_(std::move(stub)),
+        request_(std::move(request)),
+        call_(call),
+        deadline_(DeadlineFor(call)) {
     Start();
   }
   ~GrpcSearchStream() override {
@@ -353,8 +380,9 @@ class GrpcSearchStream final : public SearchStream {
       }
       grpc::Status status = reader_->Finish();
       // Nothing delivered yet: the search may be repeated elsewhere.
-      if (status.error_code() == grpc::StatusCode::UNAVAILABLE && delivered_ == 0 &&
-          attempt_ < std::max(1, call_.max_attempts) && Backoff()) {
+      if (status.error_code() == grpc::StatusCode::UNAVAILABLE &&
+          delivered_ == 0 && attempt_ < std::max(1, call_.max_attempts) &&
+          Backoff()) {
         Start();
         continue;
       }
@@ -392,7 +420,8 @@ class GrpcSearchStream final : public SearchStream {
   // Sleeps before the next attempt; false when that would pass the deadline.
   bool Backoff() {
     absl::Duration wait = call_.initial_backoff;
-    for (int i = 1; i < attempt_; ++i) wait = std::min(call_.max_backoff, wait * call_.backoff_multiplier);
+    for (int i = 1; i < attempt_; ++i)
+      wait = std::min(call_.max_backoff, wait * call_.backoff_multiplier);
     const auto w = std::chrono::microseconds(absl::ToInt64Microseconds(wait));
     if (std::chrono::system_clock::now() + w >= deadline_) return false;
     BackoffWait(channel_.get(), w);
@@ -417,44 +446,52 @@ class GrpcSearchStream final : public SearchStream {
 
 }  // namespace
 
-IndexerClient::IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults)
+IndexerClient::IndexerClient(std::shared_ptr<grpc::Channel> channel,
+                             CallOptions defaults)
     : channel_(std::move(channel)),
       stub_(v1::Indexer::NewStub(channel_)),
       defaults_(defaults) {}
 
-absl::StatusOr<IndexerClient> IndexerClient::Connect(absl::string_view addresses,
-                                                     CallOptions defaults) {
-  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = MakeChannel(addresses);
+absl::StatusOr<IndexerClient> IndexerClient::Connect(
+    absl::string_view addresses, CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      MakeChannel(addresses);
   if (!channel.ok()) return channel.status();
   return IndexerClient(*std::move(channel), defaults);
 }
 
-absl::StatusOr<bool> IndexerClient::Upsert(const v1::Model& model, bool overwrite,
+absl::StatusOr<bool> IndexerClient::Upsert(const v1::Model& model,
+                                           bool overwrite,
                                            const CallOptions* call) const {
   v1::UpsertRequest request;
   *request.mutable_model() = model;
   request.set_overwrite(overwrite);
   v1::UpsertResponse response;
-  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/overwrite,
-                                    [&](grpc::ClientContext* context) {
-                                      return stub_->Upsert(context, request, &response);
-                                    });
+  grpc::Status status =
+      WithRetries(channel_.get(), call ? *call : defaults_,
+                  /*idempotent=*/overwrite, [&](grpc::ClientContext* context) {
+                    return stub_->Upsert(context, request, &response);
+                  });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response.created();
 }
 
-std::unique_ptr<BatchUpsertWriter> IndexerClient::BatchUpsert(const CallOptions* call) const {
-  return std::make_unique<GrpcBatchUpsertWriter>(stub_, call ? *call : defaults_);
+std::unique_ptr<BatchUpsertWriter> IndexerClient::BatchUpsert(
+    const CallOptions* call) const {
+  return std::make_unique<GrpcBatchUpsertWriter>(stub_,
+                                                 call ? *call : defaults_);
 }
 
-absl::Status IndexerClient::Delete(const std::string& id, const CallOptions* call) const {
+absl::Status IndexerClient::Delete(const std::string& id,
+                                   const CallOptions* call) const {
   v1::DeleteRequest request;
   request.set_id(id);
   v1::DeleteResponse response;
-  return common::FromGrpcStatus(WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/false,
-                                    [&](grpc::ClientContext* context) {
-                                      return stub_->Delete(context, request, &response);
-                                    }));
+  return common::FromGrpcStatus(
+      WithRetries(channel_.get(), call ? *call : defaults_,
+                  /*idempotent=*/false, [&](grpc::ClientContext* context) {
+                    return stub_->Delete(context, request, &response);
+                  }));
 }
 
 absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
@@ -462,27 +499,29 @@ absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
   v1::GetRequest request;
   request.set_id(id);
   v1::Model response;
-  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
-                                    [&](grpc::ClientContext* context) {
-                                      return stub_->Get(context, request, &response);
-                                    });
+  grpc::Status status =
+      WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
+                  [&](grpc::ClientContext* context) {
+                    return stub_->Get(context, request, &response);
+                  });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 
-absl::StatusOr<v1::ListResponse> IndexerClient::List(const v1::ListRequest& request,
-                                                     const CallOptions* call) const {
+absl::StatusOr<v1::ListResponse> IndexerClient::List(
+    const v1::ListRequest& request, const CallOptions* call) const {
   v1::ListResponse response;
-  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
-                                    [&](grpc::ClientContext* context) {
-                                      return stub_->List(context, request, &response);
-                                    });
+  grpc::Status status =
+      WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
+                  [&](grpc::ClientContext* context) {
+                    return stub_->List(context, request, &response);
+                  });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }
 
-absl::StatusOr<std::vector<v1::Model>> IndexerClient::ListAll(const std::string& label,
-                                                              const CallOptions* call) const {
+absl::StatusOr<std::vector<v1::Model>> IndexerClient::ListAll(
+    const std::string& label, const CallOptions* call) const {
   std::vector<v1::Model> models;
   v1::ListRequest request;
   request.set_page_size(1000);
@@ -497,18 +536,21 @@ absl::StatusOr<std::vector<v1::Model>> IndexerClient::ListAll(const std::string&
   return models;
 }
 
-std::unique_ptr<SearchStream> IndexerClient::Search(const v1::SearchRequest& request,
-                                                    const CallOptions* call) const {
-  return std::make_unique<GrpcSearchStream>(channel_, stub_, request, call ? *call : defaults_);
+std::unique_ptr<SearchStream> IndexerClient::Search(
+    const v1::SearchRequest& request, const CallOptions* call) const {
+  return std::make_unique<GrpcSearchStream>(channel_, stub_, request,
+                                            call ? *call : defaults_);
 }
 
-absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(const CallOptions* call) const {
+absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(
+    const CallOptions* call) const {
   v1::StatsRequest request;
   v1::StatsResponse response;
-  grpc::Status status = WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
-                                    [&](grpc::ClientContext* context) {
-                                      return stub_->Stats(context, request, &response);
-                                    });
+  grpc::Status status =
+      WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
+                  [&](grpc::ClientContext* context) {
+                    return stub_->Stats(context, request, &response);
+                  });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
 }

@@ -1,10 +1,9 @@
 #include "eval/lib/d2.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <random>
-
-#include <Eigen/Geometry>
 
 namespace tpr::eval {
 namespace {
@@ -18,9 +17,8 @@ class SurfaceSampler {
     double sum = 0.0;
     for (const auto& t : mesh.triangles) {
       const Eigen::Vector3d& a = mesh.positions[t[0]];
-      sum += 0.5 * (mesh.positions[t[1]] - a)
-                       .cross(mesh.positions[t[2]] - a)
-                       .norm();
+      sum += 0.5 *
+             (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
       cumulative_.push_back(sum);
     }
   }

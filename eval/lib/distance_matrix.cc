@@ -20,7 +20,8 @@ std::vector<Query> LeaveOneOutQueries(const DistanceMatrix& d) {
   return queries;
 }
 
-ClassSeparation Separation(const std::vector<std::string>& labels, const DistanceMatrix& d) {
+ClassSeparation Separation(const std::vector<std::string>& labels,
+                           const DistanceMatrix& d) {
   ClassSeparation s;
   int64_t within = 0, between = 0;
   for (size_t i = 0; i < d.size(); ++i) {
@@ -59,10 +60,12 @@ ClassSeparation Separation(const std::vector<std::string>& labels,
   return s;
 }
 
-DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members) {
+DistanceMatrix Restrict(const DistanceMatrix& d,
+                        const std::vector<size_t>& members) {
   DistanceMatrix out(members.size());
   for (size_t a = 0; a < members.size(); ++a) {
-    for (size_t b = a + 1; b < members.size(); ++b) out.Set(a, b, d(members[a], members[b]));
+    for (size_t b = a + 1; b < members.size(); ++b)
+      out.Set(a, b, d(members[a], members[b]));
   }
   return out;
 }

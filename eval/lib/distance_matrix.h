@@ -92,7 +92,8 @@ struct ClassSeparation {
 
 // Separation returns the ClassSeparation of `d` (labels[i]: model i's
 // class). Precondition: labels.size() == d.size(). O(n^2); thread-safe.
-ClassSeparation Separation(const std::vector<std::string>& labels, const DistanceMatrix& d);
+ClassSeparation Separation(const std::vector<std::string>& labels,
+                           const DistanceMatrix& d);
 
 // Separation over the (query, retrieved) pairs of `queries` (each pair of
 // a full leave-one-out evaluation is then counted twice, which leaves the
@@ -102,7 +103,8 @@ ClassSeparation Separation(const std::vector<std::string>& labels,
 
 // Restrict returns the submatrix of `d` over positions `members` (in that
 // order). Precondition: every member < d.size(). O(members^2).
-DistanceMatrix Restrict(const DistanceMatrix& d, const std::vector<size_t>& members);
+DistanceMatrix Restrict(const DistanceMatrix& d,
+                        const std::vector<size_t>& members);
 
 }  // namespace tpr::eval
 

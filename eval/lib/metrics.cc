@@ -166,9 +166,9 @@ SimilarityMatrix MeanSimilarity(const std::vector<std::string>& labels,
   for (size_t i = 0; i < c; ++i) {
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
     for (size_t j = 0; j < c; ++j) {
-      out.mean_distance[i][j] =
-          count[i][j] > 0 ? sum[i][j] / count[i][j]
-                          : std::numeric_limits<double>::quiet_NaN();
+      out.mean_distance[i][j] = count[i][j] > 0
+                                    ? sum[i][j] / count[i][j]
+                                    : std::numeric_limits<double>::quiet_NaN();
       if (count[i][j] > 0) {
         lo = std::min(lo, out.mean_distance[i][j]);
         hi = std::max(hi, out.mean_distance[i][j]);

@@ -40,12 +40,12 @@ struct Metrics {
   // Queries averaged (queries whose class has a single model are excluded:
   // they have nothing relevant to retrieve).
   int queries = 0;
-  double nn = 0.0;    // relevant at rank 1
-  double ft = 0.0;    // recall in the top C-1 (C = the query's class size)
-  double st = 0.0;    // recall in the top 2(C-1)
-  double e = 0.0;     // E-measure 2PR/(P+R) over the top 32
-  double dcg = 0.0;   // DCG / ideal DCG over the whole ranking
-  double map = 0.0;   // average precision, averaged
+  double nn = 0.0;   // relevant at rank 1
+  double ft = 0.0;   // recall in the top C-1 (C = the query's class size)
+  double st = 0.0;   // recall in the top 2(C-1)
+  double e = 0.0;    // E-measure 2PR/(P+R) over the top 32
+  double dcg = 0.0;  // DCG / ideal DCG over the whole ranking
+  double map = 0.0;  // average precision, averaged
   // Interpolated precision at recall 0, 0.05, ..., 1 (max precision at any
   // recall >= the level), averaged.
   std::array<double, kRecallLevels> pr{};
@@ -74,14 +74,16 @@ Scores Evaluate(const std::vector<std::string>& labels,
 
 // Objective returns mean(NN, FT, ST, DCG), the one number the tuning
 // tools maximize (tpr-eval-local --tune, tpr-tune-spectral).
-inline double Objective(const Metrics& m) { return (m.nn + m.ft + m.st + m.dcg) / 4; }
+inline double Objective(const Metrics& m) {
+  return (m.nn + m.ft + m.st + m.dcg) / 4;
+}
 
 // SimilarityMatrix: mean distance between every pair of classes, turned into
 // a similarity per row as the paper's Fig. 11 and Tables 2-3 do:
 // sim(i, j) = (max_i - D(i, j)) / (max_i - min_i), where min_i and max_i are
 // the row's extremes (1 on a row's closest class, 0 on its furthest).
 struct SimilarityMatrix {
-  std::vector<std::string> classes;               // sorted
+  std::vector<std::string> classes;                // sorted
   std::vector<std::vector<double>> mean_distance;  // D(i, j)
   std::vector<std::vector<double>> similarity;     // normalized per row
 };

@@ -13,11 +13,20 @@ std::string Escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '&': out += "&amp;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '&':
+        out += "&amp;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -47,8 +56,8 @@ std::string PrecisionRecallSvg(const std::vector<Curve>& curves,
         "<line x1=\"%g\" y1=\"%g\" x2=\"%g\" y2=\"%g\" stroke=\"#ddd\"/>\n"
         "<text x=\"%g\" y=\"%g\" text-anchor=\"middle\">%.1f</text>\n"
         "<text x=\"%g\" y=\"%g\" text-anchor=\"end\">%.1f</text>\n",
-        x, top, x, top + height, left, y, left + width, y, x,
-        top + height + 16, i / 10.0, left - 6, y + 4, 1.0 - i / 10.0);
+        x, top, x, top + height, left, y, left + width, y, x, top + height + 16,
+        i / 10.0, left - 6, y + 4, 1.0 - i / 10.0);
   }
   absl::StrAppendFormat(
       &svg,

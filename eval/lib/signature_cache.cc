@@ -56,14 +56,14 @@ bool LoadCached(const std::string& dir, const std::string& key,
   std::ifstream in(std::filesystem::path(dir) / CacheFileName(key));
   if (!in) return false;
   std::string magic, stored_key;
-  if (!std::getline(in, magic) ||
-      (magic != kMagic && magic != kMagicV2)) {
+  if (!std::getline(in, magic) || (magic != kMagic && magic != kMagicV2)) {
     return false;
   }
   if (!std::getline(in, stored_key) || stored_key != key) return false;
   CachedDescription d;
   size_t stages = 0, features = 0;
-  if (!(in >> d.points >> d.rings >> d.extract_ms >> stages >> d.vertices >> d.faces)) {
+  if (!(in >> d.points >> d.rings >> d.extract_ms >> stages >> d.vertices >>
+        d.faces)) {
     return false;
   }
   for (size_t i = 0; i < stages; ++i) {
@@ -72,7 +72,8 @@ bool LoadCached(const std::string& dir, const std::string& key,
     if (!(in >> name >> ms)) return false;
     d.stage_ms[name] = ms;
   }
-  if (!ReadVector(in, &d.d2) || !(in >> features) || features > 100000) return false;
+  if (!ReadVector(in, &d.d2) || !(in >> features) || features > 100000)
+    return false;
   d.signature.features.resize(features);
   for (index::Feature& f : d.signature.features) {
     if (!(in >> f.weight >> f.integral_geodesic)) return false;
@@ -91,7 +92,8 @@ bool StoreCached(const std::string& dir, const std::string& key,
                  const CachedDescription& d) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  const std::filesystem::path final_path = std::filesystem::path(dir) / CacheFileName(key);
+  const std::filesystem::path final_path =
+      std::filesystem::path(dir) / CacheFileName(key);
   std::ostringstream tmp_name;
   tmp_name << final_path.string() << ".tmp" << std::hash<std::string>{}(key);
   {
@@ -99,8 +101,9 @@ bool StoreCached(const std::string& dir, const std::string& key,
     if (!out) return false;
     out << kMagic << "\n" << key << "\n";
     char buf[64];
-    std::snprintf(buf, sizeof(buf), "%d %d %.17g %zu %" PRId64 " %" PRId64 "\n", d.points,
-                  d.rings, d.extract_ms, d.stage_ms.size(), d.vertices, d.faces);
+    std::snprintf(buf, sizeof(buf), "%d %d %.17g %zu %" PRId64 " %" PRId64 "\n",
+                  d.points, d.rings, d.extract_ms, d.stage_ms.size(),
+                  d.vertices, d.faces);
     out << buf;
     for (const auto& [name, ms] : d.stage_ms) {
       std::snprintf(buf, sizeof(buf), " %.17g\n", ms);
@@ -109,9 +112,11 @@ bool StoreCached(const std::string& dir, const std::string& key,
     WriteVector(out, d.d2);
     out << d.signature.features.size() << "\n";
     for (const index::Feature& f : d.signature.features) {
-      std::snprintf(buf, sizeof(buf), "%.17g %.17g\n", f.weight, f.integral_geodesic);
+      std::snprintf(buf, sizeof(buf), "%.17g %.17g\n", f.weight,
+                    f.integral_geodesic);
       out << buf;
-      for (const std::vector<double>* band : index::BandVectors(f)) WriteVector(out, *band);
+      for (const std::vector<double>* band : index::BandVectors(f))
+        WriteVector(out, *band);
     }
     WriteVector(out, d.signature.spectrum);
     out << "end\n";

@@ -6,7 +6,10 @@
 // feature-code version).
 //
 //   CachedDescription d;
-//   if (!LoadCached(dir, key, &d)) { d = ...extract...; StoreCached(dir, key, d); }
+//   if (!LoadCached(dir, key, &d)) {
+//     d = ...extract...;
+//     StoreCached(dir, key, d);
+//   }
 //   index::Signature s = d.signature;
 #ifndef TPR_EVAL_LIB_SIGNATURE_CACHE_H_
 #define TPR_EVAL_LIB_SIGNATURE_CACHE_H_

@@ -30,7 +30,8 @@ class StageTimer {
   void Finish(const char* stage) {
     const Clock::time_point now = Clock::now();
     timings_->push_back(
-        {stage, std::chrono::duration<double, std::milli>(now - start_).count()});
+        {stage,
+         std::chrono::duration<double, std::milli>(now - start_).count()});
     start_ = now;
   }
 
@@ -44,8 +45,9 @@ class StageTimer {
 // are not thread-safe; the graph is); on one thread, in the caller with
 // `caller_solver`. Items write to their own slots, so results do not depend
 // on the thread count.
-void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver, int count,
-                 int threads, const std::function<void(int, DijkstraSolver&)>& body) {
+void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver,
+                 int count, int threads,
+                 const std::function<void(int, DijkstraSolver&)>& body) {
   if (std::min(std::max(threads, 1), count) <= 1) {
     for (int i = 0; i < count; ++i) body(i, caller_solver);
     return;
@@ -59,24 +61,29 @@ void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver, int coun
 
 absl::Status ValidateOptions(const Options& o) {
   if (o.bands < 1 || o.bands > 1000) {
-    return absl::InvalidArgumentError(absl::StrCat("options: bands ", o.bands, " not in [1, 1000]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options: bands ", o.bands, " not in [1, 1000]"));
   }
   if (o.cycle_min_vertices < 0) {
-    return absl::InvalidArgumentError("options: cycle_min_vertices must be >= 0");
+    return absl::InvalidArgumentError(
+        "options: cycle_min_vertices must be >= 0");
   }
   if (o.cycle_search_hops < o.cycle_min_vertices + 1) {
     return absl::InvalidArgumentError(
         "options: cycle_search_hops must be >= cycle_min_vertices + 1");
   }
   if (!(o.ring_length_threshold >= 0.0 && o.ring_length_threshold <= 1.0)) {
-    return absl::InvalidArgumentError("options: ring_length_threshold not in [0, 1]");
+    return absl::InvalidArgumentError(
+        "options: ring_length_threshold not in [0, 1]");
   }
   if (!(o.point_min_prominence >= 0.0 && o.point_min_prominence <= 1.0)) {
-    return absl::InvalidArgumentError("options: point_min_prominence not in [0, 1]");
+    return absl::InvalidArgumentError(
+        "options: point_min_prominence not in [0, 1]");
   }
   if (o.spectrum_eigenvalues < 0 || o.spectrum_eigenvalues > 1000) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options: spectrum_eigenvalues ", o.spectrum_eigenvalues, " not in [0, 1000]"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options: spectrum_eigenvalues ", o.spectrum_eigenvalues,
+                     " not in [0, 1000]"));
   }
   if (o.threads < 0 || o.threads > 256) {
     return absl::InvalidArgumentError("options: threads not in [0, 256]");
@@ -96,28 +103,33 @@ Feature MakeFeature(FeatureKind kind, double g_norm, SurfaceVectors vectors) {
 
 }  // namespace
 
-absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats& stats,
+absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
+                                               const MeshStats& stats,
                                                const Options& options) {
   TPR_RETURN_IF_ERROR(ValidateOptions(options));
   ExtractResult result;
   StageTimer timer(&result.timings);
 
   // Stage: mesh graph, 1-ring links and angle defects.
-  TPR_ASSIGN_OR_RETURN(MeshGraph graph, MeshGraph::Create(mesh, options.geodesic));
+  TPR_ASSIGN_OR_RETURN(MeshGraph graph,
+                       MeshGraph::Create(mesh, options.geodesic));
   const VertexLinks& links = graph.links();  // built with the graph
   const std::vector<double> defects = AngleDefects(mesh, links);
   const int32_t main_component = graph.largest_component();
-  const double area = main_component >= 0 ? graph.component_areas()[main_component] : 0.0;
+  const double area =
+      main_component >= 0 ? graph.component_areas()[main_component] : 0.0;
   if (!(area > 0.0)) {
     return absl::InvalidArgumentError("mesh has zero surface area");
   }
   if (stats.genus > 0) {
-    result.warnings.push_back(absl::StrCat(
-        "mesh has genus ", stats.genus, "; TPR analysis describes genus-0 surfaces poorly (7.4)"));
+    result.warnings.push_back(
+        absl::StrCat("mesh has genus ", stats.genus,
+                     "; TPR analysis describes genus-0 surfaces poorly (7.4)"));
   }
   if (stats.boundary_edges > 0) {
-    result.warnings.push_back(absl::StrCat("mesh has ", stats.boundary_edges,
-                                           " boundary edges; TPR assumes closed surfaces (7.4)"));
+    result.warnings.push_back(
+        absl::StrCat("mesh has ", stats.boundary_edges,
+                     " boundary edges; TPR assumes closed surfaces (7.4)"));
   }
   if (graph.num_components() > 1) {
     result.warnings.push_back(absl::StrCat(
@@ -128,8 +140,9 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
 
   // Stage: source points (4.5).
   DijkstraSolver solver(graph);
-  TPR_ASSIGN_OR_RETURN(SourcePoints sources,
-                       SelectSourcePoints(graph, solver, options.integral_geodesic));
+  TPR_ASSIGN_OR_RETURN(
+      SourcePoints sources,
+      SelectSourcePoints(graph, solver, options.integral_geodesic));
   const int32_t centre = sources.centre;
   const double g_min = sources.surface_centre.g_min;
   double g_max = sources.surface_centre.g_max;
@@ -138,16 +151,17 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   // Stage: Critical Point Analysis from each source (4.3). The centre's
   // analysis is last: its saddles end ring extraction (4.6.3) and its field
   // gives MAX g_o (Eq. 1).
-  const std::vector<int32_t> source_list = {sources.far_a, sources.far_b, centre};
+  const std::vector<int32_t> source_list = {sources.far_a, sources.far_b,
+                                            centre};
   std::vector<CriticalPoints> sets(source_list.size());
   std::vector<absl::Status> cpa_status(source_list.size());
   CriticalPointOptions cpa_options;
   cpa_options.cycle_min_vertices = options.cycle_min_vertices;
   cpa_options.search_hops = options.cycle_search_hops;
-  ParallelFor(graph, solver, static_cast<int>(source_list.size()), options.threads,
-              [&](int i, DijkstraSolver&) {
-                absl::StatusOr<CriticalPoints> cp =
-                    AnalyzeCriticalPoints(graph, links, source_list[i], cpa_options);
+  ParallelFor(graph, solver, static_cast<int>(source_list.size()),
+              options.threads, [&](int i, DijkstraSolver&) {
+                absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(
+                    graph, links, source_list[i], cpa_options);
                 if (cp.ok()) {
                   sets[i] = std::move(*cp);
                 } else {
@@ -171,9 +185,10 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
 
   // Stage: Topological Point Selection (4.4).
   TopologicalPointOptions point_options;
-  point_options.min_persistence = options.point_min_prominence * std::sqrt(area);
-  std::vector<TopologicalPoint> points =
-      SelectTopologicalPoints(graph, solver, sets, /*stats=*/nullptr, point_options);
+  point_options.min_persistence =
+      options.point_min_prominence * std::sqrt(area);
+  std::vector<TopologicalPoint> points = SelectTopologicalPoints(
+      graph, solver, sets, /*stats=*/nullptr, point_options);
   int num_points = static_cast<int>(points.size());
   timer.Finish("topological_points");
 
@@ -181,12 +196,13 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   // and, from the same sweep, the point's surface vectors (5.3).
   std::vector<double> point_g(num_points, 0.0);
   std::vector<SurfaceVectors> point_vectors(num_points);
-  ParallelFor(graph, solver, num_points, options.threads, [&](int i, DijkstraSolver& s) {
-    point_g[i] = IntegralGeodesic(s, points[i].vertex);
-    point_vectors[i] =
-        ComputeSurfaceVectors(graph, links, s.distances(), defects, options.bands, area,
-                              band_extent);
-  });
+  ParallelFor(graph, solver, num_points, options.threads,
+              [&](int i, DijkstraSolver& s) {
+                point_g[i] = IntegralGeodesic(s, points[i].vertex);
+                point_vectors[i] =
+                    ComputeSurfaceVectors(graph, links, s.distances(), defects,
+                                          options.bands, area, band_extent);
+              });
   // MAX G is an estimate from the centre search; the points are where G
   // peaks (4.1), so they raise it and Eq. 1 stays non-negative.
   for (double g : point_g) g_max = std::max(g_max, g);
@@ -201,7 +217,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   std::vector<double> start = RingStartTimes(point_g, g_min, g_max, max_g_o);
   TPR_ASSIGN_OR_RETURN(
       RingExtraction rings,
-      ExtractTopologicalRings(graph, point_vertices, start, centre_set.saddles, ring_options));
+      ExtractTopologicalRings(graph, point_vertices, start, centre_set.saddles,
+                              ring_options));
   // A point whose wavefront never started (another front swept its vertex
   // before its Eq. 1 start time) lies inside another feature's region, bounds
   // no region and would get no effective area (5.2), so it carries no mass
@@ -229,8 +246,9 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     num_points = static_cast<int>(points.size());
     point_vertices.resize(num_points);
     for (int i = 0; i < num_points; ++i) point_vertices[i] = points[i].vertex;
-    TPR_ASSIGN_OR_RETURN(rings, ExtractTopologicalRings(graph, point_vertices, start,
-                                                        centre_set.saddles, ring_options));
+    TPR_ASSIGN_OR_RETURN(
+        rings, ExtractTopologicalRings(graph, point_vertices, start,
+                                       centre_set.saddles, ring_options));
   }
   std::vector<int32_t> ring_fronts;
   for (int32_t f = 0; f < static_cast<int32_t>(rings.fronts.size()); ++f) {
@@ -243,20 +261,22 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
   // Eq. 4 and the bands of 5.3.
   std::vector<double> ring_g(num_rings, 0.0);
   std::vector<SurfaceVectors> ring_vectors(num_rings);
-  ParallelFor(graph, solver, num_rings, options.threads, [&](int k, DijkstraSolver& s) {
-    const Front& front = rings.fronts[ring_fronts[k]];
-    const std::vector<double>& d = s.Run(front.ring_vertices);
-    // Ancestor point w: the originating point farthest from the ring (5.1).
-    int w = front.points.front();
-    for (int p : front.points) {
-      if (d[point_vertices[p]] > d[point_vertices[w]]) w = p;
-    }
-    const double g_vs_o = d[centre] == kUnreachable ? 0.0 : d[centre];
-    const double g_vs_w = d[point_vertices[w]] == kUnreachable ? 0.0 : d[point_vertices[w]];
-    ring_g[k] = RingIntegralGeodesic(g_vs_o, g_vs_w, g_min, point_g[w]);
-    ring_vectors[k] =
-        ComputeSurfaceVectors(graph, links, d, defects, options.bands, area, band_extent);
-  });
+  ParallelFor(
+      graph, solver, num_rings, options.threads, [&](int k, DijkstraSolver& s) {
+        const Front& front = rings.fronts[ring_fronts[k]];
+        const std::vector<double>& d = s.Run(front.ring_vertices);
+        // Ancestor point w: the originating point farthest from the ring (5.1).
+        int w = front.points.front();
+        for (int p : front.points) {
+          if (d[point_vertices[p]] > d[point_vertices[w]]) w = p;
+        }
+        const double g_vs_o = d[centre] == kUnreachable ? 0.0 : d[centre];
+        const double g_vs_w =
+            d[point_vertices[w]] == kUnreachable ? 0.0 : d[point_vertices[w]];
+        ring_g[k] = RingIntegralGeodesic(g_vs_o, g_vs_w, g_min, point_g[w]);
+        ring_vectors[k] = ComputeSurfaceVectors(
+            graph, links, d, defects, options.bands, area, band_extent);
+      });
   timer.Finish("ring_features");
 
   // Stage: effective areas (5.2) and the signature.
@@ -266,26 +286,31 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     // No protrusion survived the vote (a blob): one point at the surface
     // centre carries the whole area, so the signature stays comparable.
     result.warnings.push_back(
-        "no topological point found; the signature is one point at the surface centre");
+        "no topological point found; the signature is one point at the surface "
+        "centre");
     Feature f = MakeFeature(
         FeatureKind::kPoint, NormalizeIntegralGeodesic(g_min, g_min, g_max),
-        ComputeSurfaceVectors(graph, links, centre_set.distances, defects, options.bands, area,
-                              band_extent));
+        ComputeSurfaceVectors(graph, links, centre_set.distances, defects,
+                              options.bands, area, band_extent));
     f.weight = 1.0;
     sig.features.push_back(std::move(f));
   } else {
-    const std::vector<double> weights = EffectiveAreas(graph, rings, num_points);
+    const std::vector<double> weights =
+        EffectiveAreas(graph, rings, num_points);
     for (int i = 0; i < num_points; ++i) {
-      sig.features.push_back(MakeFeature(FeatureKind::kPoint,
-                                         NormalizeIntegralGeodesic(point_g[i], g_min, g_max),
-                                         std::move(point_vectors[i])));
+      sig.features.push_back(
+          MakeFeature(FeatureKind::kPoint,
+                      NormalizeIntegralGeodesic(point_g[i], g_min, g_max),
+                      std::move(point_vectors[i])));
     }
     for (int k = 0; k < num_rings; ++k) {
-      sig.features.push_back(MakeFeature(FeatureKind::kRing,
-                                         NormalizeIntegralGeodesic(ring_g[k], g_min, g_max),
-                                         std::move(ring_vectors[k])));
+      sig.features.push_back(
+          MakeFeature(FeatureKind::kRing,
+                      NormalizeIntegralGeodesic(ring_g[k], g_min, g_max),
+                      std::move(ring_vectors[k])));
     }
-    for (size_t i = 0; i < sig.features.size(); ++i) sig.features[i].weight = weights[i];
+    for (size_t i = 0; i < sig.features.size(); ++i)
+      sig.features[i].weight = weights[i];
   }
   double weight_sum = 0.0;
   for (const Feature& f : sig.features) weight_sum += f.weight;
@@ -298,8 +323,10 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     if (num_points == 0) {
       e.feature_vertices.push_back({centre});
     } else {
-      for (int i = 0; i < num_points; ++i) e.feature_vertices.push_back({point_vertices[i]});
-      for (int32_t f : ring_fronts) e.feature_vertices.push_back(rings.fronts[f].ring_vertices);
+      for (int i = 0; i < num_points; ++i)
+        e.feature_vertices.push_back({point_vertices[i]});
+      for (int32_t f : ring_fronts)
+        e.feature_vertices.push_back(rings.fronts[f].ring_vertices);
     }
     result.explanation = std::move(e);
   }
@@ -310,12 +337,14 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh, const MeshStats
     SpectrumOptions spectrum_options = options.spectrum;
     spectrum_options.eigenvalues = options.spectrum_eigenvalues;
     spectrum_options.allow_fewer = true;  // a small mesh still gets a signature
-    TPR_ASSIGN_OR_RETURN(Spectrum spectrum, LaplaceBeltramiSpectrum(mesh, spectrum_options));
-    if (static_cast<int>(spectrum.eigenvalues.size()) < options.spectrum_eigenvalues) {
+    TPR_ASSIGN_OR_RETURN(Spectrum spectrum,
+                         LaplaceBeltramiSpectrum(mesh, spectrum_options));
+    if (static_cast<int>(spectrum.eigenvalues.size()) <
+        options.spectrum_eigenvalues) {
       result.warnings.push_back(absl::StrCat(
           "mesh has ", spectrum.vertices, " vertices in ", spectrum.components,
-          " components: the spectrum has ", spectrum.eigenvalues.size(), " eigenvalues, not ",
-          options.spectrum_eigenvalues));
+          " components: the spectrum has ", spectrum.eigenvalues.size(),
+          " eigenvalues, not ", options.spectrum_eigenvalues));
     }
     sig.spectrum = std::move(spectrum.eigenvalues);
     timer.Finish("spectrum");

@@ -2,7 +2,8 @@
 // plus the Laplace-Beltrami spectrum (spectrum.h).
 //
 //   Options options;                          // the paper's defaults
-//   absl::StatusOr<ExtractResult> r = ExtractSignature(mesh, ComputeMeshStats(mesh), options);
+//   absl::StatusOr<ExtractResult> r =
+//       ExtractSignature(mesh, ComputeMeshStats(mesh), options);
 //   if (r.ok()) Store(r->signature);
 #ifndef TPR_EXTRACTOR_LIB_EXTRACT_H_
 #define TPR_EXTRACTOR_LIB_EXTRACT_H_
@@ -93,12 +94,12 @@ struct Options {
 // Errors: INVALID_ARGUMENT for options out of range, or a mesh with no
 // vertex, out-of-range indices, non-finite coordinates, zero area, or too
 // few vertices for spectrum_eigenvalues (the message says which);
-// INTERNAL when the spectrum's eigensolver does not converge. Thread-safe (no shared state). Cost: about
-// (7 + R + psi + mu + gamma) Dijkstra sweeps (Table 4); with threads > 1
-// the independent sweeps (the three analyses, the per-feature geodesics)
-// run in parallel, with identical results. The spectrum adds one
-// simplification and one sparse eigensolve (see LaplaceBeltramiSpectrum),
-// on the caller's thread.
+// INTERNAL when the spectrum's eigensolver does not converge. Thread-safe (no
+// shared state). Cost: about (7 + R + psi + mu + gamma) Dijkstra sweeps (Table
+// 4); with threads > 1 the independent sweeps (the three analyses, the
+// per-feature geodesics) run in parallel, with identical results. The spectrum
+// adds one simplification and one sparse eigensolve (see
+// LaplaceBeltramiSpectrum), on the caller's thread.
 absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
                                                const MeshStats& stats,
                                                const Options& options);

@@ -1,10 +1,9 @@
 // Geometric features (section 5).
 #include "extractor/lib/features.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-
-#include <Eigen/Geometry>
 
 namespace tpr::extract {
 
@@ -38,10 +37,12 @@ std::vector<double> AngleDefects(const Mesh& mesh, const VertexLinks& links) {
   return defect;
 }
 
-SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& links,
+SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph,
+                                     const VertexLinks& links,
                                      const std::vector<double>& distances,
-                                     const std::vector<double>& defects, int bands,
-                                     double total_area, double band_extent) {
+                                     const std::vector<double>& defects,
+                                     int bands, double total_area,
+                                     double band_extent) {
   const int32_t n = graph.num_vertices();
   const Mesh& mesh = graph.mesh();
   const std::vector<double>& areas = graph.vertex_areas();
@@ -86,7 +87,8 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
       area += areas[u];
       defect += defects[u];
       centre += areas[u] * mesh.positions[u];
-      for (const int32_t* p = links.neighbors_begin(u); p != links.neighbors_end(u); ++p) {
+      for (const int32_t* p = links.neighbors_begin(u);
+           p != links.neighbors_end(u); ++p) {
         if (band[*p] == b) {
           band[*p] = kVisited;
           segment.push_back(*p);
@@ -96,7 +98,8 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
     if (!(area > 0.0)) continue;
     centre /= area;
     double thickness = 0.0;
-    for (int32_t u : segment) thickness += areas[u] * (mesh.positions[u] - centre).norm();
+    for (int32_t u : segment)
+      thickness += areas[u] * (mesh.positions[u] - centre).norm();
     thickness /= area;
     band_area[b] += area;
     // Curvature of a segment: its integrated Gaussian curvature (sum of
@@ -106,8 +109,8 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
     // defect / area that an earlier version used divided by tiny segment
     // areas at tips, and its tip bands (about 1000 after x total area)
     // outweighed every other term of Eq. 7 by 300x on SHREC'07.
-    band_defect[b] += area * defect;   // sum_seg A_s * K_s
-    band_area_sq[b] += area * area;    // sum_seg A_s * A_s
+    band_defect[b] += area * defect;  // sum_seg A_s * K_s
+    band_area_sq[b] += area * area;   // sum_seg A_s * A_s
     band_thickness[b] += area * thickness;
   }
   const double root_area = std::sqrt(total_area);
@@ -120,7 +123,8 @@ SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& 
   return out;
 }
 
-double RingIntegralGeodesic(double g_vs_o, double g_vs_w, double g_o, double g_w) {
+double RingIntegralGeodesic(double g_vs_o, double g_vs_w, double g_o,
+                            double g_w) {
   const double sum = g_vs_o + g_vs_w;
   if (!(sum > 0.0)) return g_o;
   return (g_vs_o * g_w + g_vs_w * g_o) / sum;  // Eq. 4
@@ -131,7 +135,8 @@ double NormalizeIntegralGeodesic(double g, double g_min, double g_max) {
   return std::clamp((g - g_min) / (g_max - g_min), 0.0, 1.0);  // Eq. 5
 }
 
-std::vector<double> EffectiveAreas(const MeshGraph& graph, const RingExtraction& rings,
+std::vector<double> EffectiveAreas(const MeshGraph& graph,
+                                   const RingExtraction& rings,
                                    int num_points) {
   const std::vector<Front>& fronts = rings.fronts;
   const int32_t num_fronts = static_cast<int32_t>(fronts.size());
@@ -161,7 +166,8 @@ std::vector<double> EffectiveAreas(const MeshGraph& graph, const RingExtraction&
     const double own_area = rings.regions[own].area;
     adjacent[own].push_back({feature_of_front[f], own_area});
     if (fronts[f].parent >= 0) {
-      adjacent[rings.front_region[fronts[f].parent]].push_back({feature_of_front[f], own_area});
+      adjacent[rings.front_region[fronts[f].parent]].push_back(
+          {feature_of_front[f], own_area});
     }
   }
   for (int i = 0; i < num_points; ++i) {
@@ -181,7 +187,8 @@ std::vector<double> EffectiveAreas(const MeshGraph& graph, const RingExtraction&
         if (a.feature < num_points) points.push_back(a.feature);
       }
       weight[ring_feature] += 0.5 * region.area;
-      for (int p : points) weight[p] += 0.5 * region.area / static_cast<double>(points.size());
+      for (int p : points)
+        weight[p] += 0.5 * region.area / static_cast<double>(points.size());
       distributed += region.area;
       continue;
     }

@@ -45,24 +45,27 @@ struct SurfaceVectors {
 // search, 5.3), and gives each band the segment-area-weighted mean over its
 // segments of: integrated Gaussian curvature (sum of the segment's angle
 // defects, radians: "area-weighted Gaussian curvature" read as the integral
-// of K dA, see features.cc for why not the mean K), segment area, and average distance (area-weighted mean Euclidean distance
-// of the segment's vertices to its area-weighted centre of mass; the
-// weighting keeps the value stable under remeshing). Empty bands are 0.
-// Preconditions: bands >= 1; distances, defects of size n; total_area > 0.
-// Cost O(n + e). Thread-safe (per-thread scratch, reused across calls).
-// With band_extent > 0 the bands divide [0, band_extent] instead (vertices
-// farther away fall in the last band), so that band b covers the same
-// absolute range for every feature of a mesh.
-SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph, const VertexLinks& links,
+// of K dA, see features.cc for why not the mean K), segment area, and average
+// distance (area-weighted mean Euclidean distance of the segment's vertices to
+// its area-weighted centre of mass; the weighting keeps the value stable under
+// remeshing). Empty bands are 0. Preconditions: bands >= 1; distances, defects
+// of size n; total_area > 0. Cost O(n + e). Thread-safe (per-thread scratch,
+// reused across calls). With band_extent > 0 the bands divide [0, band_extent]
+// instead (vertices farther away fall in the last band), so that band b covers
+// the same absolute range for every feature of a mesh.
+SurfaceVectors ComputeSurfaceVectors(const MeshGraph& graph,
+                                     const VertexLinks& links,
                                      const std::vector<double>& distances,
-                                     const std::vector<double>& defects, int bands,
-                                     double total_area, double band_extent = 0.0);
+                                     const std::vector<double>& defects,
+                                     int bands, double total_area,
+                                     double band_extent = 0.0);
 
 // RingIntegralGeodesic returns G'(U) of a ring U, Eq. 4: the interpolation
 // of G(o) and G(w) by the vertex-set geodesic distances g_vs(o, U) and
 // g_vs(w, U) (w: the ancestor point, the ring's originating point farthest
 // from it). When both distances are 0 returns G(o). Pure.
-double RingIntegralGeodesic(double g_vs_o, double g_vs_w, double g_o, double g_w);
+double RingIntegralGeodesic(double g_vs_o, double g_vs_w, double g_o,
+                            double g_w);
 
 // NormalizeIntegralGeodesic returns Eq. 5, (g - g_min) / (g_max - g_min),
 // clamped to [0, 1] (MAX G is an estimate); 0 when g_max <= g_min. Pure.
@@ -82,8 +85,8 @@ double NormalizeIntegralGeodesic(double g, double g_min, double g_max);
 // adjacent feature (only possible with no feature at all) is left out.
 // Returns an empty vector when there is no feature. Precondition: `rings`
 // computed on `graph` for `num_points` points. O(n + features). Thread-safe.
-std::vector<double> EffectiveAreas(const MeshGraph& graph, const RingExtraction& rings,
-                                   int num_points);
+std::vector<double> EffectiveAreas(const MeshGraph& graph,
+                                   const RingExtraction& rings, int num_points);
 
 }  // namespace tpr::extract
 

@@ -173,7 +173,8 @@ class HierarchicalSearch {
   // evaluation), into ranked_.
   void RankCentres() {
     ranked_.resize(centres_.size());
-    for (size_t i = 0; i < ranked_.size(); ++i) ranked_[i] = static_cast<int>(i);
+    for (size_t i = 0; i < ranked_.size(); ++i)
+      ranked_[i] = static_cast<int>(i);
     const std::vector<double>& g = result_.evaluated_g;
     std::stable_sort(ranked_.begin(), ranked_.end(),
                      [&g](int a, int b) { return g[a] < g[b]; });

@@ -3,7 +3,8 @@
 // patch search (4.5) rather than by a sweep from every vertex.
 //
 //   DijkstraSolver solver(graph);
-//   SurfaceCentre c = FindSurfaceCentre(graph, solver, IntegralGeodesicOptions{});
+//   SurfaceCentre c =
+//       FindSurfaceCentre(graph, solver, IntegralGeodesicOptions{});
 //   double g = IntegralGeodesic(solver, some_vertex);   // one sweep
 #ifndef TPR_EXTRACTOR_LIB_INTEGRAL_GEODESIC_H_
 #define TPR_EXTRACTOR_LIB_INTEGRAL_GEODESIC_H_

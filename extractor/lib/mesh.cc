@@ -2,14 +2,13 @@
 // indexed triangle mesh.
 #include "extractor/lib/mesh.h"
 
+#include <Eigen/Geometry>  // cross(): declared in Core, defined here.
 #include <algorithm>
 #include <cassert>
 #include <cstdint>
 #include <numeric>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>  // cross(): declared in Core, defined here.
 
 #include "extractor/lib/disjoint_sets.h"
 
@@ -30,9 +29,8 @@ MeshStats ComputeMeshStats(const Mesh& mesh) {
   for (int64_t f = 0; f < num_faces; ++f) {
     const auto& t = mesh.triangles[f];
     const Eigen::Vector3d& a = mesh.positions[t[0]];
-    stats.area += 0.5 * (mesh.positions[t[1]] - a)
-                            .cross(mesh.positions[t[2]] - a)
-                            .norm();
+    stats.area +=
+        0.5 * (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
     for (int k = 0; k < 3; ++k) {
       uint32_t u = static_cast<uint32_t>(t[k]);
       uint32_t v = static_cast<uint32_t>(t[(k + 1) % 3]);
@@ -48,7 +46,7 @@ MeshStats ComputeMeshStats(const Mesh& mesh) {
   // endpoints into boundary loops.
   DisjointSets face_sets(num_faces);
   DisjointSets vertex_sets(num_vertices);
-  std::vector<std::pair<uint64_t, int64_t>> boundary;  // (edge key, face)
+  std::vector<std::pair<uint64_t, int64_t>> boundary;      // (edge key, face)
   std::vector<std::pair<uint64_t, int64_t>> unique_edges;  // (key, face)
   for (size_t i = 0; i < edges.size();) {
     size_t j = i + 1;

@@ -7,11 +7,10 @@
 #ifndef TPR_EXTRACTOR_LIB_MESH_H_
 #define TPR_EXTRACTOR_LIB_MESH_H_
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <Eigen/Core>
 
 namespace tpr::extract {
 

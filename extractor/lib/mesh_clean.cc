@@ -4,16 +4,15 @@
 // for what are here a few sorts over flat arrays.
 #include "extractor/lib/mesh_clean.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
-#include <cassert>
 #include <array>
+#include <cassert>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -144,8 +143,7 @@ absl::StatusOr<int64_t> Orient(const std::vector<Eigen::Vector3d>& positions,
           if (cut == nullptr) {
             return absl::InvalidArgumentError(absl::StrCat(
                 "non-orientable surface: triangles around edge ",
-                EdgeName(links[link].key),
-                " cannot be oriented consistently"));
+                EdgeName(links[link].key), " cannot be oriented consistently"));
           }
           (*cut)[link] = 1;
           closed = false;
@@ -262,10 +260,11 @@ absl::Status ValidatePolygonSoup(const PolygonSoup& soup,
           absl::StrCat("vertex ", v, " has a non-finite coordinate"));
     }
     if (soup.positions[v].cwiseAbs().maxCoeff() > kMaxCoordinate) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "vertex ", v, ": coordinate ", soup.positions[v].cwiseAbs().maxCoeff(),
-          " exceeds the supported magnitude ", kMaxCoordinate,
-          " (mesh_clean.h kMaxCoordinate)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("vertex ", v, ": coordinate ",
+                       soup.positions[v].cwiseAbs().maxCoeff(),
+                       " exceeds the supported magnitude ", kMaxCoordinate,
+                       " (mesh_clean.h kMaxCoordinate)"));
     }
   }
   int64_t triangle_count = 0;
@@ -278,9 +277,9 @@ absl::Status ValidatePolygonSoup(const PolygonSoup& soup,
     }
     for (int32_t v : polygon) {
       if (v < 0 || v >= nv) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "face ", f, " references vertex ", v, "; the mesh has ", nv,
-            " vertices"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("face ", f, " references vertex ", v,
+                         "; the mesh has ", nv, " vertices"));
       }
     }
     triangle_count += static_cast<int64_t>(polygon.size()) - 2;
@@ -470,8 +469,9 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
   Triangles triangles = FanTriangulate(soup);
   soup.corners = {};
   soup.offsets = {};
-  const int64_t degenerate = soup.reader_dropped_degenerate +
-                             DropDegenerateTriangles(soup.positions, &triangles);
+  const int64_t degenerate =
+      soup.reader_dropped_degenerate +
+      DropDegenerateTriangles(soup.positions, &triangles);
   const int64_t duplicates = DropDuplicateTriangles(&triangles);
   if (degenerate > 0) {
     warnings.push_back(absl::StrCat("dropped ", degenerate,
@@ -498,7 +498,8 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
                            " but span only ", span,
                            ": at float precision (24 bits, how files are "
                            "read) detail below ",
-                           magnitude * 6e-8, " is lost, so move the mesh "
+                           magnitude * 6e-8,
+                           " is lost, so move the mesh "
                            "near the origin")
             : "";
     return absl::InvalidArgumentError(absl::StrCat(
@@ -511,7 +512,8 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
     warnings.push_back(absl::StrCat(
         "repaired non-manifold input by splitting it into manifold sheets: ",
         repair.non_manifold_edges, " edges shared by 3 or more triangles, ",
-        repair.split_vertices, " vertices whose triangles form 2 or more fans (",
+        repair.split_vertices,
+        " vertices whose triangles form 2 or more fans (",
         repair.added_vertices, " vertex copies added)",
         repair.orientation_cuts > 0
             ? absl::StrCat(", ", repair.orientation_cuts,

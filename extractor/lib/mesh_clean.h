@@ -24,13 +24,12 @@
 #ifndef TPR_EXTRACTOR_LIB_MESH_CLEAN_H_
 #define TPR_EXTRACTOR_LIB_MESH_CLEAN_H_
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <initializer_list>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"

@@ -53,7 +53,10 @@ std::string ReaderNames() {
   std::string out;
   const size_t n = std::size(kReaders);
   for (size_t i = 0; i < n; ++i) {
-    absl::StrAppend(&out, i == 0 ? "" : i + 1 == n ? " or " : ", ",
+    absl::StrAppend(&out,
+                    i == 0       ? ""
+                    : i + 1 == n ? " or "
+                                 : ", ",
                     kReaders[i].name);
   }
   return out;
@@ -100,9 +103,9 @@ const char* MeshFormatName(MeshFormat format) {
   return reader != nullptr ? reader->name : "unknown";
 }
 
-absl::StatusOr<LoadedMesh> BuildMesh(
-    std::vector<Eigen::Vector3d> positions,
-    std::vector<std::vector<int32_t>> polygons, const IntakeOptions& options) {
+absl::StatusOr<LoadedMesh> BuildMesh(std::vector<Eigen::Vector3d> positions,
+                                     std::vector<std::vector<int32_t>> polygons,
+                                     const IntakeOptions& options) {
   PolygonSoup soup;
   soup.positions = std::move(positions);
   soup.offsets.reserve(polygons.size() + 1);

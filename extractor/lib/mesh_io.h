@@ -31,7 +31,8 @@
 //   8. nothing left (no vertex or no triangle) is INVALID_ARGUMENT.
 // Ids in messages are the input's ids (0-based; for STL, after welding).
 //
-//   absl::StatusOr<LoadedMesh> m = LoadMeshFromFile("dog.off", IntakeOptions{});
+//   absl::StatusOr<LoadedMesh> m =
+//       LoadMeshFromFile("dog.off", IntakeOptions{});
 //   if (!m.ok()) return m.status();   // INVALID_ARGUMENT names the fault
 //   Use(m->mesh, m->stats);
 #ifndef TPR_EXTRACTOR_LIB_MESH_IO_H_
@@ -77,9 +78,9 @@ absl::StatusOr<LoadedMesh> LoadMeshFromFile(const std::string& path,
 // Errors: INVALID_ARGUMENT (non-finite coordinate, index out of range,
 // polygon with < 3 ids, non-manifold edge or vertex, non-orientable, empty),
 // RESOURCE_EXHAUSTED above the limits. Thread-safe. O(n log n).
-absl::StatusOr<LoadedMesh> BuildMesh(
-    std::vector<Eigen::Vector3d> positions,
-    std::vector<std::vector<int32_t>> polygons, const IntakeOptions& options);
+absl::StatusOr<LoadedMesh> BuildMesh(std::vector<Eigen::Vector3d> positions,
+                                     std::vector<std::vector<int32_t>> polygons,
+                                     const IntakeOptions& options);
 
 // MeshFormatName returns "OFF", "OBJ", "PLY", "STL" or "unknown".
 const char* MeshFormatName(MeshFormat format);

@@ -85,10 +85,10 @@ absl::StatusOr<PolygonSoup> ReadObj(string_view bytes,
           index += static_cast<int64_t>(soup.positions.size()) + 1;
         }
         if (index < 1) {
-          return InvalidAt(kFmt, reader.number(),
-                           absl::StrCat("face ", face,
-                                        " references relative vertex ", vertex,
-                                        " before vertex 1"));
+          return InvalidAt(
+              kFmt, reader.number(),
+              absl::StrCat("face ", face, " references relative vertex ",
+                           vertex, " before vertex 1"));
         }
         if (index >= kTooLarge) {
           if (first_too_large == 0) first_too_large = index;
@@ -108,15 +108,16 @@ absl::StatusOr<PolygonSoup> ReadObj(string_view bytes,
       if (soup.corners[k] > nv) {
         const int64_t index =
             soup.corners[k] == kTooLarge ? first_too_large : soup.corners[k];
-        return InvalidAt(kFmt, face_lines[f],
-                         absl::StrCat("face ", f, " references vertex ", index,
-                                      " (1-based); the file has ", nv,
-                                      " vertices"));
+        return InvalidAt(
+            kFmt, face_lines[f],
+            absl::StrCat("face ", f, " references vertex ", index,
+                         " (1-based); the file has ", nv, " vertices"));
       }
     }
   }
   if (nv == 0) return Invalid(kFmt, "no vertices ('v' lines) found");
-  if (soup.num_polygons() == 0) return Invalid(kFmt, "no faces ('f' lines) found");
+  if (soup.num_polygons() == 0)
+    return Invalid(kFmt, "no faces ('f' lines) found");
   face_lines = {};
   // 0-based ids; a face's repeated ids are removed (first kept) and a face
   // left with fewer than three is dropped as degenerate.

@@ -48,9 +48,9 @@ absl::StatusOr<PolygonSoup> ReadOff(string_view bytes,
                        absl::StrCat("header variant ", Quote(tok[0]),
                                     " is not supported (plain OFF only)"));
     }
-    return InvalidAt(kFmt, reader.number(),
-                     absl::StrCat("expected the 'OFF' header, got ",
-                                  Quote(tok[0])));
+    return InvalidAt(
+        kFmt, reader.number(),
+        absl::StrCat("expected the 'OFF' header, got ", Quote(tok[0])));
   }
   if (tok.size() > 1 && tok[1] == "BINARY") {
     return InvalidAt(kFmt, reader.number(), "binary OFF is not supported");
@@ -115,9 +115,10 @@ absl::StatusOr<PolygonSoup> ReadOff(string_view bytes,
     cursor.Next(&token);
     int64_t n = 0;
     if (!mesh_io::ParseInt(token, &n)) {
-      return InvalidAt(kFmt, reader.number(),
-                       absl::StrCat("face ", f, ": expected a vertex count, got ",
-                                    Quote(token)));
+      return InvalidAt(
+          kFmt, reader.number(),
+          absl::StrCat("face ", f, ": expected a vertex count, got ",
+                       Quote(token)));
     }
     if (n < 3) {
       return InvalidAt(kFmt, reader.number(),
@@ -141,10 +142,10 @@ absl::StatusOr<PolygonSoup> ReadOff(string_view bytes,
       cursor.Next(&token);
       int64_t index = 0;
       if (!mesh_io::ParseInt(token, &index)) {
-        return InvalidAt(kFmt, reader.number(),
-                         absl::StrCat("face ", f,
-                                      ": expected a vertex index, got ",
-                                      Quote(token)));
+        return InvalidAt(
+            kFmt, reader.number(),
+            absl::StrCat("face ", f, ": expected a vertex index, got ",
+                         Quote(token)));
       }
       if (index < 0 || index >= nv) {
         return InvalidAt(kFmt, reader.number(),

@@ -120,11 +120,11 @@ class AsciiBody {
     const bool ok = p.is_float ? mesh_io::ParseDouble(token, value)
                                : mesh_io::ParseInt(token, &n);
     if (!ok) {
-      return InvalidAt(kFmt, line_,
-                       absl::StrCat(element, " ", i, ": property ",
-                                    Quote(p.name), ": expected ",
-                                    p.is_float ? "a number" : "an integer",
-                                    ", got ", Quote(token)));
+      return InvalidAt(
+          kFmt, line_,
+          absl::StrCat(element, " ", i, ": property ", Quote(p.name),
+                       ": expected ", p.is_float ? "a number" : "an integer",
+                       ", got ", Quote(token)));
     }
     return absl::OkStatus();
   }
@@ -144,10 +144,10 @@ class AsciiBody {
     string_view token;
     TPR_RETURN_IF_ERROR(Next(&token));
     if (!mesh_io::ParseInt(token, index)) {
-      return InvalidAt(kFmt, line_,
-                       absl::StrCat("face ", i,
-                                    ": expected a vertex index, got ",
-                                    Quote(token)));
+      return InvalidAt(
+          kFmt, line_,
+          absl::StrCat("face ", i, ": expected a vertex index, got ",
+                       Quote(token)));
     }
     return absl::OkStatus();
   }
@@ -186,8 +186,8 @@ class BinaryBody {
     if (body_.size() - pos_ < static_cast<size_t>(p.size)) {
       return absl::OutOfRangeError("eof");
     }
-    *value = ReadPlyScalar(body_.data() + pos_, p.size, p.is_float,
-                           p.is_signed, big_);
+    *value = ReadPlyScalar(body_.data() + pos_, p.size, p.is_float, p.is_signed,
+                           big_);
     pos_ += p.size;
     if (p.coordinate >= 0 && element == "vertex") {
       TPR_RETURN_IF_ERROR(mesh_io::CheckCoordinateValue(
@@ -201,8 +201,8 @@ class BinaryBody {
     if (body_.size() - pos_ < static_cast<size_t>(p.count_size)) {
       return absl::OutOfRangeError("eof");
     }
-    const double count = ReadPlyScalar(body_.data() + pos_, p.count_size,
-                                       false, p.count_signed, big_);
+    const double count = ReadPlyScalar(body_.data() + pos_, p.count_size, false,
+                                       p.count_signed, big_);
     pos_ += p.count_size;
     if (count < 3) {
       return Invalid(kFmt, absl::StrCat("face ", i, " has ", count,
@@ -221,8 +221,8 @@ class BinaryBody {
     return absl::OkStatus();
   }
   absl::Status Index(const PlyProperty& p, int64_t, int64_t* index) {
-    const double value = ReadPlyScalar(body_.data() + pos_, p.size, false,
-                                       p.is_signed, big_);
+    const double value =
+        ReadPlyScalar(body_.data() + pos_, p.size, false, p.is_signed, big_);
     pos_ += p.size;
     *index = static_cast<int64_t>(value);
     return absl::OkStatus();
@@ -252,14 +252,14 @@ absl::Status WalkBody(const std::vector<PlyElement>& elements,
     for (int64_t i = 0; i < element.count; ++i) {
       auto check = [&](absl::Status s) {
         if (!absl::IsOutOfRange(s)) return s;
-        return Invalid(kFmt, absl::StrCat("truncated in ", element.name, " ",
-                                          i, " of ", element.count));
+        return Invalid(kFmt, absl::StrCat("truncated in ", element.name, " ", i,
+                                          " of ", element.count));
       };
       for (const PlyProperty& p : element.properties) {
         if (!p.is_list) {
           double value = 0.0;
-          TPR_RETURN_IF_ERROR(check(source->Scalar(
-              p, element.name, i, &value)));
+          TPR_RETURN_IF_ERROR(
+              check(source->Scalar(p, element.name, i, &value)));
           if (is_vertex && p.coordinate >= 0) {
             soup->positions[i][p.coordinate] = value;
           }
@@ -366,18 +366,17 @@ absl::StatusOr<PolygonSoup> ReadPly(string_view bytes,
         }
         if (element.name != "face" ||
             (p.name != "vertex_indices" && p.name != "vertex_index")) {
-          return InvalidAt(kFmt, at,
-                           absl::StrCat("list property ", Quote(p.name),
-                                        " of element ", Quote(element.name),
-                                        " is not supported"));
+          return InvalidAt(
+              kFmt, at,
+              absl::StrCat("list property ", Quote(p.name), " of element ",
+                           Quote(element.name), " is not supported"));
         }
         p.role_indices = true;
       } else if (tok.size() == 3) {
         p.name = std::string(tok[2]);
         if (!PlyType(tok[1], &p.size, &p.is_float, &p.is_signed)) {
-          return InvalidAt(kFmt, at,
-                           absl::StrCat("unknown property type ",
-                                        Quote(tok[1])));
+          return InvalidAt(
+              kFmt, at, absl::StrCat("unknown property type ", Quote(tok[1])));
         }
         if (element.name == "vertex" && p.name.size() == 1 &&
             p.name[0] >= 'x' && p.name[0] <= 'z') {
@@ -441,12 +440,12 @@ absl::StatusOr<PolygonSoup> ReadPly(string_view bytes,
     }
     if (min_record > 0 &&
         static_cast<uint64_t>(element.count) > body.size() / min_record) {
-      return InvalidAt(kFmt, element.line,
-                       absl::StrCat("header declares ", element.count, " ",
-                                    Quote(element.name), " elements, but ",
-                                    body.size(),
-                                    " bytes of data cannot hold "
-                                    "them (truncated file or wrong count)"));
+      return InvalidAt(
+          kFmt, element.line,
+          absl::StrCat("header declares ", element.count, " ",
+                       Quote(element.name), " elements, but ", body.size(),
+                       " bytes of data cannot hold "
+                       "them (truncated file or wrong count)"));
     }
   }
   if (nv > options.max_vertices) return mesh_io::TooManyVertices(nv, options);

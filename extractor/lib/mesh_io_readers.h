@@ -54,8 +54,8 @@ absl::StatusOr<PolygonSoup> ReadPly(absl::string_view bytes,
 
 // ReadStl reads ASCII or binary STL (binary when the 80-byte header's count
 // matches the size exactly, or the text does not start with "solid").
-// Corners at equal float positions (+0 = -0, subnormals = 0) are welded into one
-// vertex, numbered in order of first appearance; a facet whose corners weld
+// Corners at equal float positions (+0 = -0, subnormals = 0) are welded into
+// one vertex, numbered in order of first appearance; a facet whose corners weld
 // together is counted in reader_dropped_degenerate; a warning says how many
 // corners became how many vertices. Errors: INVALID_ARGUMENT naming the line
 // or triangle; RESOURCE_EXHAUSTED above the limits. O(bytes). Thread-safe.

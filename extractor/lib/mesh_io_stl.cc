@@ -1,11 +1,11 @@
 // STL reader (mesh_io_readers.h): ASCII and binary, corners welded by
 // position.
 #include <algorithm>
-#include <cmath>
-#include <limits>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -68,9 +68,9 @@ PolygonSoup Weld(const Corners& corners) {
   // first[c]: the earliest corner at c's position.
   std::vector<int32_t> first(n);
   for (int64_t i = 0; i < n; ++i) {
-    first[order[i]] =
-        i > 0 && key(order[i]) == key(order[i - 1]) ? first[order[i - 1]]
-                                                    : order[i];
+    first[order[i]] = i > 0 && key(order[i]) == key(order[i - 1])
+                          ? first[order[i - 1]]
+                          : order[i];
   }
   order = {};
   PolygonSoup soup;
@@ -119,8 +119,8 @@ absl::StatusOr<PolygonSoup> ReadStlBinary(string_view bytes,
   for (uint64_t t = 0; t < n; ++t) {
     for (int corner = 0; corner < 3; ++corner) {
       for (int c = 0; c < 3; ++c) {
-        const uint32_t raw = mesh_io::LoadLe32(bytes.data() + 84 + 50 * t +
-                                               12 + 12 * corner + 4 * c);
+        const uint32_t raw = mesh_io::LoadLe32(bytes.data() + 84 + 50 * t + 12 +
+                                               12 * corner + 4 * c);
         float value;
         std::memcpy(&value, &raw, sizeof(value));
         TPR_RETURN_IF_ERROR(mesh_io::CheckCoordinateValue(
@@ -167,9 +167,9 @@ absl::StatusOr<PolygonSoup> ReadStlAscii(string_view bytes,
         }
         mesh_io::SplitTokens(line, &tok, 5);
         if (tok.size() != 4 || tok[0] != "vertex") {
-          return InvalidAt(kFmt, reader.number(),
-                           absl::StrCat("triangle ", faces,
-                                        ": expected 'vertex x y z'"));
+          return InvalidAt(
+              kFmt, reader.number(),
+              absl::StrCat("triangle ", faces, ": expected 'vertex x y z'"));
         }
         std::array<float, 3> p;
         for (int k = 0; k < 3; ++k) {

@@ -121,15 +121,15 @@ absl::Status InvalidAt(string_view format, int64_t line, string_view message) {
 }
 
 absl::Status TooManyVertices(int64_t n, const IntakeOptions& options) {
-  return absl::ResourceExhaustedError(absl::StrCat(
-      "mesh has ", n, " vertices; the limit is ", options.max_vertices,
-      " (IntakeOptions::max_vertices)"));
+  return absl::ResourceExhaustedError(
+      absl::StrCat("mesh has ", n, " vertices; the limit is ",
+                   options.max_vertices, " (IntakeOptions::max_vertices)"));
 }
 
 absl::Status TooManyFaces(int64_t n, const IntakeOptions& options) {
-  return absl::ResourceExhaustedError(absl::StrCat(
-      "mesh has at least ", n, " triangles; the limit is ", options.max_faces,
-      " (IntakeOptions::max_faces)"));
+  return absl::ResourceExhaustedError(
+      absl::StrCat("mesh has at least ", n, " triangles; the limit is ",
+                   options.max_faces, " (IntakeOptions::max_faces)"));
 }
 
 absl::Status CheckCoordinateValue(string_view format, string_view where,
@@ -157,9 +157,10 @@ absl::Status ParseCoordinate(string_view format, int64_t line, int64_t vertex,
   if (!signed_ok || !whole ||
       (result.ec != std::errc() &&
        result.ec != std::errc::result_out_of_range)) {
-    return InvalidAt(format, line,
-                     absl::StrCat("vertex ", vertex,
-                                  ": expected a coordinate, got ", Quote(token)));
+    return InvalidAt(
+        format, line,
+        absl::StrCat("vertex ", vertex, ": expected a coordinate, got ",
+                     Quote(token)));
   }
   if (result.ec == std::errc::result_out_of_range) {
     // Beyond float: the double value tells an overflow (reported below)
@@ -171,16 +172,16 @@ absl::Status ParseCoordinate(string_view format, int64_t line, int64_t vertex,
     }
   }
   if (!std::isfinite(d)) {
-    return InvalidAt(format, line,
-                     absl::StrCat("vertex ", vertex,
-                                  " has a non-finite coordinate ", Quote(token)));
+    return InvalidAt(
+        format, line,
+        absl::StrCat("vertex ", vertex, " has a non-finite coordinate ",
+                     Quote(token)));
   }
   if (std::fabs(d) > kMaxCoordinate) {
-    return InvalidAt(format, line,
-                     absl::StrCat("vertex ", vertex, ": coordinate ",
-                                  Quote(token),
-                                  " exceeds the supported magnitude ",
-                                  kMaxCoordinate));
+    return InvalidAt(
+        format, line,
+        absl::StrCat("vertex ", vertex, ": coordinate ", Quote(token),
+                     " exceeds the supported magnitude ", kMaxCoordinate));
   }
   *value = d;
   return absl::OkStatus();

@@ -90,7 +90,8 @@ absl::Status TooManyVertices(int64_t n, const IntakeOptions& options);
 absl::Status TooManyFaces(int64_t n, const IntakeOptions& options);
 
 // CheckCoordinate checks a coordinate value already decoded (binary
-// formats): finite and within kMaxCoordinate (mesh_clean.h). `where` names the element
+// formats): finite and within kMaxCoordinate (mesh_clean.h). `where` names the
+// element
 // ("vertex 3", "triangle 2 corner 1").
 absl::Status CheckCoordinateValue(absl::string_view format,
                                   absl::string_view where, double value);

@@ -3,12 +3,13 @@
 // failure as a bool; the formats are small enough to emit directly.
 #include "extractor/lib/mesh_writer.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <cerrno>
-#include <fcntl.h>
-#include <unistd.h>
 
 #include "absl/strings/str_cat.h"
 
@@ -61,9 +62,9 @@ absl::Status Validate(const Mesh& mesh, const MeshWriteOptions& options) {
   }
   if (!options.vertex_colors.empty() &&
       options.vertex_colors.size() != mesh.positions.size()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "vertex_colors has ", options.vertex_colors.size(),
-        " entries for ", mesh.positions.size(), " vertices"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("vertex_colors has ", options.vertex_colors.size(),
+                     " entries for ", mesh.positions.size(), " vertices"));
   }
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
     if (!mesh.positions[v].allFinite()) {
@@ -83,8 +84,7 @@ absl::Status Validate(const Mesh& mesh, const MeshWriteOptions& options) {
   return absl::OkStatus();
 }
 
-std::string PlyHeader(const Mesh& mesh, bool binary, bool colors,
-                      int digits) {
+std::string PlyHeader(const Mesh& mesh, bool binary, bool colors, int digits) {
   std::string out = "ply\n";
   absl::StrAppend(&out, "format ", binary ? "binary_little_endian" : "ascii",
                   " 1.0\n");
@@ -106,7 +106,7 @@ std::string PlyHeader(const Mesh& mesh, bool binary, bool colors,
 
 // FileError maps an errno from writing `path` to a code a caller need not
 // retry (the same call fails the same way until someone changes the file
-// system): NOT_FOUND for a missing directory, PERMISSION_DENIED, 
+// system): NOT_FOUND for a missing directory, PERMISSION_DENIED,
 // RESOURCE_EXHAUSTED for a full disk or quota, FAILED_PRECONDITION for
 // anything else about the path (a directory, a read-only file system).
 absl::Status FileError(int error, const char* what, const std::string& path) {
@@ -115,7 +115,8 @@ absl::Status FileError(int error, const char* what, const std::string& path) {
   switch (error) {
     case ENOENT:
     case ENOTDIR:
-      return absl::NotFoundError(absl::StrCat(message, " (a directory on the path is missing)"));
+      return absl::NotFoundError(
+          absl::StrCat(message, " (a directory on the path is missing)"));
     case EACCES:
     case EPERM:
       return absl::PermissionDeniedError(message);
@@ -130,8 +131,8 @@ absl::Status FileError(int error, const char* what, const std::string& path) {
 
 }  // namespace
 
-absl::StatusOr<std::string> WriteMeshToString(
-    const Mesh& mesh, const MeshWriteOptions& options) {
+absl::StatusOr<std::string> WriteMeshToString(const Mesh& mesh,
+                                              const MeshWriteOptions& options) {
   absl::Status valid = Validate(mesh, options);
   if (!valid.ok()) return valid;
   const bool colors = !options.vertex_colors.empty();
@@ -142,9 +143,11 @@ absl::StatusOr<std::string> WriteMeshToString(
   if (options.format == MeshWriteFormat::kPlyBinary) {
     out += PlyHeader(mesh, /*binary=*/true, colors, options.digits);
     for (size_t v = 0; v < mesh.positions.size(); ++v) {
-      for (int a = 0; a < 3; ++a) AppendLittleEndian(&out, mesh.positions[v][a]);
+      for (int a = 0; a < 3; ++a)
+        AppendLittleEndian(&out, mesh.positions[v][a]);
       if (colors) {
-        for (uint8_t c : options.vertex_colors[v]) out.push_back(static_cast<char>(c));
+        for (uint8_t c : options.vertex_colors[v])
+          out.push_back(static_cast<char>(c));
       }
     }
     for (const auto& t : mesh.triangles) {
@@ -192,11 +195,13 @@ absl::Status WriteMeshToFile(const Mesh& mesh, const MeshWriteOptions& options,
                              const std::string& path) {
   absl::StatusOr<std::string> bytes = WriteMeshToString(mesh, options);
   if (!bytes.ok()) return bytes.status();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  const int fd =
+      ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return FileError(errno, "cannot open", path);
   size_t written = 0;
   while (written < bytes->size()) {
-    const ssize_t n = ::write(fd, bytes->data() + written, bytes->size() - written);
+    const ssize_t n =
+        ::write(fd, bytes->data() + written, bytes->size() - written);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
       const int error = n < 0 ? errno : EIO;

@@ -76,7 +76,8 @@ absl::StatusOr<SourcePoints> SelectSourcePoints(
   // The sweep from far_a is the first level's first centre: its farthest
   // point sampling then takes far_b next, so G at both extremes is exact and
   // feeds MAX G.
-  s.surface_centre = FindSurfaceCentreFrom(graph, solver, options, s.far_a, from_a);
+  s.surface_centre =
+      FindSurfaceCentreFrom(graph, solver, options, s.far_a, from_a);
   s.centre = s.surface_centre.vertex;
   s.sweeps = 2 + s.surface_centre.sweeps;
   return s;

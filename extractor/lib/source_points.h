@@ -38,9 +38,9 @@ struct SourcePoints {
 // (by area) of `graph`; other components are ignored (TPR describes one
 // connected surface; the pipeline warns). Errors: INVALID_ARGUMENT for a
 // graph without vertices or whose largest component has zero area, or for
-// options out of range (first_level_patches < 2, patches_per_level < 1, negative thresholds,
-// max_sweeps < 1). Cost: 2 + psi Dijkstra sweeps. Not thread-safe per
-// solver.
+// options out of range (first_level_patches < 2, patches_per_level < 1,
+// negative thresholds, max_sweeps < 1). Cost: 2 + psi Dijkstra sweeps. Not
+// thread-safe per solver.
 absl::StatusOr<SourcePoints> SelectSourcePoints(
     const MeshGraph& graph, DijkstraSolver& solver,
     const IntegralGeodesicOptions& options);

@@ -3,15 +3,14 @@
 // the eigenproblem solved by Spectra, the simplification by OpenMesh.
 #include "extractor/lib/spectrum.h"
 
-#include <algorithm>
-#include <cmath>
-#include <exception>
-#include <utility>
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <utility>
 // OpenMesh's property vectors default-construct VectorT without
 // initializing it, which g++ 12 flags at -O3 inside OpenMesh's headers.
 #pragma GCC diagnostic push
@@ -72,7 +71,8 @@ int64_t CountComponents(const Mesh& mesh) {
   }
   int64_t components = 0;
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
-    if (sets.Find(static_cast<int64_t>(v)) == static_cast<int64_t>(v)) ++components;
+    if (sets.Find(static_cast<int64_t>(v)) == static_cast<int64_t>(v))
+      ++components;
   }
   return components;
 }
@@ -99,7 +99,8 @@ double Assemble(const Mesh& mesh, SparseMatrix* stiffness, SparseMatrix* mass) {
       const int32_t i = t[(k + 1) % 3];
       const int32_t j = t[(k + 2) % 3];
       const Eigen::Vector3d& c = mesh.positions[t[k]];
-      const double w = 0.5 * (mesh.positions[i] - c).dot(mesh.positions[j] - c) / twice_area;
+      const double w =
+          0.5 * (mesh.positions[i] - c).dot(mesh.positions[j] - c) / twice_area;
       l.emplace_back(i, j, -w);
       l.emplace_back(j, i, -w);
       l.emplace_back(i, i, w);
@@ -165,7 +166,8 @@ class ShiftInvertOp {
 // EigenvaluesBelow returns how many eigenvalues of L x = lambda M x are
 // below tau (Sylvester's law of inertia: the negative pivots of an LDL^T
 // of L - tau M), or -1 when the factorization fails (tau on an eigenvalue).
-int64_t EigenvaluesBelow(const SparseMatrix& l, const SparseMatrix& m, double tau) {
+int64_t EigenvaluesBelow(const SparseMatrix& l, const SparseMatrix& m,
+                         double tau) {
   Eigen::SimplicialLDLT<SparseMatrix> ldlt(SparseMatrix(l - tau * m));
   if (ldlt.info() != Eigen::Success) return -1;
   const Eigen::VectorXd d = ldlt.vectorD();
@@ -179,8 +181,10 @@ struct Eigenpairs {
   int64_t operations = 0;
 };
 
-absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, const SparseMatrix& mass, int64_t nev,
-                                      double sigma, const SpectrumOptions& options) {
+absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op,
+                                      const SparseMatrix& mass, int64_t nev,
+                                      double sigma,
+                                      const SpectrumOptions& options) {
   // Spectra requires nev < ncv <= n and advises ncv >= 2 nev. Between
   // nev + 10 and 2 nev + 1, ncv changed neither the number of solves
   // (about 130 for 51 values) nor the time much.
@@ -188,49 +192,57 @@ absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, const SparseMatrix& mas
   Spectra::SparseSymMatProd<double> mass_op(mass);
   Eigenpairs out;
   try {
-    Spectra::SymGEigsShiftSolver<ShiftInvertOp, Spectra::SparseSymMatProd<double>,
+    Spectra::SymGEigsShiftSolver<ShiftInvertOp,
+                                 Spectra::SparseSymMatProd<double>,
                                  Spectra::GEigsMode::ShiftInvert>
         solver(op, mass_op, nev, ncv, sigma);
     if (!op.ok()) {
-      return absl::InternalError("spectrum: sparse Cholesky of L - sigma M failed");
+      return absl::InternalError(
+          "spectrum: sparse Cholesky of L - sigma M failed");
     }
     solver.init();
     const Eigen::Index converged =
-        solver.compute(Spectra::SortRule::LargestMagn, options.max_restarts, options.tolerance,
-                       Spectra::SortRule::SmallestAlge);
+        solver.compute(Spectra::SortRule::LargestMagn, options.max_restarts,
+                       options.tolerance, Spectra::SortRule::SmallestAlge);
     out.operations = solver.num_operations();
     if (solver.info() != Spectra::CompInfo::Successful || converged < nev) {
       return absl::InternalError(absl::StrCat(
-          "spectrum: Lanczos iteration did not converge (", converged, " of ", nev,
-          " eigenvalues after ", solver.num_iterations(), " restarts)"));
+          "spectrum: Lanczos iteration did not converge (", converged, " of ",
+          nev, " eigenvalues after ", solver.num_iterations(), " restarts)"));
     }
     out.values = solver.eigenvalues();
     out.vectors = solver.eigenvectors();
   } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrCat("spectrum: eigensolver failed: ", e.what()));
+    return absl::InternalError(
+        absl::StrCat("spectrum: eigensolver failed: ", e.what()));
   }
   return out;
 }
 
 absl::Status ValidateOptions(const SpectrumOptions& o) {
   if (o.eigenvalues < 1 || o.eigenvalues > 10000) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("spectrum options: eigenvalues ", o.eigenvalues, " not in [1, 10000]"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "spectrum options: eigenvalues ", o.eigenvalues, " not in [1, 10000]"));
   }
   if (o.max_vertices != 0 && o.max_vertices < 4) {
-    return absl::InvalidArgumentError("spectrum options: max_vertices must be 0 or >= 4");
+    return absl::InvalidArgumentError(
+        "spectrum options: max_vertices must be 0 or >= 4");
   }
   if (!(o.shift < 0.0) || !std::isfinite(o.shift)) {
-    return absl::InvalidArgumentError("spectrum options: shift must be negative and finite");
+    return absl::InvalidArgumentError(
+        "spectrum options: shift must be negative and finite");
   }
   if (!(o.tolerance > 0.0 && o.tolerance < 1.0)) {
-    return absl::InvalidArgumentError("spectrum options: tolerance not in (0, 1)");
+    return absl::InvalidArgumentError(
+        "spectrum options: tolerance not in (0, 1)");
   }
   if (o.dense_max_vertices < 0 || o.dense_max_vertices > 5000) {
-    return absl::InvalidArgumentError("spectrum options: dense_max_vertices not in [0, 5000]");
+    return absl::InvalidArgumentError(
+        "spectrum options: dense_max_vertices not in [0, 5000]");
   }
   if (o.max_restarts < 1) {
-    return absl::InvalidArgumentError("spectrum options: max_restarts must be >= 1");
+    return absl::InvalidArgumentError(
+        "spectrum options: max_restarts must be >= 1");
   }
   return absl::OkStatus();
 }
@@ -239,11 +251,12 @@ absl::Status ValidateOptions(const SpectrumOptions& o) {
 
 absl::StatusOr<Mesh> SimplifyMesh(const Mesh& mesh, int target_vertices) {
   if (target_vertices < 4) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("SimplifyMesh: target_vertices ", target_vertices, " < 4"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "SimplifyMesh: target_vertices ", target_vertices, " < 4"));
   }
   Mesh compact = Compact(mesh);
-  if (static_cast<int64_t>(compact.positions.size()) <= target_vertices) return compact;
+  if (static_cast<int64_t>(compact.positions.size()) <= target_vertices)
+    return compact;
   OmMesh om;
   std::vector<OmMesh::VertexHandle> handles;
   handles.reserve(compact.positions.size());
@@ -272,7 +285,8 @@ absl::StatusOr<Mesh> SimplifyMesh(const Mesh& mesh, int target_vertices) {
   decimater.add(roundness);
   decimater.module(roundness).set_min_angle(kMinAngleDegrees, /*binary=*/true);
   if (!decimater.initialize()) {
-    return absl::InternalError("SimplifyMesh: OpenMesh decimater did not initialize");
+    return absl::InternalError(
+        "SimplifyMesh: OpenMesh decimater did not initialize");
   }
   decimater.decimate_to(static_cast<size_t>(target_vertices));
   om.garbage_collection();
@@ -292,8 +306,8 @@ absl::StatusOr<Mesh> SimplifyMesh(const Mesh& mesh, int target_vertices) {
   return Compact(out);
 }
 
-absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
-                                                 const SpectrumOptions& options) {
+absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
+    const Mesh& mesh, const SpectrumOptions& options) {
   TPR_RETURN_IF_ERROR(ValidateOptions(options));
   if (mesh.triangles.empty()) {
     return absl::InvalidArgumentError("spectrum: mesh has no triangle");
@@ -311,14 +325,16 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
   // Small meshes are solved densely (every eigenvalue, exact multiplicity);
   // the shift-invert Lanczos needs nev = wanted + C < V.
   const bool dense = result.vertices <= options.dense_max_vertices;
-  const int64_t reachable = result.vertices - result.components - (dense ? 0 : 1);
+  const int64_t reachable =
+      result.vertices - result.components - (dense ? 0 : 1);
   int64_t wanted = options.eigenvalues;
   if (wanted > reachable) {
     if (!options.allow_fewer || reachable < 1) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "spectrum: ", wanted, " non-zero eigenvalues requested but the mesh solved has ",
-          result.vertices, " vertices in ", result.components, " components, so at most ",
-          std::max<int64_t>(0, reachable)));
+          "spectrum: ", wanted,
+          " non-zero eigenvalues requested but the mesh solved has ",
+          result.vertices, " vertices in ", result.components,
+          " components, so at most ", std::max<int64_t>(0, reachable)));
     }
     wanted = reachable;
   }
@@ -327,7 +343,8 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
   if (!(area > 0.0) || !std::isfinite(area)) {
     return absl::InvalidArgumentError("spectrum: mesh has zero surface area");
   }
-  const double scale = area / (4.0 * kPi);  // lambda * scale is the stored value
+  const double scale =
+      area / (4.0 * kPi);  // lambda * scale is the stored value
   const double sigma = options.shift / scale;
 
   // One Lanczos run finds, in exact arithmetic, one vector per eigenspace
@@ -340,12 +357,14 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
   const int64_t nev = wanted + result.components;
   if (dense) {
     Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> solver(
-        Eigen::MatrixXd(stiffness), Eigen::MatrixXd(mass), Eigen::EigenvaluesOnly);
+        Eigen::MatrixXd(stiffness), Eigen::MatrixXd(mass),
+        Eigen::EigenvaluesOnly);
     if (solver.info() != Eigen::Success) {
       return absl::InternalError("spectrum: dense eigensolver failed");
     }
     for (int64_t i = result.components; i < nev; ++i) {
-      result.eigenvalues.push_back(std::max(0.0, solver.eigenvalues()[i]) * scale);
+      result.eigenvalues.push_back(std::max(0.0, solver.eigenvalues()[i]) *
+                                   scale);
     }
     return result;
   }
@@ -359,11 +378,14 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
         run == 0 ? nev : std::max<int64_t>(8, missing + 4),
         result.vertices - static_cast<int64_t>(found.size()) - 1);
     if (request < 1) {
-      return absl::InternalError("spectrum: no room left for a deflated Lanczos run");
+      return absl::InternalError(
+          "spectrum: no room left for a deflated Lanczos run");
     }
-    TPR_ASSIGN_OR_RETURN(Eigenpairs pairs, RunLanczos(op, mass, request, sigma, options));
+    TPR_ASSIGN_OR_RETURN(Eigenpairs pairs,
+                         RunLanczos(op, mass, request, sigma, options));
     result.operations += pairs.operations;
-    found.insert(found.end(), pairs.values.data(), pairs.values.data() + pairs.values.size());
+    found.insert(found.end(), pairs.values.data(),
+                 pairs.values.data() + pairs.values.size());
     std::sort(found.begin(), found.end());
     if (static_cast<int64_t>(found.size()) > nev) found.resize(nev);
     Eigen::MatrixXd all(result.vertices, vectors.cols() + pairs.vectors.cols());
@@ -379,16 +401,17 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
       below = EigenvaluesBelow(stiffness, mass, tau);
     }
     if (below < 0) {
-      return absl::InternalError("spectrum: inertia check factorization failed");
+      return absl::InternalError(
+          "spectrum: inertia check factorization failed");
     }
     const int64_t found_below =
         std::lower_bound(found.begin(), found.end(), tau) - found.begin();
     missing = below - found_below;
     if (missing <= 0) break;
     if (run + 1 == kMaxRuns) {
-      return absl::InternalError(absl::StrCat("spectrum: ", missing,
-                                              " eigenvalues still missing after ", kMaxRuns,
-                                              " deflated Lanczos runs"));
+      return absl::InternalError(absl::StrCat(
+          "spectrum: ", missing, " eigenvalues still missing after ", kMaxRuns,
+          " deflated Lanczos runs"));
     }
     op.Deflate(vectors);
   }

@@ -5,8 +5,10 @@
 // uniform scale. A global, pose-invariant description that complements the
 // TPR's local features on similar-skeleton shapes (issue 9).
 //
-//   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(mesh, SpectrumOptions{});
-//   if (s.ok()) Store(s->eigenvalues);   // unit sphere: 2, 2, 2, 6, 6, 6, 6, 6, 12, ...
+//   absl::StatusOr<Spectrum> s =
+//       LaplaceBeltramiSpectrum(mesh, SpectrumOptions{});
+//   // unit sphere: 2, 2, 2, 6, 6, 6, 6, 6, 12, ...
+//   if (s.ok()) Store(s->eigenvalues);
 #ifndef TPR_EXTRACTOR_LIB_SPECTRUM_H_
 #define TPR_EXTRACTOR_LIB_SPECTRUM_H_
 
@@ -51,8 +53,8 @@ struct SpectrumOptions {
   int dense_max_vertices = 300;
   // When the mesh solved has too few vertices for `eigenvalues` (V vertices
   // in C components have V - C non-zero eigenvalues; above
-  // dense_max_vertices the iterative solver reaches V - C - 1), return that many instead of
-  // INVALID_ARGUMENT. Default false.
+  // dense_max_vertices the iterative solver reaches V - C - 1), return that
+  // many instead of INVALID_ARGUMENT. Default false.
   bool allow_fewer = false;
 };
 
@@ -83,21 +85,20 @@ struct Spectrum {
 // options.shift, with a sparse Cholesky (Eigen::SimplicialLDLT) of
 // L - sigma M, checked by Sylvester's inertia (further deflated runs find
 // copies of multiple eigenvalues a single run missed); meshes of at most
-// options.dense_max_vertices vertices are solved densely. One zero eigenvalue per connected
-// component is skipped.
-// Preconditions: a mesh that intake validated (finite coordinates, indices
-// in range, edge-manifold).
-// Errors: INVALID_ARGUMENT for options out of range, a mesh without
-// triangles or with zero area, or too few vertices for the requested count
-// unless allow_fewer (the message gives the numbers: a mesh of V vertices
-// in C components has V - C non-zero eigenvalues); INTERNAL when the factorization or the
-// Lanczos iteration fails (non-convergence: the message names the count
-// converged). Cost: simplification O(V log V); then, for V' = min(V,
-// max_vertices) vertices, one sparse Cholesky (about O(V'^1.5) on a
-// surface mesh) and O(N) Lanczos steps of one triangular solve each;
-// O(N V') memory. Thread-safe (pure function, no shared state).
-absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(const Mesh& mesh,
-                                                 const SpectrumOptions& options);
+// options.dense_max_vertices vertices are solved densely. One zero eigenvalue
+// per connected component is skipped. Preconditions: a mesh that intake
+// validated (finite coordinates, indices in range, edge-manifold). Errors:
+// INVALID_ARGUMENT for options out of range, a mesh without triangles or with
+// zero area, or too few vertices for the requested count unless allow_fewer
+// (the message gives the numbers: a mesh of V vertices in C components has V -
+// C non-zero eigenvalues); INTERNAL when the factorization or the Lanczos
+// iteration fails (non-convergence: the message names the count converged).
+// Cost: simplification O(V log V); then, for V' = min(V, max_vertices)
+// vertices, one sparse Cholesky (about O(V'^1.5) on a surface mesh) and O(N)
+// Lanczos steps of one triangular solve each; O(N V') memory. Thread-safe (pure
+// function, no shared state).
+absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
+    const Mesh& mesh, const SpectrumOptions& options);
 
 // SimplifyMesh returns `mesh` decimated with OpenMesh's DecimaterT and its
 // quadric error module (Garland-Heckbert edge collapses) until at most

@@ -9,7 +9,8 @@
 
 namespace tpr::extract {
 
-std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector<double>& field) {
+std::vector<double> MaximumPersistence(const MeshGraph& graph,
+                                       const std::vector<double>& field) {
   const int32_t n = graph.num_vertices();
   std::vector<int32_t> order;
   order.reserve(n);
@@ -17,7 +18,8 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector
     if (field[v] != kUnreachable) order.push_back(v);
   }
   std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
-    return std::tie(field[b], a) < std::tie(field[a], b);  // decreasing, ties by id
+    return std::tie(field[b], a) <
+           std::tie(field[a], b);  // decreasing, ties by id
   });
   DisjointSets sets(n);
   std::vector<int32_t> top(n, -1);          // per root: the component's maximum
@@ -37,7 +39,8 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector
       } else if (r != root) {
         // Two components meet at v: the lower maximum dies here.
         int64_t hi = root, lo = r;
-        if (std::tie(field[top[lo]], top[hi]) > std::tie(field[top[hi]], top[lo])) {
+        if (std::tie(field[top[lo]], top[hi]) >
+            std::tie(field[top[hi]], top[lo])) {
           std::swap(hi, lo);
         }
         persistence[top[lo]] = field[top[lo]] - field[v];
@@ -104,14 +107,17 @@ std::vector<TopologicalPoint> SelectTopologicalPoints(
       persistence = MaximumPersistence(graph, sets[i].distances);
     }
     for (int32_t m : sets[i].maxima) {
-      if (!persistence.empty() && persistence[m] < options.min_persistence) continue;
+      if (!persistence.empty() && persistence[m] < options.min_persistence)
+        continue;
       if (max_sources[m] == 0) candidates.push_back({to_saddle[m], m});
       max_sources[m] |= 1u << i;
     }
   }
-  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
-    return std::tie(b.prominence, a.vertex) < std::tie(a.prominence, b.vertex);
-  });
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) {
+              return std::tie(b.prominence, a.vertex) <
+                     std::tie(a.prominence, b.vertex);
+            });
 
   std::vector<char> visited(n, 0);
   std::vector<TopologicalPoint> points;
@@ -140,7 +146,8 @@ std::vector<TopologicalPoint> SelectTopologicalPoints(
     p.vertex = p.members.front();
     for (int32_t v : p.members) {
       visited[v] = 1;
-      if (std::tie(to_saddle[v], p.vertex) > std::tie(to_saddle[p.vertex], v)) p.vertex = v;
+      if (std::tie(to_saddle[v], p.vertex) > std::tie(to_saddle[p.vertex], v))
+        p.vertex = v;
     }
     std::sort(p.members.begin(), p.members.end());
     points.push_back(std::move(p));

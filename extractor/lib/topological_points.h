@@ -5,7 +5,8 @@
 //
 //   std::vector<CriticalPoints> sets = {cp_a, cp_b, cp_centre};
 //   DijkstraSolver solver(graph);
-//   std::vector<TopologicalPoint> tips = SelectTopologicalPoints(graph, solver, sets);
+//   std::vector<TopologicalPoint> tips =
+//       SelectTopologicalPoints(graph, solver, sets);
 #ifndef TPR_EXTRACTOR_LIB_TOPOLOGICAL_POINTS_H_
 #define TPR_EXTRACTOR_LIB_TOPOLOGICAL_POINTS_H_
 
@@ -61,7 +62,8 @@ struct TopologicalPointOptions {
 // highest maximum of a component gets its field value minus the
 // component's lowest value. Vertices with kUnreachable get 0.
 // Cost O(n log n + e). Thread-safe.
-std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector<double>& field);
+std::vector<double> MaximumPersistence(const MeshGraph& graph,
+                                       const std::vector<double>& field);
 
 // SelectTopologicalPoints returns the topological points, in the order they
 // were validated. Maxima are examined in decreasing distance to the nearest
@@ -84,7 +86,8 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph, const std::vector
 // solver.
 std::vector<TopologicalPoint> SelectTopologicalPoints(
     const MeshGraph& graph, DijkstraSolver& solver,
-    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats = nullptr,
+    const std::vector<CriticalPoints>& sets,
+    TopologicalPointStats* stats = nullptr,
     const TopologicalPointOptions& options = {});
 
 }  // namespace tpr::extract

@@ -13,8 +13,8 @@
 
 namespace tpr::extract {
 
-std::vector<double> RingStartTimes(const std::vector<double>& point_g, double g_min,
-                                   double g_max, double max_g_o) {
+std::vector<double> RingStartTimes(const std::vector<double>& point_g,
+                                   double g_min, double g_max, double max_g_o) {
   std::vector<double> start(point_g.size(), 0.0);
   const double span = g_max - g_min;
   if (!(span > 0.0)) return start;
@@ -27,26 +27,30 @@ std::vector<double> RingStartTimes(const std::vector<double>& point_g, double g_
 
 absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     const MeshGraph& graph, const std::vector<int32_t>& point_vertices,
-    const std::vector<double>& start_times, const std::vector<int32_t>& centre_saddles,
-    const RingOptions& options) {
+    const std::vector<double>& start_times,
+    const std::vector<int32_t>& centre_saddles, const RingOptions& options) {
   const int32_t n = graph.num_vertices();
   const int32_t num_points = static_cast<int32_t>(point_vertices.size());
   if (start_times.size() != point_vertices.size()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "rings: ", point_vertices.size(), " points but ", start_times.size(), " start times"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("rings: ", point_vertices.size(), " points but ",
+                     start_times.size(), " start times"));
   }
   for (int32_t i = 0; i < num_points; ++i) {
     if (point_vertices[i] < 0 || point_vertices[i] >= n) {
       return absl::InvalidArgumentError(
-          absl::StrCat("rings: point ", i, " has vertex ", point_vertices[i], " out of range"));
+          absl::StrCat("rings: point ", i, " has vertex ", point_vertices[i],
+                       " out of range"));
     }
     if (!std::isfinite(start_times[i])) {
-      return absl::InvalidArgumentError(absl::StrCat("rings: start time of point ", i, " is not finite"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("rings: start time of point ", i, " is not finite"));
     }
   }
   for (int32_t s : centre_saddles) {
     if (s < 0 || s >= n) {
-      return absl::InvalidArgumentError(absl::StrCat("rings: saddle vertex ", s, " out of range"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("rings: saddle vertex ", s, " out of range"));
     }
   }
   if (!(options.length_threshold >= 0.0)) {
@@ -66,8 +70,9 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     fronts[i].birth = start_times[i];
     fronts[i].points = {i};
   }
-  const int32_t component =
-      num_points > 0 ? graph.component()[point_vertices[0]] : graph.largest_component();
+  const int32_t component = num_points > 0
+                                ? graph.component()[point_vertices[0]]
+                                : graph.largest_component();
 
   std::vector<int32_t> reached_by(n, -1);  // Front that set level[v].
   std::vector<char> settled(n, 0);
@@ -90,7 +95,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     heap.Push(start_times[i], p);
   }
   std::vector<std::pair<int32_t, int32_t>> points_at;  // (vertex, point)
-  for (int32_t i = 0; i < num_points; ++i) points_at.push_back({point_vertices[i], i});
+  for (int32_t i = 0; i < num_points; ++i)
+    points_at.push_back({point_vertices[i], i});
   std::sort(points_at.begin(), points_at.end());
   // Live wavefronts, counting points not yet started: the algorithm ends
   // when all have merged into one (4.6.3).
@@ -105,7 +111,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     out.final_level = level[v];
     // Points at v other than the front that reached it never start: another
     // wavefront got there before their start time.
-    for (auto it = std::lower_bound(points_at.begin(), points_at.end(), std::make_pair(v, -1));
+    for (auto it = std::lower_bound(points_at.begin(), points_at.end(),
+                                    std::make_pair(v, -1));
          it != points_at.end() && it->first == v; ++it) {
       if (it->second != reached_by[v]) {
         fronts[it->second].started = false;
@@ -120,7 +127,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     for (int32_t w : graph.one_ring(v)) {
       if (!settled[w] || out.owner[w] < 0) continue;
       const int32_t r = static_cast<int32_t>(up.Find(out.owner[w]));
-      if (std::find(roots.begin(), roots.end(), r) == roots.end()) roots.push_back(r);
+      if (std::find(roots.begin(), roots.end(), r) == roots.end())
+        roots.push_back(r);
     }
     int32_t owner = roots.front();
     if (roots.size() > 1) {
@@ -151,7 +159,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
         heap.Push(d, w);
       }
     }
-    if (is_stop[v] && --remaining_saddles == 0 && options.stop_at_centre_saddles) {
+    if (is_stop[v] && --remaining_saddles == 0 &&
+        options.stop_at_centre_saddles) {
       out.stopped_by_saddles = true;
       stop = true;
     }
@@ -173,7 +182,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     if (!fronts[f].is_ring) continue;
     ring_region[f] = static_cast<int32_t>(out.regions.size());
     out.regions.push_back(Region{
-        fronts[f].point >= 0 ? RegionKind::kProtrusion : RegionKind::kSegment, f, 0.0});
+        fronts[f].point >= 0 ? RegionKind::kProtrusion : RegionKind::kSegment,
+        f, 0.0});
   }
   // Fronts are created after their children, so resolving from the last to
   // the first sees every parent resolved already.
@@ -233,7 +243,8 @@ absl::StatusOr<RingExtraction> ExtractTopologicalRings(
   }
   int alive = 0;
   for (int32_t f = 0; f < num_fronts; ++f) {
-    alive += fronts[f].parent < 0 && fronts[f].started && (f >= num_points || settled[point_vertices[f]]);
+    alive += fronts[f].parent < 0 && fronts[f].started &&
+             (f >= num_points || settled[point_vertices[f]]);
   }
   out.live_fronts_at_end = alive;
   return out;

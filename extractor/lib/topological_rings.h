@@ -5,7 +5,8 @@
 // topological ring. What is left when the algorithm stops is the final
 // region FR.
 //
-//   std::vector<double> start = RingStartTimes(point_g, g_min, g_max, max_g_o); // Eq. 1
+//   std::vector<double> start =  // Eq. 1
+//       RingStartTimes(point_g, g_min, g_max, max_g_o);
 //   absl::StatusOr<RingExtraction> r = ExtractTopologicalRings(
 //       graph, point_vertices, start, centre_saddles, RingOptions{threshold});
 #ifndef TPR_EXTRACTOR_LIB_TOPOLOGICAL_RINGS_H_
@@ -23,8 +24,8 @@ namespace tpr::extract {
 // MAX g_o * (MAX G - G(m)) / (MAX G - MIN G), clamped to [0, MAX g_o]
 // (MAX G is an estimate, 4.1, so G(m) may exceed it slightly). When
 // MAX G == MIN G every start time is 0. Pure, O(points).
-std::vector<double> RingStartTimes(const std::vector<double>& point_g, double g_min,
-                                   double g_max, double max_g_o);
+std::vector<double> RingStartTimes(const std::vector<double>& point_g,
+                                   double g_min, double g_max, double max_g_o);
 
 // RingOptions controls ring validation (4.6.2).
 struct RingOptions {
@@ -129,8 +130,8 @@ struct RingExtraction {
 // Thread-safe.
 absl::StatusOr<RingExtraction> ExtractTopologicalRings(
     const MeshGraph& graph, const std::vector<int32_t>& point_vertices,
-    const std::vector<double>& start_times, const std::vector<int32_t>& centre_saddles,
-    const RingOptions& options);
+    const std::vector<double>& start_times,
+    const std::vector<int32_t>& centre_saddles, const RingOptions& options);
 
 }  // namespace tpr::extract
 

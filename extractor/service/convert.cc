@@ -15,26 +15,30 @@ namespace tpr::extractor {
 
 const char kExtractorVersion[] = TPR_VERSION_STRING;
 
-absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& proto,
-                                                  int max_threads) {
+absl::StatusOr<extract::Options> OptionsFromProto(
+    const v1::ExtractOptions& proto, int max_threads) {
   extract::Options options;
   if (proto.bands() != 0) {
     if (proto.bands() < 1 || proto.bands() > 256) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "options.bands must be in 1..256 (0 for the default 20), got ", proto.bands()));
+          "options.bands must be in 1..256 (0 for the default 20), got ",
+          proto.bands()));
     }
     options.bands = proto.bands();
   }
   if (proto.cycle_min_vertices() < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.cycle_min_vertices must be >= 0, got ", proto.cycle_min_vertices()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.cycle_min_vertices must be >= 0, got ",
+                     proto.cycle_min_vertices()));
   }
-  if (proto.cycle_min_vertices() != 0) options.cycle_min_vertices = proto.cycle_min_vertices();
+  if (proto.cycle_min_vertices() != 0)
+    options.cycle_min_vertices = proto.cycle_min_vertices();
   // NaN fails both comparisons below, so test it the other way round.
-  if (!(proto.ring_length_threshold() >= 0.0 && proto.ring_length_threshold() < 1.0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.ring_length_threshold must be in [0, 1), got ",
-        proto.ring_length_threshold()));
+  if (!(proto.ring_length_threshold() >= 0.0 &&
+        proto.ring_length_threshold() < 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.ring_length_threshold must be in [0, 1), got ",
+                     proto.ring_length_threshold()));
   }
   if (proto.ring_length_threshold() != 0.0) {
     options.ring_length_threshold = proto.ring_length_threshold();
@@ -46,16 +50,19 @@ absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& prot
   options.threads = std::clamp(proto.threads(), 1, std::max(1, max_threads));
   options.explain = proto.explain();
   if (proto.spectrum_eigenvalues() < 0 || proto.spectrum_eigenvalues() > 1000) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.spectrum_eigenvalues must be in 1..1000 (0 for the default 50), got ",
-        proto.spectrum_eigenvalues()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.spectrum_eigenvalues must be in 1..1000 (0 for "
+                     "the default 50), got ",
+                     proto.spectrum_eigenvalues()));
   }
   if (proto.spectrum_eigenvalues() != 0) {
     options.spectrum_eigenvalues = proto.spectrum_eigenvalues();
   }
-  if (!(proto.point_min_prominence() >= 0.0 && proto.point_min_prominence() <= 1.0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.point_min_prominence must be in [0, 1], got ", proto.point_min_prominence()));
+  if (!(proto.point_min_prominence() >= 0.0 &&
+        proto.point_min_prominence() <= 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.point_min_prominence must be in [0, 1], got ",
+                     proto.point_min_prominence()));
   }
   options.point_min_prominence = proto.point_min_prominence();
   return options;
@@ -105,18 +112,21 @@ v1::MeshStats StatsToProto(const extract::MeshStats& stats) {
 v1::Signature SignatureToProto(const extract::Signature& signature,
                                const extract::Options& options) {
   v1::Signature proto;
-  proto.mutable_features()->Reserve(static_cast<int>(signature.features.size()));
+  proto.mutable_features()->Reserve(
+      static_cast<int>(signature.features.size()));
   for (const extract::Feature& f : signature.features) {
     v1::Feature* out = proto.add_features();
-    out->set_kind(f.kind == extract::FeatureKind::kPoint ? v1::FEATURE_KIND_POINT
-                                                         : v1::FEATURE_KIND_RING);
+    out->set_kind(f.kind == extract::FeatureKind::kPoint
+                      ? v1::FEATURE_KIND_POINT
+                      : v1::FEATURE_KIND_RING);
     out->set_weight(f.weight);
     out->set_integral_geodesic(f.integral_geodesic);
     out->mutable_curvature()->Add(f.curvature.begin(), f.curvature.end());
     out->mutable_area()->Add(f.area.begin(), f.area.end());
     out->mutable_distance()->Add(f.distance.begin(), f.distance.end());
   }
-  proto.mutable_spectrum()->Add(signature.spectrum.begin(), signature.spectrum.end());
+  proto.mutable_spectrum()->Add(signature.spectrum.begin(),
+                                signature.spectrum.end());
   *proto.mutable_mesh() = StatsToProto(signature.stats);
   proto.set_extractor_version(kExtractorVersion);
   proto.set_signature_version(kSignatureVersion);
@@ -129,7 +139,8 @@ v1::Explanation ExplanationToProto(const extract::Explanation& explanation) {
   proto.mutable_vertex_region()->Add(explanation.vertex_region.begin(),
                                      explanation.vertex_region.end());
   for (const std::vector<int32_t>& vertices : explanation.feature_vertices) {
-    proto.add_feature_vertices()->mutable_vertices()->Add(vertices.begin(), vertices.end());
+    proto.add_feature_vertices()->mutable_vertices()->Add(vertices.begin(),
+                                                          vertices.end());
   }
   return proto;
 }

@@ -35,8 +35,8 @@ inline constexpr int kSignatureVersion = 2;
 // message names the field). `max_threads` caps the requested
 // Dijkstra threads (a client must not be able to take the whole machine).
 // O(1). Thread-safe.
-absl::StatusOr<extract::Options> OptionsFromProto(const v1::ExtractOptions& proto,
-                                                  int max_threads);
+absl::StatusOr<extract::Options> OptionsFromProto(
+    const v1::ExtractOptions& proto, int max_threads);
 
 // OptionsToProto returns `options` in wire form, every field filled.
 v1::ExtractOptions OptionsToProto(const extract::Options& options);

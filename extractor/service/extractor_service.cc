@@ -23,7 +23,8 @@ namespace tpr::extractor {
 namespace {
 
 double MillisecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now() - start)
       .count();
 }
 
@@ -55,7 +56,8 @@ class WorkerPool {
       {
         absl::MutexLock lock(&mu_);
         mu_.Await(absl::Condition(
-            +[](WorkerPool* p) { return p->stopping_ || !p->queue_.empty(); }, this));
+            +[](WorkerPool* p) { return p->stopping_ || !p->queue_.empty(); },
+            this));
         // Drain the queue before stopping: every queued job owns a call that
         // must be finished.
         if (queue_.empty()) return;
@@ -74,43 +76,51 @@ class WorkerPool {
 
 }  // namespace
 
-absl::StatusOr<v1::ExtractResponse> RunExtraction(std::string bytes,
-                                                  const v1::ExtractRequest& header,
-                                                  const ServiceOptions& options,
-                                                  const std::function<bool()>& cancelled) {
+absl::StatusOr<v1::ExtractResponse> RunExtraction(
+    std::string bytes, const v1::ExtractRequest& header,
+    const ServiceOptions& options, const std::function<bool()>& cancelled) {
   if (bytes.empty()) {
     return absl::InvalidArgumentError("the upload carried no mesh data");
   }
-  TPR_ASSIGN_OR_RETURN(extract::Options extract_options,
-                       OptionsFromProto(header.options(), options.max_threads_per_extraction));
+  TPR_ASSIGN_OR_RETURN(
+      extract::Options extract_options,
+      OptionsFromProto(header.options(), options.max_threads_per_extraction));
   // The library would name its internal cycle_search_hops; the caller set
   // cycle_min_vertices, so name that and its range.
   if (extract_options.cycle_min_vertices >= extract_options.cycle_search_hops) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.cycle_min_vertices must be in [0, ", extract_options.cycle_search_hops - 1,
-        "] (cycles around a saddle are searched within ", extract_options.cycle_search_hops,
-        " edges), got ", header.options().cycle_min_vertices()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.cycle_min_vertices must be in [0, ",
+                     extract_options.cycle_search_hops - 1,
+                     "] (cycles around a saddle are searched within ",
+                     extract_options.cycle_search_hops, " edges), got ",
+                     header.options().cycle_min_vertices()));
   }
-  if (cancelled()) return absl::CancelledError("extraction cancelled before intake");
+  if (cancelled())
+    return absl::CancelledError("extraction cancelled before intake");
 
   extract::IntakeOptions intake_options;
   intake_options.max_vertices = options.max_vertices;
   const auto intake_start = std::chrono::steady_clock::now();
-  TPR_ASSIGN_OR_RETURN(extract::LoadedMesh loaded,
-                       extract::LoadMeshFromBuffer(bytes, FormatFromProto(header.format()),
-                                                   header.file_name(), intake_options));
+  TPR_ASSIGN_OR_RETURN(
+      extract::LoadedMesh loaded,
+      extract::LoadMeshFromBuffer(bytes, FormatFromProto(header.format()),
+                                  header.file_name(), intake_options));
   const double intake_ms = MillisecondsSince(intake_start);
   std::string().swap(bytes);  // the upload is parsed: free it before extraction
-  if (cancelled()) return absl::CancelledError("extraction cancelled after intake");
+  if (cancelled())
+    return absl::CancelledError("extraction cancelled after intake");
 
-  TPR_ASSIGN_OR_RETURN(extract::ExtractResult result,
-                       extract::ExtractSignature(loaded.mesh, loaded.stats, extract_options));
-  if (cancelled()) return absl::CancelledError("extraction cancelled after extraction");
+  TPR_ASSIGN_OR_RETURN(
+      extract::ExtractResult result,
+      extract::ExtractSignature(loaded.mesh, loaded.stats, extract_options));
+  if (cancelled())
+    return absl::CancelledError("extraction cancelled after extraction");
 
   v1::ExtractResponse response;
   // Intake's statistics are the mesh "as the extractor read it".
   result.signature.stats = loaded.stats;
-  *response.mutable_signature() = SignatureToProto(result.signature, extract_options);
+  *response.mutable_signature() =
+      SignatureToProto(result.signature, extract_options);
   v1::StageTiming* intake = response.add_timings();
   intake->set_stage("intake");
   intake->set_milliseconds(intake_ms);
@@ -184,7 +194,8 @@ namespace {
 // nothing. Once the upload is complete (kQueued) only the worker finishes.
 class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
-  ExtractReactor(ExtractorService::State* state, grpc::CallbackServerContext* context,
+  ExtractReactor(ExtractorService::State* state,
+                 grpc::CallbackServerContext* context,
                  v1::ExtractResponse* response)
       : state_(state),
         options_(&state->options),
@@ -203,12 +214,14 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     if (!ok) {
       // End of the upload (or a broken stream / cancel).
       if (cancelled_.load() || context_->IsCancelled()) {
-        FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
+        FinishLocked(
+            grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
         return;
       }
       if (!got_first_) {
-        FinishLocked(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                                  "the upload carried no messages (no mesh data)"));
+        FinishLocked(
+            grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                         "the upload carried no messages (no mesh data)"));
         return;
       }
       phase_ = Phase::kQueued;
@@ -227,12 +240,13 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       *header_.mutable_options() = request_.options();
     }
     std::string* chunk = request_.mutable_data();
-    if (static_cast<int64_t>(bytes_.size() + chunk->size()) > options_->max_mesh_bytes) {
+    if (static_cast<int64_t>(bytes_.size() + chunk->size()) >
+        options_->max_mesh_bytes) {
       // Stop reading now: the rest of the stream is never buffered.
-      FinishLocked(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                                absl::StrCat("mesh upload exceeds the server limit of ",
-                                             options_->max_mesh_bytes,
-                                             " bytes (--max-mesh-bytes)")));
+      FinishLocked(grpc::Status(
+          grpc::StatusCode::RESOURCE_EXHAUSTED,
+          absl::StrCat("mesh upload exceeds the server limit of ",
+                       options_->max_mesh_bytes, " bytes (--max-mesh-bytes)")));
       return;
     }
     if (bytes_.empty()) {
@@ -248,7 +262,8 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       chunk->clear();
     }
     if (cancelled_.load()) {
-      FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
+      FinishLocked(
+          grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled"));
       return;
     }
     StartRead(&raw_);
@@ -271,15 +286,19 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     const int64_t idle_ms = options_->upload_idle_timeout_ms;
     const int64_t rate = options_->min_upload_bytes_per_second;
     std::optional<grpc::Status> refusal;
-    if (idle_ms > 0 && now - last_message_ >= std::chrono::milliseconds(idle_ms)) {
+    if (idle_ms > 0 &&
+        now - last_message_ >= std::chrono::milliseconds(idle_ms)) {
       refusal = grpc::Status(
           grpc::StatusCode::DEADLINE_EXCEEDED,
           absl::StrCat("upload stalled: no message for ", idle_ms,
-                       " ms (server --upload-idle-timeout-ms) after ", bytes_.size(), " bytes"));
+                       " ms (server --upload-idle-timeout-ms) after ",
+                       bytes_.size(), " bytes"));
     } else if (rate > 0) {
       const double beyond_grace_s =
-          std::chrono::duration<double>(now - admitted_).count() - idle_ms / 1000.0;
-      if (beyond_grace_s > 0 && static_cast<double>(bytes_.size()) < rate * beyond_grace_s) {
+          std::chrono::duration<double>(now - admitted_).count() -
+          idle_ms / 1000.0;
+      if (beyond_grace_s > 0 &&
+          static_cast<double>(bytes_.size()) < rate * beyond_grace_s) {
         refusal = grpc::Status(
             grpc::StatusCode::DEADLINE_EXCEEDED,
             absl::StrCat("upload too slow: ", bytes_.size(), " bytes in ",
@@ -334,11 +353,14 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 };
 
 UploadWatchdog::UploadWatchdog(const ServiceOptions& options) {
-  if (options.upload_idle_timeout_ms <= 0 && options.min_upload_bytes_per_second <= 0) return;
+  if (options.upload_idle_timeout_ms <= 0 &&
+      options.min_upload_bytes_per_second <= 0)
+    return;
   // A few checks per idle timeout, so that a stalled upload is refused
   // within about 1.25 timeouts; at most every 250 ms otherwise.
   const int64_t idle = options.upload_idle_timeout_ms;
-  period_ = absl::Milliseconds(idle > 0 ? std::clamp<int64_t>(idle / 4, 5, 250) : 250);
+  period_ = absl::Milliseconds(idle > 0 ? std::clamp<int64_t>(idle / 4, 5, 250)
+                                        : 250);
   thread_ = std::thread([this] { Loop(); });
 }
 
@@ -359,7 +381,8 @@ void UploadWatchdog::Loop() {
       if (stopping_) return;
       const Clock::time_point now = Clock::now();
       for (ExtractReactor* call : calls_) {
-        if (std::optional<grpc::Status> s = call->Expire(now)) expired.emplace_back(call, *s);
+        if (std::optional<grpc::Status> s = call->Expire(now))
+          expired.emplace_back(call, *s);
       }
     }
     // Outside both locks: Finish may run OnDone on this thread, which
@@ -373,9 +396,10 @@ void UploadWatchdog::Loop() {
 class RejectReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
   explicit RejectReactor(int limit) {
-    Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                        absl::StrCat("too many extractions in flight (limit ", limit,
-                                     ", --max-concurrent); retry later")));
+    Finish(
+        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                     absl::StrCat("too many extractions in flight (limit ",
+                                  limit, ", --max-concurrent); retry later")));
   }
   void OnDone() override { delete this; }
 };

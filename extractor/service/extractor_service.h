@@ -82,10 +82,9 @@ struct ServiceOptions {
 // (intake's message), RESOURCE_EXHAUSTED above max_vertices, CANCELLED when
 // `cancelled` returned true. Thread-safe. Cost: intake O(n log n) plus
 // extraction (Table 4 of the paper).
-absl::StatusOr<v1::ExtractResponse> RunExtraction(std::string bytes,
-                                                  const v1::ExtractRequest& header,
-                                                  const ServiceOptions& options,
-                                                  const std::function<bool()>& cancelled);
+absl::StatusOr<v1::ExtractResponse> RunExtraction(
+    std::string bytes, const v1::ExtractRequest& header,
+    const ServiceOptions& options, const std::function<bool()>& cancelled);
 
 // ExtractorService implements tpr.v1.Extractor with the callback API. The
 // object must outlive the server it is registered with; its destructor

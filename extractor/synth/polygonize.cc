@@ -32,6 +32,7 @@
 //  5. Delaunay edge flips and tangential Laplacian relaxation with
 //     projection onto the surface even out the triangles without moving off
 //     the shape; a move that would flip or crush a triangle is skipped.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -40,8 +41,6 @@
 #include <tuple>
 #include <unordered_map>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -218,8 +217,8 @@ absl::StatusOr<Grid> SampleField(const BlendField& field, double h) {
   sums.assign(static_cast<size_t>(points), 0.0f);
   for (const Capsule& c : field.capsules()) {
     auto first = [&](double v, double o, int64_t n) {
-      return std::clamp<int64_t>(
-          static_cast<int64_t>(std::floor((v - o) / h)), 0, n - 1);
+      return std::clamp<int64_t>(static_cast<int64_t>(std::floor((v - o) / h)),
+                                 0, n - 1);
     };
     auto last = [&](double v, double o, int64_t n) {
       return std::clamp<int64_t>(static_cast<int64_t>(std::ceil((v - o) / h)),
@@ -329,15 +328,14 @@ Mesh MarchingTetrahedra(const Grid& grid) {
   Mesh mesh;
   std::unordered_map<int64_t, int32_t> edge_vertex;
   edge_vertex.reserve(1 << 16);
-  const int64_t corner_offset[8] = {
-      0,
-      1,
-      grid.nx,
-      grid.nx + 1,
-      grid.nx * grid.ny,
-      grid.nx * grid.ny + 1,
-      grid.nx * grid.ny + grid.nx,
-      grid.nx * grid.ny + grid.nx + 1};
+  const int64_t corner_offset[8] = {0,
+                                    1,
+                                    grid.nx,
+                                    grid.nx + 1,
+                                    grid.nx * grid.ny,
+                                    grid.nx * grid.ny + 1,
+                                    grid.nx * grid.ny + grid.nx,
+                                    grid.nx * grid.ny + grid.nx + 1};
   float v[8];
   for (int64_t k = 0; k + 1 < grid.nz; ++k) {
     for (int64_t j = 0; j + 1 < grid.ny; ++j) {
@@ -472,7 +470,8 @@ class Decimator {
       if (!face_alive_[f]) continue;
       const auto& t = mesh_.triangles[f];
       for (int e = 0; e < 3; ++e) {
-        mean += (mesh_.positions[t[e]] - mesh_.positions[t[(e + 1) % 3]]).norm();
+        mean +=
+            (mesh_.positions[t[e]] - mesh_.positions[t[(e + 1) % 3]]).norm();
         ++count;
       }
     }
@@ -576,10 +575,10 @@ class Decimator {
     double worst_before = 1.0, worst_after = 1.0;
     for (int i = 0; i < 2; ++i) {
       const auto& t = mesh_.triangles[shared[i]];
-      worst_before = std::min(
-          worst_before, TriangleQuality(mesh_.positions[t[0]],
-                                        mesh_.positions[t[1]],
-                                        mesh_.positions[t[2]]));
+      worst_before =
+          std::min(worst_before,
+                   TriangleQuality(mesh_.positions[t[0]], mesh_.positions[t[1]],
+                                   mesh_.positions[t[2]]));
     }
     for (int32_t moved : {u, v}) {
       for (int32_t f : vertex_faces_[moved]) {
@@ -639,9 +638,8 @@ class Decimator {
     // only) either endpoint, which often passes at sharp tips where the
     // midpoint would fold a triangle over.
     const Vector3d mid = 0.5 * (mesh_.positions[u] + mesh_.positions[v]);
-    std::array<Vector3d, 3> candidates = {field_.Project(mid, max_step_),
-                                          mesh_.positions[u],
-                                          mesh_.positions[v]};
+    std::array<Vector3d, 3> candidates = {
+        field_.Project(mid, max_step_), mesh_.positions[u], mesh_.positions[v]};
     std::array<Vector3d, 3> candidate_normals = {Vector3d::Zero(), normal_[u],
                                                  normal_[v]};
     field_.ValueAndGradient(candidates[0], &candidate_normals[0]);
@@ -725,9 +723,10 @@ void SplitToTarget(Mesh& mesh, const BlendField& field, double max_step,
       const auto& t = mesh.triangles[f];
       for (int e = 0; e < 3; ++e) {
         if (t[e] < t[(e + 1) % 3]) {
-          edges.push_back({(mesh.positions[t[e]] - mesh.positions[t[(e + 1) % 3]])
-                               .squaredNorm(),
-                           static_cast<int32_t>(f), e});
+          edges.push_back(
+              {(mesh.positions[t[e]] - mesh.positions[t[(e + 1) % 3]])
+                   .squaredNorm(),
+               static_cast<int32_t>(f), e});
         }
       }
     }
@@ -817,7 +816,8 @@ int FlipEdges(Mesh& mesh) {
       const auto t = mesh.triangles[f];
       const int32_t a = t[e], b = t[(e + 1) % 3], c = t[(e + 2) % 3];
       const auto& faces = edge_faces.at(key(a, b));
-      const int32_t g = faces[0] == static_cast<int32_t>(f) ? faces[1] : faces[0];
+      const int32_t g =
+          faces[0] == static_cast<int32_t>(f) ? faces[1] : faces[0];
       if (g < 0 || touched[g]) continue;
       const auto& tg = mesh.triangles[g];
       int32_t d = -1;
@@ -884,9 +884,8 @@ void Relax(Mesh& mesh, const BlendField& field, double max_step,
     // against the old positions of the neighbours, so still order-free.
     std::vector<char> ok(n, 1);
     for (const auto& t : mesh.triangles) {
-      const std::array<Vector3d, 3> old = {mesh.positions[t[0]],
-                                           mesh.positions[t[1]],
-                                           mesh.positions[t[2]]};
+      const std::array<Vector3d, 3> old = {
+          mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
       const Vector3d n0 = (old[1] - old[0]).cross(old[2] - old[0]);
       for (int e = 0; e < 3; ++e) {
         std::array<Vector3d, 3> moved = old;
@@ -948,17 +947,17 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
     // make it an overestimate, which only costs decimation work.
     const double len = (b.end - b.start).norm();
     area_estimate += M_PI * (b.start_radius + b.end_radius) * len;
-    if (b.parent < 0) area_estimate += 4.0 * M_PI * b.start_radius * b.start_radius;
+    if (b.parent < 0)
+      area_estimate += 4.0 * M_PI * b.start_radius * b.start_radius;
   }
   // Blend radius: fillets at joints without swallowing the thinnest parts
   // (a joint of two bones bulges by k log 2).
   const BlendField field(skeleton, 0.5 * r_min);
   // Thin parts must span at least two cells in radius for MT to keep them
   // whole and genus 0.
-  double h = std::min(
-      std::sqrt(kMtVerticesPerArea * area_estimate /
-                (kOversample * target_vertices)),
-      r_min / 1.25);
+  double h = std::min(std::sqrt(kMtVerticesPerArea * area_estimate /
+                                (kOversample * target_vertices)),
+                      r_min / 1.25);
 
   Mesh fine;
   absl::Status last_failure;
@@ -976,8 +975,8 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
     const double have = static_cast<double>(fine.positions.size());
     if (dropped * 200 > total || euler != 2) {
       last_failure = absl::InternalError(absl::StrCat(
-          "isosurface at grid spacing ", h, " has Euler characteristic ",
-          euler, " and drops ", dropped, " of ", total,
+          "isosurface at grid spacing ", h, " has Euler characteristic ", euler,
+          " and drops ", dropped, " of ", total,
           " triangles in stray components"));
       h *= 0.75;
       continue;

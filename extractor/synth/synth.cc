@@ -6,6 +6,9 @@
 // proportions, so "similar-skeleton" pairs (Tam & Lau 2007, section 1: the
 // hard case for topology-only methods) share code and differ only in
 // numbers.
+#include "extractor/synth/synth.h"
+
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -14,12 +17,9 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
-
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "extractor/synth/synth.h"
 
 namespace tpr::synth {
 namespace {
@@ -86,27 +86,27 @@ Vector3d V(double x, double y, double z) { return Vector3d(x, y, z); }
 // Adult and child share this; the child has a bigger head, shorter limbs and
 // a relatively thicker body.
 struct BipedProportions {
-  double height;    // top of the pelvis bone
+  double height;  // top of the pelvis bone
   double torso_r;
   double head_r;
-  double arm_len;   // upper arm; forearm is 0.9 of it
+  double arm_len;  // upper arm; forearm is 0.9 of it
   double arm_r;
-  double leg_len;   // thigh; shin is 0.95 of it
+  double leg_len;  // thigh; shin is 0.95 of it
   double leg_r;
 };
 
 std::vector<TemplateBone> Biped(const BipedProportions& p) {
   Builder b;
   const double hip_y = p.leg_len * 1.95 + 0.08;
-  const int pelvis = b.Add("pelvis", -1, V(0, hip_y, 0),
-                           V(0, hip_y + 0.6 * p.torso_r, 0), p.torso_r * 0.95,
-                           p.torso_r, 0);
+  const int pelvis =
+      b.Add("pelvis", -1, V(0, hip_y, 0), V(0, hip_y + 0.6 * p.torso_r, 0),
+            p.torso_r * 0.95, p.torso_r, 0);
   const double chest_y = hip_y + 0.6 * p.torso_r + p.height;
   const int chest = b.Add("chest", pelvis, V(0, hip_y + 0.6 * p.torso_r, 0),
                           V(0, chest_y, 0), p.torso_r, p.torso_r * 1.05, 15);
-  const int neck = b.Add("neck", chest, V(0, chest_y, 0),
-                         V(0, chest_y + p.torso_r * 0.8, 0), p.arm_r,
-                         p.arm_r, 20);
+  const int neck =
+      b.Add("neck", chest, V(0, chest_y, 0), V(0, chest_y + p.torso_r * 0.8, 0),
+            p.arm_r, p.arm_r, 20);
   b.Add("head", neck, V(0, chest_y + p.torso_r * 0.8 + p.head_r * 0.6, 0),
         V(0, chest_y + p.torso_r * 0.8 + p.head_r * 1.0, 0), p.head_r,
         p.head_r * 0.95, 20);
@@ -157,16 +157,15 @@ std::vector<TemplateBone> Quadruped(const QuadrupedProportions& p) {
   Builder b;
   const double y = 2.0 * p.leg_len + 0.6 * p.body_r;
   const double zb = -0.5 * p.body_len, zf = 0.5 * p.body_len;
-  const int body =
-      b.Add("body", -1, V(0, y, zb), V(0, y + 0.05, zf), p.body_r,
-            p.body_r * 1.05, 0);
+  const int body = b.Add("body", -1, V(0, y, zb), V(0, y + 0.05, zf), p.body_r,
+                         p.body_r * 1.05, 0);
   const Vector3d head_base = V(0, y + 0.35, zf + 0.3);
-  const int neck = b.Add("neck", body, V(0, y + 0.05, zf), head_base,
-                         p.neck_r, p.neck_r * 0.9, 20);
-  b.Add("head", neck, head_base, head_base + V(0, -0.05, 0.28),
-        p.neck_r * 1.3, p.neck_r * 0.8, 20);
-  b.Chain("tail", body, {V(0, y, zb), V(0, y - 0.1, zb - 0.3),
-                         V(0, y - 0.25, zb - 0.55)},
+  const int neck = b.Add("neck", body, V(0, y + 0.05, zf), head_base, p.neck_r,
+                         p.neck_r * 0.9, 20);
+  b.Add("head", neck, head_base, head_base + V(0, -0.05, 0.28), p.neck_r * 1.3,
+        p.neck_r * 0.8, 20);
+  b.Chain("tail", body,
+          {V(0, y, zb), V(0, y - 0.1, zb - 0.3), V(0, y - 0.25, zb - 0.55)},
           p.tail_r, p.tail_r * 0.7, 30);
   for (int front : {0, 1}) {
     for (int side : {-1, 1}) {
@@ -177,10 +176,10 @@ std::vector<TemplateBone> Quadruped(const QuadrupedProportions& p) {
       const Vector3d hip = V(x, y - 0.4 * p.body_r, z);
       const Vector3d knee = V(x * 1.1, y - 0.4 * p.body_r - p.leg_len, z);
       const Vector3d foot = V(x * 1.1, 0.0, z + 0.05);
-      const int upper = b.Add(s + "upper_leg", body, hip, knee, p.leg_r,
-                              p.leg_r * 0.85, 30);
-      b.Add(s + "lower_leg", upper, knee, foot, p.leg_r * 0.8,
-            p.leg_r * 0.65, 40);
+      const int upper =
+          b.Add(s + "upper_leg", body, hip, knee, p.leg_r, p.leg_r * 0.85, 30);
+      b.Add(s + "lower_leg", upper, knee, foot, p.leg_r * 0.8, p.leg_r * 0.65,
+            40);
     }
   }
   return b.bones();
@@ -189,8 +188,8 @@ std::vector<TemplateBone> Quadruped(const QuadrupedProportions& p) {
 std::vector<TemplateBone> Octopus() {
   Builder b;
   // The mantle sits well above the arms so that arms may curl up.
-  const int head = b.Add("mantle", -1, V(0, 0.5, 0), V(0, 0.75, 0), 0.3,
-                         0.27, 0);
+  const int head =
+      b.Add("mantle", -1, V(0, 0.5, 0), V(0, 0.75, 0), 0.3, 0.27, 0);
   for (int i = 0; i < 8; ++i) {
     const double a = 2.0 * M_PI * (i + 0.5) / 8.0;
     const Vector3d out = V(std::cos(a), 0, std::sin(a));
@@ -215,22 +214,22 @@ std::vector<TemplateBone> Hand() {
     const double a = fan[f] * kDeg;
     const Vector3d dir = V(std::sin(a), std::cos(a), 0);
     const Vector3d knuckle = V(0.19 * (f - 1.5) / 1.5, 0.42, 0);
-    const int meta = b.Add(absl::StrCat("meta", f), palm,
-                           V(knuckle.x() * 0.4, 0.25, 0), knuckle, 0.05, 0.045,
-                           3);
+    const int meta =
+        b.Add(absl::StrCat("meta", f), palm, V(knuckle.x() * 0.4, 0.25, 0),
+              knuckle, 0.05, 0.045, 3);
     const int first = b.size();
-    const int last = b.Chain(
-        absl::StrCat("finger", f, "_"), meta,
-        {knuckle, knuckle + 0.42 * lengths[f] * dir,
-         knuckle + 0.74 * lengths[f] * dir, knuckle + lengths[f] * dir},
-        0.042, 0.03, 40);
+    const int last =
+        b.Chain(absl::StrCat("finger", f, "_"), meta,
+                {knuckle, knuckle + 0.42 * lengths[f] * dir,
+                 knuckle + 0.74 * lengths[f] * dir, knuckle + lengths[f] * dir},
+                0.042, 0.03, 40);
     // Fingers curl towards the palm's front (+z).
     b.Hinge(first, last, dir.cross(V(0, 0, 1)));
   }
   const Vector3d thumb_dir = V(-0.8, 0.6, 0.25).normalized();
   const Vector3d thumb_base = V(-0.17, 0.12, 0.03);
-  const int tmeta = b.Add("thumb_meta", palm, V(-0.05, 0.08, 0), thumb_base,
-                          0.055, 0.05, 5);
+  const int tmeta =
+      b.Add("thumb_meta", palm, V(-0.05, 0.08, 0), thumb_base, 0.055, 0.05, 5);
   const int first = b.size();
   const int last = b.Chain("thumb", tmeta,
                            {thumb_base, thumb_base + 0.15 * thumb_dir,
@@ -246,8 +245,8 @@ std::vector<TemplateBone> Ant() {
       b.Add("thorax", -1, V(0, 0.35, 0.08), V(0, 0.37, 0.38), 0.09, 0.08, 0);
   const int neck = b.Add("neck", thorax, V(0, 0.37, 0.38), V(0, 0.42, 0.5),
                          0.045, 0.045, 15);
-  const int head = b.Add("head", neck, V(0, 0.44, 0.56), V(0, 0.44, 0.6), 0.1,
-                         0.09, 15);
+  const int head =
+      b.Add("head", neck, V(0, 0.44, 0.56), V(0, 0.44, 0.6), 0.1, 0.09, 15);
   for (int side : {-1, 1}) {
     const Vector3d base = V(side * 0.05, 0.5, 0.62);
     b.Chain(side < 0 ? "r_antenna" : "l_antenna", head,
@@ -257,8 +256,7 @@ std::vector<TemplateBone> Ant() {
   }
   const int petiole = b.Add("petiole", thorax, V(0, 0.35, 0.08),
                             V(0, 0.36, -0.1), 0.05, 0.05, 15);
-  b.Add("gaster", petiole, V(0, 0.38, -0.22), V(0, 0.42, -0.5), 0.16, 0.12,
-        10);
+  b.Add("gaster", petiole, V(0, 0.38, -0.22), V(0, 0.42, -0.5), 0.16, 0.12, 10);
   const double zs[3] = {0.32, 0.22, 0.12};
   const double sweep[3] = {40, 0, -40};
   for (int l = 0; l < 3; ++l) {
@@ -267,8 +265,8 @@ std::vector<TemplateBone> Ant() {
       const double a = sweep[l] * kDeg;
       const Vector3d out = V(side * std::cos(a), 0, std::sin(a));
       const Vector3d hip = V(0, 0.33, zs[l]) + 0.1 * out;
-      const int coxa = b.Add(s + "coxa", thorax, V(0, 0.33, zs[l]), hip, 0.04,
-                             0.036, 5);
+      const int coxa =
+          b.Add(s + "coxa", thorax, V(0, 0.33, zs[l]), hip, 0.04, 0.036, 5);
       const Vector3d knee = hip + 0.25 * out + V(0, 0.14, 0);
       const Vector3d foot = knee + 0.25 * out + V(0, -0.5, 0);
       const int femur = b.Add(s + "femur", coxa, hip, knee, 0.034, 0.03, 20);
@@ -282,8 +280,8 @@ std::vector<TemplateBone> Bird() {
   Builder b;
   const int body =
       b.Add("body", -1, V(0, 0.5, -0.22), V(0, 0.56, 0.18), 0.15, 0.16, 0);
-  const int neck = b.Add("neck", body, V(0, 0.58, 0.2), V(0, 0.76, 0.3), 0.06,
-                         0.055, 20);
+  const int neck =
+      b.Add("neck", body, V(0, 0.58, 0.2), V(0, 0.76, 0.3), 0.06, 0.055, 20);
   const int head =
       b.Add("head", neck, V(0, 0.8, 0.32), V(0, 0.81, 0.38), 0.08, 0.075, 20);
   b.Add("beak", head, V(0, 0.8, 0.42), V(0, 0.77, 0.6), 0.04, 0.025, 10);
@@ -305,8 +303,8 @@ std::vector<TemplateBone> Bird() {
 
 std::vector<TemplateBone> Snake() {
   Builder b;
-  const int head = b.Add("head", -1, V(0, 0.1, 0.05), V(0, 0.1, 0.2), 0.09,
-                         0.075, 0);
+  const int head =
+      b.Add("head", -1, V(0, 0.1, 0.05), V(0, 0.1, 0.2), 0.09, 0.075, 0);
   std::vector<Vector3d> pts;
   for (int k = 0; k <= 9; ++k) pts.push_back(V(0, 0.1, 0.05 - 0.22 * k));
   b.Chain("body", head, pts, 0.075, 0.03, 22);
@@ -321,8 +319,8 @@ std::vector<TemplateBone> Pliers() {
     b.Add(s + "jaw", pivot, V(0, 0, 0), V(side * 0.07, 0.55, 0), 0.05, 0.026,
           10);
     b.Chain(s + "handle", pivot,
-            {V(0, 0, 0), V(side * 0.1, -0.4, 0), V(side * 0.2, -0.85, 0)},
-            0.05, 0.04, 10);
+            {V(0, 0, 0), V(side * 0.1, -0.4, 0), V(side * 0.2, -0.85, 0)}, 0.05,
+            0.04, 10);
   }
   return b.bones();
 }
@@ -336,11 +334,17 @@ const std::vector<ShapeClass>& Classes() {
   static const auto* classes = new std::vector<ShapeClass>{
       {"biped_adult", [] { return Biped(kAdult); }},
       {"biped_child",
-       [] { return Biped({0.33, 0.13, 0.15, 0.18, 0.045, 0.27, 0.07}); }},
+       [] {
+         return Biped({0.33, 0.13, 0.15, 0.18, 0.045, 0.27, 0.07});
+       }},
       {"quadruped_slender",
-       [] { return Quadruped({0.16, 0.8, 0.33, 0.055, 0.07, 0.045}); }},
+       [] {
+         return Quadruped({0.16, 0.8, 0.33, 0.055, 0.07, 0.045});
+       }},
       {"quadruped_stocky",
-       [] { return Quadruped({0.24, 0.8, 0.25, 0.09, 0.11, 0.06}); }},
+       [] {
+         return Quadruped({0.24, 0.8, 0.25, 0.09, 0.11, 0.06});
+       }},
       {"octopus", Octopus},
       {"hand", Hand},
       {"ant", Ant},
@@ -450,7 +454,8 @@ bool Pose(const std::vector<TemplateBone>& bones, Rng& rng, double amount,
     b = rest;
     if (rest.parent >= 0) {
       const Bone& pr = bones[rest.parent].bone;
-      b.start = (*out)[rest.parent].start + parent_rot * (rest.start - pr.start);
+      b.start =
+          (*out)[rest.parent].start + parent_rot * (rest.start - pr.start);
     }
     constexpr int kTries = 8;
     bool placed = false;
@@ -513,14 +518,13 @@ Similarity DrawSimilarity(uint64_t seed) {
   // Uniform random rotation from a uniform unit quaternion (Shoemake).
   const double u1 = rng.Uniform(), u2 = rng.Uniform(), u3 = rng.Uniform();
   const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
-  const Eigen::Quaterniond q(a * std::sin(2 * M_PI * u2),
-                             a * std::cos(2 * M_PI * u2),
-                             b * std::sin(2 * M_PI * u3),
-                             b * std::cos(2 * M_PI * u3));
+  const Eigen::Quaterniond q(
+      a * std::sin(2 * M_PI * u2), a * std::cos(2 * M_PI * u2),
+      b * std::sin(2 * M_PI * u3), b * std::cos(2 * M_PI * u3));
   Similarity s;
   s.rotation = q.normalized().toRotationMatrix();
-  s.translation = Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1),
-                           rng.Uniform(-1, 1));
+  s.translation =
+      Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(-1, 1));
   s.scale = rng.Uniform(1.0, 2.0);
   return s;
 }
@@ -539,8 +543,8 @@ Posed PoseTemplate(const std::vector<TemplateBone>& bones, uint64_t shape_id,
   // A few full-range draws, then draws damped towards the rest pose, which
   // is the last resort and always separated.
   for (int attempt = 0; attempt < 36; ++attempt) {
-    const double amount =
-        options.pose_amount * (attempt < 30 ? 1.0 : std::pow(0.7, attempt - 29));
+    const double amount = options.pose_amount *
+                          (attempt < 30 ? 1.0 : std::pow(0.7, attempt - 29));
     if (amount == 0.0) break;
     Rng rng(StreamSeed(options.seed, shape_id, pose_index, 1 + attempt));
     std::vector<Bone> candidate;
@@ -603,15 +607,33 @@ std::vector<TemplateBone> Star(int arms) {
     }
   };
   switch (arms) {
-    case 2: ring(2, 0, 0); break;
-    case 3: ring(3, 0, 0); break;
+    case 2:
+      ring(2, 0, 0);
+      break;
+    case 3:
+      ring(3, 0, 0);
+      break;
     case 4:
       dirs = {V(1, 1, 1), V(1, -1, -1), V(-1, 1, -1), V(-1, -1, 1)};
       break;
-    case 5: ring(3, 0, 0); dirs.push_back(V(0, 1, 0)); dirs.push_back(V(0, -1, 0)); break;
-    case 6: dirs = {V(1, 0, 0), V(-1, 0, 0), V(0, 1, 0), V(0, -1, 0), V(0, 0, 1), V(0, 0, -1)}; break;
-    case 7: ring(5, 0, 0); dirs.push_back(V(0, 1, 0)); dirs.push_back(V(0, -1, 0)); break;
-    default: ring(4, 0.45, 0); ring(4, -0.45, M_PI / 4); break;
+    case 5:
+      ring(3, 0, 0);
+      dirs.push_back(V(0, 1, 0));
+      dirs.push_back(V(0, -1, 0));
+      break;
+    case 6:
+      dirs = {V(1, 0, 0),  V(-1, 0, 0), V(0, 1, 0),
+              V(0, -1, 0), V(0, 0, 1),  V(0, 0, -1)};
+      break;
+    case 7:
+      ring(5, 0, 0);
+      dirs.push_back(V(0, 1, 0));
+      dirs.push_back(V(0, -1, 0));
+      break;
+    default:
+      ring(4, 0.45, 0);
+      ring(4, -0.45, M_PI / 4);
+      break;
   }
   Builder b;
   const int ball = b.Add("ball", -1, V(0, 0, 0), V(0, 0, 0), 0.35, 0.35, 0);
@@ -631,10 +653,9 @@ constexpr uint64_t kStarIdBase = 1000;
 constexpr uint64_t kIdentityIdBase = 2000;
 constexpr uint64_t kIdentityProportionsId = 3000;
 
-
 std::array<double, 7> Factors(const BodyProportions& b) {
-  return {b.torso_length, b.torso_thickness, b.head_size, b.arm_length,
-          b.arm_thickness, b.leg_length, b.leg_thickness};
+  return {b.torso_length,  b.torso_thickness, b.head_size,    b.arm_length,
+          b.arm_thickness, b.leg_length,      b.leg_thickness};
 }
 
 BodyProportions DrawBody(Rng& rng) {
@@ -656,7 +677,8 @@ std::vector<BodyProportions> DrawBodies(int count, uint64_t seed) {
   constexpr double kMinApart = 0.1;
   std::vector<BodyProportions> bodies;
   for (int i = 0; i < count; ++i) {
-    Rng rng(StreamSeed(seed, kIdentityProportionsId, static_cast<uint64_t>(i), 0));
+    Rng rng(
+        StreamSeed(seed, kIdentityProportionsId, static_cast<uint64_t>(i), 0));
     BodyProportions b;
     for (int attempt = 0; attempt < 200; ++attempt) {
       b = DrawBody(rng);
@@ -664,7 +686,8 @@ std::vector<BodyProportions> DrawBodies(int count, uint64_t seed) {
       for (const BodyProportions& other : bodies) {
         const std::array<double, 7> x = Factors(b), y = Factors(other);
         double d = 0.0;
-        for (int k = 0; k < 7; ++k) d = std::max(d, std::abs(std::log(x[k] / y[k])));
+        for (int k = 0; k < 7; ++k)
+          d = std::max(d, std::abs(std::log(x[k] / y[k])));
         if (d < kMinApart) {
           apart = false;
           break;
@@ -689,13 +712,15 @@ std::vector<TemplateBone> IdentityBiped(const BodyProportions& b) {
   return Biped(p);
 }
 
-absl::StatusOr<Posed> PoseIdentity(int body, int pose_index, const ShapeOptions& options) {
+absl::StatusOr<Posed> PoseIdentity(int body, int pose_index,
+                                   const ShapeOptions& options) {
   absl::Status ok = CheckOptions(options, pose_index);
   if (!ok.ok()) return ok;
-  absl::StatusOr<BodyProportions> proportions = IdentityProportions(body, options);
+  absl::StatusOr<BodyProportions> proportions =
+      IdentityProportions(body, options);
   if (!proportions.ok()) return proportions.status();
-  return PoseTemplate(IdentityBiped(*proportions), kIdentityIdBase + body, pose_index,
-                      options);
+  return PoseTemplate(IdentityBiped(*proportions), kIdentityIdBase + body,
+                      pose_index, options);
 }
 
 absl::StatusOr<Posed> PoseStar(int arms, int pose_index,
@@ -761,10 +786,11 @@ std::string IdentityBodyName(int body) {
   return absl::StrCat("body_", digits);
 }
 
-absl::StatusOr<BodyProportions> IdentityProportions(int body, const ShapeOptions& options) {
+absl::StatusOr<BodyProportions> IdentityProportions(
+    int body, const ShapeOptions& options) {
   if (body < 0 || body >= kMaxIdentityBodies) {
-    return absl::InvalidArgumentError(absl::StrCat("identity body ", body,
-                                                   " is outside [0, ", kMaxIdentityBodies, ")"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "identity body ", body, " is outside [0, ", kMaxIdentityBodies, ")"));
   }
   return DrawBodies(body + 1, options.seed).back();
 }

@@ -6,15 +6,15 @@
 //
 //   tpr::synth::ShapeOptions options;            // 10k vertices, seed 1
 //   absl::StatusOr<tpr::extract::Mesh> dog =
-//       tpr::synth::GenerateShape("quadruped_slender", /*pose_index=*/3, options);
+//       tpr::synth::GenerateShape("quadruped_slender", /*pose_index=*/3,
+//                                 options);
 #ifndef TPR_EXTRACTOR_SYNTH_SYNTH_H_
 #define TPR_EXTRACTOR_SYNTH_SYNTH_H_
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
@@ -135,9 +135,9 @@ struct BodyProportions {
   double torso_length = 1.0;  // pelvis top to shoulders
   double torso_thickness = 1.0;
   double head_size = 1.0;
-  double arm_length = 1.0;    // upper arm, forearm and hand together
+  double arm_length = 1.0;  // upper arm, forearm and hand together
   double arm_thickness = 1.0;
-  double leg_length = 1.0;    // thigh, shin and foot together
+  double leg_length = 1.0;  // thigh, shin and foot together
   double leg_thickness = 1.0;
 };
 
@@ -148,7 +148,8 @@ struct BodyProportions {
 // twins). Deterministic in (options.seed, body); independent of poses.
 // Errors: INVALID_ARGUMENT unless 0 <= body < kMaxIdentityBodies.
 // Thread-safe. Cost O(body^2) draws (microseconds for 100 bodies).
-absl::StatusOr<BodyProportions> IdentityProportions(int body, const ShapeOptions& options);
+absl::StatusOr<BodyProportions> IdentityProportions(
+    int body, const ShapeOptions& options);
 
 // IdentitySkeleton returns body `body` in pose `pose_index` (the posing of
 // PoseSkeleton, with a seed stream of its own per body), in the frame of

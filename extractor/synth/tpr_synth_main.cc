@@ -37,10 +37,11 @@ int main(int argc, char** argv) {
   bool identity = false;
   std::vector<std::string> names = tpr::synth::ClassNames();
   app.add_option("--out", out_dir, "output directory (created)")->required();
-  app.add_option("--classes", classes,
-                 absl::StrCat("number of classes, the first N of ", names.size(),
-                              "; with --identity the number of bodies (up to ",
-                              tpr::synth::kMaxIdentityBodies, ")"))
+  app.add_option(
+         "--classes", classes,
+         absl::StrCat("number of classes, the first N of ", names.size(),
+                      "; with --identity the number of bodies (up to ",
+                      tpr::synth::kMaxIdentityBodies, ")"))
       ->check(CLI::Range(1, tpr::synth::kMaxIdentityBodies));
   app.add_flag("--identity", identity,
                "bodies of one skeleton (biped) differing in limb lengths and "
@@ -63,11 +64,13 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (identity) {
     names.clear();
-    for (int b = 0; b < classes; ++b) names.push_back(tpr::synth::IdentityBodyName(b));
+    for (int b = 0; b < classes; ++b)
+      names.push_back(tpr::synth::IdentityBodyName(b));
   } else if (classes > static_cast<int>(names.size())) {
     return app.exit(CLI::ValidationError(
-        "--classes", absl::StrCat(classes, " exceeds the ", names.size(),
-                                  " classes (use --identity for more bodies)")));
+        "--classes",
+        absl::StrCat(classes, " exceeds the ", names.size(),
+                     " classes (use --identity for more bodies)")));
   }
 
   tpr::extract::MeshWriteOptions write;
@@ -143,9 +146,9 @@ int main(int argc, char** argv) {
         return;
       }
       t.vertices = static_cast<int64_t>(mesh->positions.size());
-      t.seconds = std::chrono::duration<double>(
-                      std::chrono::steady_clock::now() - t0)
-                      .count();
+      t.seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+              .count();
     }
   };
   const auto start = std::chrono::steady_clock::now();

@@ -1,17 +1,17 @@
 #include "indexer/gateway/gateway_service.h"
 
+#include <grpcpp/client_context.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
+#include <grpcpp/support/client_interceptor.h>
+
 #include <algorithm>
 #include <chrono>
 #include <climits>
 #include <map>
 #include <queue>
 #include <utility>
-
-#include <grpcpp/client_context.h>
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
-#include <grpcpp/support/channel_arguments.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
@@ -37,21 +37,25 @@ class ShardCallInterceptor final : public grpc::experimental::Interceptor {
         options_(options),
         start_(std::chrono::steady_clock::now()) {}
 
-  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+  void Intercept(
+      grpc::experimental::InterceptorBatchMethods* methods) override {
     using grpc::experimental::InterceptionHookPoints;
-    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_INITIAL_METADATA) &&
+    if (methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::PRE_SEND_INITIAL_METADATA) &&
         !options_->shard_api_key.empty()) {
-      methods->GetSendInitialMetadata()->emplace("authorization",
-                                                 "Bearer " + options_->shard_api_key);
+      methods->GetSendInitialMetadata()->emplace(
+          "authorization", "Bearer " + options_->shard_api_key);
     }
-    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_STATUS) &&
+    if (methods->QueryInterceptionHookPoint(
+            InterceptionHookPoints::POST_RECV_STATUS) &&
         options_->on_shard_call) {
       ShardCall call;
       call.shard = shard_;
       call.method = method_;
       call.code = methods->GetRecvStatus()->error_code();
-      call.seconds =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+      call.seconds = std::chrono::duration<double>(
+                         std::chrono::steady_clock::now() - start_)
+                         .count();
       options_->on_shard_call(call);
     }
     methods->Proceed();
@@ -80,7 +84,8 @@ class ShardCallInterceptorFactory final
 };
 
 // `options` must outlive the channel (Shards owns both).
-std::shared_ptr<grpc::Channel> MakeShardChannel(const std::string& address, int shard,
+std::shared_ptr<grpc::Channel> MakeShardChannel(const std::string& address,
+                                                int shard,
                                                 const GatewayOptions* options) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(options->max_message_bytes);
@@ -93,12 +98,16 @@ std::shared_ptr<grpc::Channel> MakeShardChannel(const std::string& address, int 
   if (!options->shard_tls_server_name.empty()) {
     args.SetSslTargetNameOverride(options->shard_tls_server_name);
   }
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> factories;
-  factories.push_back(std::make_unique<ShardCallInterceptorFactory>(shard, options));
+  std::vector<
+      std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>>
+      factories;
+  factories.push_back(
+      std::make_unique<ShardCallInterceptorFactory>(shard, options));
   return grpc::experimental::CreateCustomChannelWithInterceptors(
       address,
-      options->shard_credentials != nullptr ? options->shard_credentials
-                                            : grpc::InsecureChannelCredentials(),
+      options->shard_credentials != nullptr
+          ? options->shard_credentials
+          : grpc::InsecureChannelCredentials(),
       args, std::move(factories));
 }
 
@@ -119,14 +128,17 @@ bool IsCallersFault(grpc::StatusCode code) {
 }
 
 absl::Status CancelledStatus(grpc::ServerContext* context) {
-  return context->IsCancelled() ? absl::CancelledError("call cancelled or deadline exceeded")
-                                : absl::OkStatus();
+  return context->IsCancelled()
+             ? absl::CancelledError("call cancelled or deadline exceeded")
+             : absl::OkStatus();
 }
 
 // A shard context that inherits the caller's deadline and cancellation and
 // carries its request id, so one call can be followed through every log.
-std::unique_ptr<grpc::ClientContext> ShardContext(grpc::ServerContext* context) {
-  std::unique_ptr<grpc::ClientContext> shard = grpc::ClientContext::FromServerContext(*context);
+std::unique_ptr<grpc::ClientContext> ShardContext(
+    grpc::ServerContext* context) {
+  std::unique_ptr<grpc::ClientContext> shard =
+      grpc::ClientContext::FromServerContext(*context);
   const std::string request_id = tpr::common::RequestIdOf(*context);
   if (!request_id.empty()) shard->AddMetadata("x-request-id", request_id);
   return shard;
@@ -145,27 +157,35 @@ void AddStats(const tpr::v1::SearchStats& from, tpr::v1::SearchStats* to) {
 
 }  // namespace
 
-std::function<void(const ShardCall&)> ShardCallMetrics(tpr::common::Metrics& metrics) {
+std::function<void(const ShardCall&)> ShardCallMetrics(
+    tpr::common::Metrics& metrics) {
   prometheus::Family<prometheus::Histogram>& duration =
       prometheus::BuildHistogram()
           .Name("tpr_gateway_shard_duration_seconds")
-          .Help("Calls of the gateway to its shards, by shard and method (not cancelled ones)")
+          .Help(
+              "Calls of the gateway to its shards, by shard and method (not "
+              "cancelled ones)")
           .Register(metrics.registry());
   prometheus::Family<prometheus::Counter>& errors =
       prometheus::BuildCounter()
           .Name("tpr_gateway_shard_errors_total")
-          .Help("Calls of the gateway to its shards that failed, by shard, method and code")
+          .Help(
+              "Calls of the gateway to its shards that failed, by shard, "
+              "method and code")
           .Register(metrics.registry());
   return [&duration, &errors](const ShardCall& call) {
     if (call.code == grpc::StatusCode::CANCELLED) return;
     const std::string shard = std::to_string(call.shard);
-    duration.Add({{"shard", shard}, {"method", call.method}}, tpr::common::SecondsBuckets())
+    duration
+        .Add({{"shard", shard}, {"method", call.method}},
+             tpr::common::SecondsBuckets())
         .Observe(call.seconds);
     if (call.code != grpc::StatusCode::OK) {
       errors
           .Add({{"shard", shard},
                 {"method", call.method},
-                {"code", absl::StatusCodeToString(static_cast<absl::StatusCode>(call.code))}})
+                {"code", absl::StatusCodeToString(
+                             static_cast<absl::StatusCode>(call.code))}})
           .Increment();
     }
   };
@@ -179,13 +199,15 @@ Shards::Shards(const GatewayOptions& options) : options_(options) {
   for (size_t s = 0; s < options_.shards.shards.size(); ++s) {
     const ShardAddresses& shard = options_.shards.shards[s];
     std::vector<std::string> addresses = {shard.primary};
-    addresses.insert(addresses.end(), shard.replicas.begin(), shard.replicas.end());
+    addresses.insert(addresses.end(), shard.replicas.begin(),
+                     shard.replicas.end());
     for (size_t i = 0; i < addresses.size(); ++i) {
       auto endpoint = std::make_unique<Endpoint>();
       endpoint->shard = static_cast<int>(s);
       endpoint->address = addresses[i];
       endpoint->primary = i == 0;
-      endpoint->channel = MakeShardChannel(addresses[i], static_cast<int>(s), &options_);
+      endpoint->channel =
+          MakeShardChannel(addresses[i], static_cast<int>(s), &options_);
       endpoint->stub = tpr::v1::Indexer::NewStub(endpoint->channel);
       endpoint->serving = endpoint->primary;
       if (endpoint->primary) primaries_.push_back(endpoint.get());
@@ -193,7 +215,8 @@ Shards::Shards(const GatewayOptions& options) : options_(options) {
       endpoints_.push_back(std::move(endpoint));
     }
   }
-  if (options_.health_interval_ms > 0) checker_ = std::thread([this] { Loop(); });
+  if (options_.health_interval_ms > 0)
+    checker_ = std::thread([this] { Loop(); });
 }
 
 Shards::~Shards() {
@@ -212,7 +235,8 @@ void Shards::Log(const std::string& line) const {
 std::vector<Endpoint*> Shards::ReadOrder(int shard) {
   const std::vector<Endpoint*>& all = by_shard_[static_cast<size_t>(shard)];
   std::vector<Endpoint*> serving;
-  const size_t start = static_cast<size_t>(round_robin_.fetch_add(1) % all.size());
+  const size_t start =
+      static_cast<size_t>(round_robin_.fetch_add(1) % all.size());
   for (size_t i = 0; i < all.size(); ++i) {
     Endpoint* e = all[(start + i) % all.size()];
     if (e->serving.load()) serving.push_back(e);
@@ -220,7 +244,8 @@ std::vector<Endpoint*> Shards::ReadOrder(int shard) {
   // With every address marked down, the primary is still tried: it may have
   // restarted since its last check, and it is never stale (a follower might
   // be), so a read only fails once it fails too.
-  if (serving.empty()) serving.push_back(primaries_[static_cast<size_t>(shard)]);
+  if (serving.empty())
+    serving.push_back(primaries_[static_cast<size_t>(shard)]);
   return serving;
 }
 
@@ -241,13 +266,16 @@ void Shards::Check(Endpoint* endpoint) {
   request.set_service("tpr.v1.Indexer");
   grpc::health::v1::HealthCheckResponse response;
   const grpc::Status status =
-      grpc::health::v1::Health::NewStub(endpoint->channel)->Check(&context, request, &response);
+      grpc::health::v1::Health::NewStub(endpoint->channel)
+          ->Check(&context, request, &response);
   const bool serving =
-      status.ok() && response.status() == grpc::health::v1::HealthCheckResponse::SERVING;
+      status.ok() &&
+      response.status() == grpc::health::v1::HealthCheckResponse::SERVING;
   if (endpoint->serving.exchange(serving) != serving) {
-    Log(absl::StrCat("shard ", endpoint->shard, " address ", endpoint->address,
-                     serving ? " serving" : " not serving",
-                     status.ok() ? "" : absl::StrCat(" (", status.error_message(), ")")));
+    Log(absl::StrCat(
+        "shard ", endpoint->shard, " address ", endpoint->address,
+        serving ? " serving" : " not serving",
+        status.ok() ? "" : absl::StrCat(" (", status.error_message(), ")")));
   }
 }
 
@@ -282,13 +310,15 @@ GatewayService::GatewayService(GatewayOptions options)
 
 absl::Status GatewayService::FromShard(int shard, const std::string& address,
                                        const grpc::Status& status) const {
-  if (status.ok() || IsCallersFault(status.error_code())) return common::FromGrpcStatus(status);
+  if (status.ok() || IsCallersFault(status.error_code()))
+    return common::FromGrpcStatus(status);
   return common::FromGrpcStatus(grpc::Status(
-      status.error_code(),
-      absl::StrCat("shard ", shard, " (", address, "): ", status.error_message())));
+      status.error_code(), absl::StrCat("shard ", shard, " (", address,
+                                        "): ", status.error_message())));
 }
 
-grpc::Status GatewayService::Finish(const char* method, const absl::Status& status) const {
+grpc::Status GatewayService::Finish(const char* method,
+                                    const absl::Status& status) const {
   if (options_.log && !status.ok() &&
       !IsCallersFault(static_cast<grpc::StatusCode>(status.code()))) {
     options_.log(absl::StrCat(method, " failed: ", status.ToString()));
@@ -307,10 +337,12 @@ absl::Status GatewayService::Read(
       return FromShard(shard, endpoint->address, status);
     }
     shards_.MarkDown(endpoint, status.error_message());
-    tried.push_back(absl::StrCat(endpoint->address, ": ", status.error_message()));
+    tried.push_back(
+        absl::StrCat(endpoint->address, ": ", status.error_message()));
   }
   if (absl::Status c = CancelledStatus(context); !c.ok()) return c;
-  return absl::UnavailableError(absl::StrCat("shard ", shard, " has no serving replica (tried ",
+  return absl::UnavailableError(absl::StrCat("shard ", shard,
+                                             " has no serving replica (tried ",
                                              absl::StrJoin(tried, "; "), ")"));
 }
 
@@ -323,7 +355,8 @@ grpc::Status GatewayService::Upsert(grpc::ServerContext* context,
   const int shard = ShardOf(request->model().id(), shards_.count());
   Endpoint& primary = shards_.primary(shard);
   std::unique_ptr<grpc::ClientContext> shard_context = ShardContext(context);
-  const grpc::Status status = primary.stub->Upsert(shard_context.get(), *request, response);
+  const grpc::Status status =
+      primary.stub->Upsert(shard_context.get(), *request, response);
   return Finish("Upsert", FromShard(shard, primary.address, status));
 }
 
@@ -333,7 +366,8 @@ grpc::Status GatewayService::Delete(grpc::ServerContext* context,
   const int shard = ShardOf(request->id(), shards_.count());
   Endpoint& primary = shards_.primary(shard);
   std::unique_ptr<grpc::ClientContext> shard_context = ShardContext(context);
-  const grpc::Status status = primary.stub->Delete(shard_context.get(), *request, response);
+  const grpc::Status status =
+      primary.stub->Delete(shard_context.get(), *request, response);
   return Finish("Delete", FromShard(shard, primary.address, status));
 }
 
@@ -362,7 +396,8 @@ grpc::Status GatewayService::BatchUpsertRaw(
     ShardBatch& batch = batches[static_cast<size_t>(shard)];
     if (batch.writer == nullptr) {
       batch.context = ShardContext(context);
-      batch.writer = shards_.primary(shard).stub->BatchUpsert(batch.context.get(), &batch.response);
+      batch.writer = shards_.primary(shard).stub->BatchUpsert(
+          batch.context.get(), &batch.response);
     }
     // A failed write means the shard's stream ended (its error comes with
     // Finish below); stop reading: the call fails anyway.
@@ -383,39 +418,45 @@ grpc::Status GatewayService::BatchUpsertRaw(
       response->set_written(response->written() + batch.response.written());
       response->set_skipped(response->skipped() + batch.response.skipped());
     } else if (first_error.ok()) {
-      first_error = FromShard(static_cast<int>(s), shards_.primary(static_cast<int>(s)).address,
-                              status);
+      first_error =
+          FromShard(static_cast<int>(s),
+                    shards_.primary(static_cast<int>(s)).address, status);
     }
   }
   if (!first_error.ok()) {
     response->Clear();
     return Finish("BatchUpsert", first_error);
   }
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("BatchUpsert", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("BatchUpsert", c);
   return grpc::Status::OK;
 }
 
 // ---------------------------------------------------------------------------
 // Reads.
 
-grpc::Status GatewayService::Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+grpc::Status GatewayService::Get(grpc::ServerContext* context,
+                                 const tpr::v1::GetRequest* request,
                                  tpr::v1::Model* response) {
   const int shard = ShardOf(request->id(), shards_.count());
-  return Finish("Get", Read(context, shard, [&](Endpoint& e, grpc::ClientContext* c) {
+  return Finish("Get",
+                Read(context, shard, [&](Endpoint& e, grpc::ClientContext* c) {
                   return e.stub->Get(c, *request, response);
                 }));
 }
 
-grpc::Status GatewayService::Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest* request,
+grpc::Status GatewayService::Stats(grpc::ServerContext* context,
+                                   const tpr::v1::StatsRequest* request,
                                    tpr::v1::StatsResponse* response) {
   std::map<std::string, int64_t> labels;
   for (int s = 0; s < shards_.count(); ++s) {
     tpr::v1::ShardStats* shard = response->add_shards();
     shard->set_shard(s);
-    absl::Status status = Read(context, s, [&](Endpoint& e, grpc::ClientContext* c) {
-      shard->set_address(e.address);
-      return e.stub->Stats(c, *request, shard->mutable_stats());
-    });
+    absl::Status status =
+        Read(context, s, [&](Endpoint& e, grpc::ClientContext* c) {
+          shard->set_address(e.address);
+          return e.stub->Stats(c, *request, shard->mutable_stats());
+        });
     if (!status.ok()) {
       response->Clear();
       return Finish("Stats", status);
@@ -434,16 +475,19 @@ grpc::Status GatewayService::Stats(grpc::ServerContext* context, const tpr::v1::
   // Like one indexer: the kMaxStatsLabels most populous labels, ties by
   // label. (Each shard reports its own top labels, so a label outside every
   // shard's top list is missing from the sums.)
-  std::vector<std::pair<std::string, int64_t>> top(labels.begin(), labels.end());
+  std::vector<std::pair<std::string, int64_t>> top(labels.begin(),
+                                                   labels.end());
   auto more_models = [](const auto& a, const auto& b) {
     return a.second != b.second ? a.second > b.second : a.first < b.first;
   };
   if (top.size() > kMaxStatsLabels) {
-    std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(kMaxStatsLabels),
-                      top.end(), more_models);
+    std::partial_sort(
+        top.begin(), top.begin() + static_cast<std::ptrdiff_t>(kMaxStatsLabels),
+        top.end(), more_models);
     top.resize(kMaxStatsLabels);
   }
-  for (const auto& [label, count] : top) (*response->mutable_labels())[label] = count;
+  for (const auto& [label, count] : top)
+    (*response->mutable_labels())[label] = count;
   return grpc::Status::OK;
 }
 
@@ -452,10 +496,12 @@ grpc::Status GatewayService::List(grpc::ServerContext* context,
                                   tpr::v1::ListResponse* response) {
   if (request->page_size() < 0) {
     return Finish("List", absl::InvalidArgumentError(absl::StrCat(
-                              "page_size is ", request->page_size(), "; it must be >= 0")));
+                              "page_size is ", request->page_size(),
+                              "; it must be >= 0")));
   }
   // The same page size rule as one indexer (indexer.proto).
-  const int page_size = request->page_size() == 0 ? 100 : std::min(request->page_size(), 1000);
+  const int page_size =
+      request->page_size() == 0 ? 100 : std::min(request->page_size(), 1000);
   absl::StatusOr<std::vector<ListPosition>> positions =
       DecodeListToken(request->page_token(), shards_.count());
   if (!positions.ok()) return Finish("List", positions.status());
@@ -468,30 +514,37 @@ grpc::Status GatewayService::List(grpc::ServerContext* context,
     shard_request.set_page_size(page_size);
     shard_request.set_page_token((*positions)[s].after);
     shard_request.set_label(request->label());
-    absl::Status status = Read(context, static_cast<int>(s), [&](Endpoint& e, grpc::ClientContext* c) {
-      return e.stub->List(c, shard_request, &shard_pages[s]);
-    });
+    absl::Status status = Read(
+        context, static_cast<int>(s), [&](Endpoint& e, grpc::ClientContext* c) {
+          return e.stub->List(c, shard_request, &shard_pages[s]);
+        });
     if (!status.ok()) return Finish("List", status);
-    for (const tpr::v1::Model& m : shard_pages[s].models()) pages[s].ids.push_back(m.id());
+    for (const tpr::v1::Model& m : shard_pages[s].models())
+      pages[s].ids.push_back(m.id());
     pages[s].next_token = shard_pages[s].next_page_token();
   }
-  ListMerge merge = MergeListPages(*positions, pages, static_cast<size_t>(page_size));
+  ListMerge merge =
+      MergeListPages(*positions, pages, static_cast<size_t>(page_size));
   // The page ends before kMaxListPageBytes of models (at least one), as one
   // indexer's does; the merge is greedy, so merging again with the shorter
   // size takes the same first models and gives the positions after them.
   size_t bytes = 0;
   for (size_t i = 0; i < merge.taken.size(); ++i) {
     const auto& [shard, index] = merge.taken[i];
-    bytes += shard_pages[static_cast<size_t>(shard)].models(index).ByteSizeLong() + 6;
+    bytes +=
+        shard_pages[static_cast<size_t>(shard)].models(index).ByteSizeLong() +
+        6;
     if (bytes > kMaxListPageBytes && i > 0) {
       merge = MergeListPages(*positions, pages, i);
       break;
     }
   }
   for (const auto& [shard, index] : merge.taken) {
-    *response->add_models() = std::move(*shard_pages[static_cast<size_t>(shard)].mutable_models(index));
+    *response->add_models() = std::move(
+        *shard_pages[static_cast<size_t>(shard)].mutable_models(index));
   }
-  if (!merge.last) response->set_next_page_token(EncodeListToken(merge.positions));
+  if (!merge.last)
+    response->set_next_page_token(EncodeListToken(merge.positions));
   return grpc::Status::OK;
 }
 
@@ -526,18 +579,19 @@ struct HeadAfter {
 
 }  // namespace
 
-grpc::Status GatewayService::Search(grpc::ServerContext* context,
-                                    const tpr::v1::SearchRequest* request,
-                                    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
+grpc::Status GatewayService::Search(
+    grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
+    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
   const auto start = std::chrono::steady_clock::now();
   // The checks one indexer makes before any work, so that k + 1 below and
   // the fan-out never run on a request every shard would refuse.
   if (request->k() < 1) {
-    return Finish("Search", absl::InvalidArgumentError(
-                                absl::StrCat("k is ", request->k(), "; it must be >= 1")));
+    return Finish("Search", absl::InvalidArgumentError(absl::StrCat(
+                                "k is ", request->k(), "; it must be >= 1")));
   }
   if (request->query_case() == tpr::v1::SearchRequest::QUERY_NOT_SET) {
-    return Finish("Search", absl::InvalidArgumentError("search has no query: set signature or id"));
+    return Finish("Search", absl::InvalidArgumentError(
+                                "search has no query: set signature or id"));
   }
   const int count = shards_.count();
   tpr::v1::SearchRequest shard_request = *request;
@@ -552,9 +606,10 @@ grpc::Status GatewayService::Search(grpc::ServerContext* context,
     tpr::v1::GetRequest get;
     get.set_id(request->id());
     tpr::v1::Model model;
-    absl::Status got = Read(context, owner, [&](Endpoint& e, grpc::ClientContext* c) {
-      return e.stub->Get(c, get, &model);
-    });
+    absl::Status got =
+        Read(context, owner, [&](Endpoint& e, grpc::ClientContext* c) {
+          return e.stub->Get(c, get, &model);
+        });
     if (!got.ok()) return Finish("Search", got);
     *shard_request.mutable_signature() = std::move(*model.mutable_signature());
     if (request->exclude_self()) exclude = request->id();
@@ -596,15 +651,17 @@ grpc::Status GatewayService::Search(grpc::ServerContext* context,
         st.ended = true;
         return absl::OkStatus();
       }
-      if (status.error_code() == grpc::StatusCode::UNAVAILABLE && !st.received) {
+      if (status.error_code() == grpc::StatusCode::UNAVAILABLE &&
+          !st.received) {
         shards_.MarkDown(st.endpoint, status.error_message());
-        tried.push_back(absl::StrCat(st.endpoint->address, ": ", status.error_message()));
+        tried.push_back(
+            absl::StrCat(st.endpoint->address, ": ", status.error_message()));
         if (open(st)) continue;
         st.ended = true;
         if (absl::Status c = CancelledStatus(context); !c.ok()) return c;
-        return absl::UnavailableError(absl::StrCat("shard ", st.shard,
-                                                   " has no serving replica (tried ",
-                                                   absl::StrJoin(tried, "; "), ")"));
+        return absl::UnavailableError(
+            absl::StrCat("shard ", st.shard, " has no serving replica (tried ",
+                         absl::StrJoin(tried, "; "), ")"));
       }
       st.ended = true;
       return FromShard(st.shard, st.endpoint->address, status);
@@ -655,7 +712,8 @@ grpc::Status GatewayService::Search(grpc::ServerContext* context,
       response.mutable_neighbor()->set_rank(++sent);
       if (!writer->Write(response)) {
         stop_all();
-        return Finish("Search", absl::CancelledError("client stopped reading the stream"));
+        return Finish("Search", absl::CancelledError(
+                                    "client stopped reading the stream"));
       }
       if (sent == request->k()) break;  // lazily: no more from any shard
     }
@@ -669,9 +727,11 @@ grpc::Status GatewayService::Search(grpc::ServerContext* context,
     }
   }
   stop_all();
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Search", c);
-  stats.set_milliseconds(
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("Search", c);
+  stats.set_milliseconds(std::chrono::duration<double, std::milli>(
+                             std::chrono::steady_clock::now() - start)
+                             .count());
   *response.mutable_stats() = stats;
   writer->Write(response);
   return grpc::Status::OK;

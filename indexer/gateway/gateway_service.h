@@ -57,6 +57,9 @@
 #ifndef TPR_INDEXER_GATEWAY_GATEWAY_SERVICE_H_
 #define TPR_INDEXER_GATEWAY_GATEWAY_SERVICE_H_
 
+#include <grpcpp/channel.h>
+#include <grpcpp/security/credentials.h>
+
 #include <atomic>
 #include <condition_variable>
 #include <functional>
@@ -65,9 +68,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <grpcpp/channel.h>
-#include <grpcpp/security/credentials.h>
 
 #include "absl/status/status.h"
 #include "indexer/gateway/shard_map.h"
@@ -129,7 +129,8 @@ struct GatewayOptions {
 // cancels the shard streams a search no longer needs, and a caller's own
 // cancellation is not a shard's fault. Labels are bounded by the shard map
 // (shard index) and the API (method, code). Thread-safe.
-std::function<void(const ShardCall&)> ShardCallMetrics(tpr::common::Metrics& metrics);
+std::function<void(const ShardCall&)> ShardCallMetrics(
+    tpr::common::Metrics& metrics);
 
 // Shards: the channels to every shard address and their health. Thread-safe.
 class Shards {
@@ -155,7 +156,9 @@ class Shards {
 
   int count() const { return static_cast<int>(primaries_.size()); }
   // primary returns the endpoint of shard `shard`'s primary.
-  Endpoint& primary(int shard) { return *primaries_[static_cast<size_t>(shard)]; }
+  Endpoint& primary(int shard) {
+    return *primaries_[static_cast<size_t>(shard)];
+  }
   // ReadOrder returns the serving addresses of `shard`, rotated round-robin
   // so that reads spread over them; when none serves, the primary alone
   // (tried anyway: it may be back before its next check).
@@ -189,7 +192,8 @@ class GatewayService final : public tpr::v1::Indexer::Service {
   // Precondition: options.shards has at least one shard (main.cc checks).
   explicit GatewayService(GatewayOptions options);
 
-  grpc::Status Upsert(grpc::ServerContext* context, const tpr::v1::UpsertRequest* request,
+  grpc::Status Upsert(grpc::ServerContext* context,
+                      const tpr::v1::UpsertRequest* request,
                       tpr::v1::UpsertResponse* response) override;
   // BatchUpsert reads its stream as raw bytes (common/stream_messages.h;
   // installed by the constructor in place of the generated handler): a
@@ -198,16 +202,21 @@ class GatewayService final : public tpr::v1::Indexer::Service {
   grpc::Status BatchUpsertRaw(grpc::ServerContext* context,
                               grpc::ServerReader<grpc::ByteBuffer>* reader,
                               tpr::v1::BatchUpsertResponse* response);
-  grpc::Status Delete(grpc::ServerContext* context, const tpr::v1::DeleteRequest* request,
+  grpc::Status Delete(grpc::ServerContext* context,
+                      const tpr::v1::DeleteRequest* request,
                       tpr::v1::DeleteResponse* response) override;
-  grpc::Status Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+  grpc::Status Get(grpc::ServerContext* context,
+                   const tpr::v1::GetRequest* request,
                    tpr::v1::Model* response) override;
-  grpc::Status List(grpc::ServerContext* context, const tpr::v1::ListRequest* request,
+  grpc::Status List(grpc::ServerContext* context,
+                    const tpr::v1::ListRequest* request,
                     tpr::v1::ListResponse* response) override;
-  grpc::Status Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest* request,
+  grpc::Status Stats(grpc::ServerContext* context,
+                     const tpr::v1::StatsRequest* request,
                      tpr::v1::StatsResponse* response) override;
-  grpc::Status Search(grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
-                      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
+  grpc::Status Search(
+      grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
+      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
 
   // shards gives tests access to the health state (CheckNow).
   Shards& shards() { return shards_; }
@@ -217,9 +226,11 @@ class GatewayService final : public tpr::v1::Indexer::Service {
   // answers with something other than UNAVAILABLE. Returns UNAVAILABLE
   // naming the shard when none does, else the call's status.
   absl::Status Read(grpc::ServerContext* context, int shard,
-                    const std::function<grpc::Status(Shards::Endpoint&, grpc::ClientContext*)>& call);
+                    const std::function<grpc::Status(
+                        Shards::Endpoint&, grpc::ClientContext*)>& call);
   // Maps a shard's failure to the gateway's answer (see the file comment).
-  absl::Status FromShard(int shard, const std::string& address, const grpc::Status& status) const;
+  absl::Status FromShard(int shard, const std::string& address,
+                         const grpc::Status& status) const;
   grpc::Status Finish(const char* method, const absl::Status& status) const;
 
   const GatewayOptions options_;

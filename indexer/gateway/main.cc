@@ -25,7 +25,9 @@
 #include "tpr/connection_flags.h"
 
 int main(int argc, char** argv) {
-  CLI::App app{"tpr-gateway: one tpr.v1.Indexer endpoint over sharded tpr-indexer processes"};
+  CLI::App app{
+      "tpr-gateway: one tpr.v1.Indexer endpoint over sharded tpr-indexer "
+      "processes"};
   tpr::common::ServerOptions server_options;
   server_options.listen_address = "127.0.0.1:7003";
   server_options.log_name = "tpr-gateway";
@@ -35,10 +37,12 @@ int main(int argc, char** argv) {
   tpr::common::ServerFlags ops_flags;
   tpr::common::AddListenFlags(app, &server_options);
   tpr::common::AddServerThreadsFlag(app, &ops_flags);
-  app.add_option("--shard", shard_flags,
-                 "One shard, in shard order: PRIMARY[,REPLICA...] (repeat per shard)");
-  app.add_option("--shard-map", shard_map_path,
-                 "File with one shard per line: PRIMARY [REPLICA ...] ('#' comments)");
+  app.add_option(
+      "--shard", shard_flags,
+      "One shard, in shard order: PRIMARY[,REPLICA...] (repeat per shard)");
+  app.add_option(
+      "--shard-map", shard_map_path,
+      "File with one shard per line: PRIMARY [REPLICA ...] ('#' comments)");
   app.add_option("--health-interval-ms", options.health_interval_ms,
                  "How often every shard address is health-checked (0: never)")
       ->check(CLI::NonNegativeNumber)
@@ -49,10 +53,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   // How the gateway reaches the shards: the SDK's connection options.
   tpr::client::ConnectionOptions shard_connection;
-  tpr::client::AddPeerConnectionFlags(app, "shard", "the shards", &shard_connection);
-  app.add_option("--shard-api-key", shard_connection.api_key,
-                 "API key sent to the shards (role write, admin for backups); prefer the "
-                 "environment variable TPR_GATEWAY_SHARD_API_KEY, which ps does not show");
+  tpr::client::AddPeerConnectionFlags(app, "shard", "the shards",
+                                      &shard_connection);
+  app.add_option(
+      "--shard-api-key", shard_connection.api_key,
+      "API key sent to the shards (role write, admin for backups); prefer the "
+      "environment variable TPR_GATEWAY_SHARD_API_KEY, which ps does not show");
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_GATEWAY_", {"shard-api-key"});
@@ -67,9 +73,12 @@ int main(int argc, char** argv) {
   server_options.readiness_service = "tpr.v1.Indexer";
 
   const std::string name = server_options.log_name;
-  auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };
+  auto log = [name](const std::string& line) {
+    tpr::common::LogEvent(name, line);
+  };
   if (shard_flags.empty() == shard_map_path.empty()) {
-    log("give the shards either with --shard (repeated) or with --shard-map FILE");
+    log("give the shards either with --shard (repeated) or with --shard-map "
+        "FILE");
     return 2;
   }
   absl::StatusOr<tpr::gateway::ShardMap> map;
@@ -104,14 +113,17 @@ int main(int argc, char** argv) {
     options.shard_api_key = shard_connection.api_key;
   }
   if (server_options.metrics != nullptr) {
-    options.on_shard_call = tpr::gateway::ShardCallMetrics(*server_options.metrics);
+    options.on_shard_call =
+        tpr::gateway::ShardCallMetrics(*server_options.metrics);
   }
   for (size_t s = 0; s < options.shards.shards.size(); ++s) {
     const tpr::gateway::ShardAddresses& shard = options.shards.shards[s];
     std::string replicas;
-    for (const std::string& r : shard.replicas) absl::StrAppend(&replicas, " ", r);
-    log(absl::StrCat("shard ", s, ": primary ", shard.primary,
-                     replicas.empty() ? "" : absl::StrCat(", replicas", replicas)));
+    for (const std::string& r : shard.replicas)
+      absl::StrAppend(&replicas, " ", r);
+    log(absl::StrCat(
+        "shard ", s, ": primary ", shard.primary,
+        replicas.empty() ? "" : absl::StrCat(", replicas", replicas)));
   }
   tpr::gateway::GatewayService service(std::move(options));
   absl::StatusOr<tpr::common::StartedServer> started =

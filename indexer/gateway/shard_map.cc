@@ -22,16 +22,18 @@ absl::Status CheckAddress(absl::string_view address, absl::string_view where) {
   const size_t colon = address.rfind(':');
   int port = 0;
   if (colon == absl::string_view::npos || colon == 0 ||
-      !absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 1 || port > 65535) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(where, ": '", address, "' is not HOST:PORT with a port in 1..65535"));
+      !absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 1 ||
+      port > 65535) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        where, ": '", address, "' is not HOST:PORT with a port in 1..65535"));
   }
   return absl::OkStatus();
 }
 
 // Adds one shard, checking its addresses and that none was listed before.
-absl::Status AddShard(const std::vector<std::string>& addresses, absl::string_view where,
-                      std::set<std::string>* seen, ShardMap* map) {
+absl::Status AddShard(const std::vector<std::string>& addresses,
+                      absl::string_view where, std::set<std::string>* seen,
+                      ShardMap* map) {
   if (addresses.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(where, ": no address"));
   }
@@ -78,23 +80,28 @@ absl::StatusOr<ShardMap> ParseShardMap(absl::string_view text) {
     std::vector<std::string> addresses =
         absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
     if (addresses.empty()) continue;
-    if (absl::Status s = AddShard(addresses, absl::StrCat("shard map line ", line_number),
-                                  &seen, &map);
+    if (absl::Status s =
+            AddShard(addresses, absl::StrCat("shard map line ", line_number),
+                     &seen, &map);
         !s.ok()) {
       return s;
     }
   }
-  if (map.shards.empty()) return absl::InvalidArgumentError("shard map lists no shard");
+  if (map.shards.empty())
+    return absl::InvalidArgumentError("shard map lists no shard");
   return map;
 }
 
-absl::StatusOr<ShardMap> ParseShardFlags(const std::vector<std::string>& shards) {
+absl::StatusOr<ShardMap> ParseShardFlags(
+    const std::vector<std::string>& shards) {
   ShardMap map;
   std::set<std::string> seen;
   for (size_t i = 0; i < shards.size(); ++i) {
-    std::vector<std::string> addresses = absl::StrSplit(shards[i], ',', absl::SkipEmpty());
-    if (absl::Status s =
-            AddShard(addresses, absl::StrCat("--shard #", i + 1, " (shard ", i, ")"), &seen, &map);
+    std::vector<std::string> addresses =
+        absl::StrSplit(shards[i], ',', absl::SkipEmpty());
+    if (absl::Status s = AddShard(
+            addresses, absl::StrCat("--shard #", i + 1, " (shard ", i, ")"),
+            &seen, &map);
         !s.ok()) {
       return s;
     }
@@ -115,24 +122,27 @@ std::string EncodeListToken(const std::vector<ListPosition>& positions) {
   return absl::WebSafeBase64Escape(raw);
 }
 
-absl::StatusOr<std::vector<ListPosition>> DecodeListToken(absl::string_view token,
-                                                          int shard_count) {
+absl::StatusOr<std::vector<ListPosition>> DecodeListToken(
+    absl::string_view token, int shard_count) {
   std::vector<ListPosition> positions(static_cast<size_t>(shard_count));
   if (token.empty()) return positions;
-  const absl::Status malformed =
-      absl::InvalidArgumentError("page_token is malformed (not a gateway List token)");
+  const absl::Status malformed = absl::InvalidArgumentError(
+      "page_token is malformed (not a gateway List token)");
   std::string raw;
   if (!absl::WebSafeBase64Unescape(token, &raw)) return malformed;
   absl::string_view rest = raw;
-  if (!absl::ConsumePrefix(&rest, absl::StrCat(kTokenMagic, ":"))) return malformed;
+  if (!absl::ConsumePrefix(&rest, absl::StrCat(kTokenMagic, ":")))
+    return malformed;
   const size_t colon = rest.find(':');
   int count = 0;
-  if (colon == absl::string_view::npos || !absl::SimpleAtoi(rest.substr(0, colon), &count)) {
+  if (colon == absl::string_view::npos ||
+      !absl::SimpleAtoi(rest.substr(0, colon), &count)) {
     return malformed;
   }
   if (count != shard_count) {
-    return absl::InvalidArgumentError(absl::StrCat("page_token was made for ", count,
-                                                   " shards; this gateway has ", shard_count));
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_token was made for ", count,
+                     " shards; this gateway has ", shard_count));
   }
   rest.remove_prefix(colon + 1);
   for (ListPosition& p : positions) {
@@ -143,7 +153,8 @@ absl::StatusOr<std::vector<ListPosition>> DecodeListToken(absl::string_view toke
     if (!absl::ConsumePrefix(&rest, "a")) return malformed;
     const size_t end = rest.find(':');
     size_t size = 0;
-    if (end == absl::string_view::npos || !absl::SimpleAtoi(rest.substr(0, end), &size) ||
+    if (end == absl::string_view::npos ||
+        !absl::SimpleAtoi(rest.substr(0, end), &size) ||
         rest.size() - end - 1 < size) {
       return malformed;
     }
@@ -155,7 +166,8 @@ absl::StatusOr<std::vector<ListPosition>> DecodeListToken(absl::string_view toke
 }
 
 ListMerge MergeListPages(const std::vector<ListPosition>& positions,
-                         const std::vector<ShardPage>& pages, size_t page_size) {
+                         const std::vector<ShardPage>& pages,
+                         size_t page_size) {
   const size_t shards = pages.size();
   ListMerge merge;
   merge.positions = positions;
@@ -163,7 +175,8 @@ ListMerge MergeListPages(const std::vector<ListPosition>& positions,
   // be placed yet: that shard's next page may hold smaller ones.
   const std::string* bound = nullptr;
   for (const ShardPage& page : pages) {
-    if (!page.next_token.empty() && (bound == nullptr || page.next_token < *bound)) {
+    if (!page.next_token.empty() &&
+        (bound == nullptr || page.next_token < *bound)) {
       bound = &page.next_token;
     }
   }
@@ -174,12 +187,14 @@ ListMerge MergeListPages(const std::vector<ListPosition>& positions,
       if (next[s] == pages[s].ids.size()) continue;
       const std::string& id = pages[s].ids[next[s]];
       if (bound != nullptr && id > *bound) continue;
-      if (best < 0 || id < pages[static_cast<size_t>(best)].ids[next[static_cast<size_t>(best)]]) {
+      if (best < 0 || id < pages[static_cast<size_t>(best)]
+                               .ids[next[static_cast<size_t>(best)]]) {
         best = static_cast<int>(s);
       }
     }
     if (best < 0) break;
-    merge.taken.emplace_back(best, static_cast<int>(next[static_cast<size_t>(best)]));
+    merge.taken.emplace_back(best,
+                             static_cast<int>(next[static_cast<size_t>(best)]));
     ++next[static_cast<size_t>(best)];
   }
   for (size_t s = 0; s < shards; ++s) {

@@ -62,14 +62,15 @@ absl::StatusOr<ShardMap> ParseShardMap(absl::string_view text);
 // ParseShardFlags builds a map from one string per shard,
 // "PRIMARY[,REPLICA...]" (the gateway's repeated --shard flag). Errors as
 // ParseShardMap, naming the flag's position.
-absl::StatusOr<ShardMap> ParseShardFlags(const std::vector<std::string>& shards);
+absl::StatusOr<ShardMap> ParseShardFlags(
+    const std::vector<std::string>& shards);
 
 // RanksBefore is the order of search results, the same as one tpr-indexer's
 // (indexer/lib/signature_index.h): ascending distance, then ascending id
 // (bytewise). The gateway's merge must use exactly this order for its
 // answers to equal one indexer's, ties included.
-inline bool RanksBefore(double distance_a, const std::string& id_a, double distance_b,
-                        const std::string& id_b) {
+inline bool RanksBefore(double distance_a, const std::string& id_a,
+                        double distance_b, const std::string& id_b) {
   if (distance_a != distance_b) return distance_a < distance_b;
   return id_a < id_b;
 }
@@ -93,8 +94,8 @@ std::string EncodeListToken(const std::vector<ListPosition>& positions);
 // DecodeListToken parses a token from EncodeListToken. An empty token is the
 // first page (every shard at its start). Returns INVALID_ARGUMENT for a
 // malformed token or one made for a different number of shards.
-absl::StatusOr<std::vector<ListPosition>> DecodeListToken(absl::string_view token,
-                                                          int shard_count);
+absl::StatusOr<std::vector<ListPosition>> DecodeListToken(
+    absl::string_view token, int shard_count);
 
 // ShardPage: the ids of one shard's List page, ascending, and the shard's
 // next page token (empty when it has nothing after them).
@@ -119,9 +120,9 @@ struct ListMerge {
 // empty page. An id is taken only when no shard with more to list could
 // still hold a smaller one (it is at most every such shard's next token), so
 // pages never skip or repeat an id, even when a shard's page came back short
-// (models deleted meanwhile). Preconditions: pages.size() == positions.size(); each page's
-// ids ascending; ids unique across shards (each id has one owner). Cost
-// O(total ids log shards).
+// (models deleted meanwhile). Preconditions: pages.size() == positions.size();
+// each page's ids ascending; ids unique across shards (each id has one owner).
+// Cost O(total ids log shards).
 ListMerge MergeListPages(const std::vector<ListPosition>& positions,
                          const std::vector<ShardPage>& pages, size_t page_size);
 

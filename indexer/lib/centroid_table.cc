@@ -21,7 +21,7 @@ namespace tpr::index {
 namespace {
 
 constexpr size_t kHeaderBytes = 5 * sizeof(float);  // e, g, s_K, s_A, s_H
-constexpr double kLevels = 32767.0;                  // int16 magnitude
+constexpr double kLevels = 32767.0;                 // int16 magnitude
 
 float LoadFloat(const unsigned char* p) {
   float x;
@@ -78,10 +78,12 @@ CentroidTable CentroidTable::Build(
     for (size_t block = 0; block < 3; ++block) {
       const double* x = c.data() + 1 + block * b;
       double largest = 0.0;
-      for (size_t d = 0; d < b; ++d) largest = std::max(largest, std::abs(x[d]));
+      for (size_t d = 0; d < b; ++d)
+        largest = std::max(largest, std::abs(x[d]));
       const float scale = RoundUp(largest / kLevels);  // |x / scale| <= 32767
       StoreFloat(row + (2 + block) * sizeof(float), scale);
-      unsigned char* q = row + kHeaderBytes + block * table_bands * sizeof(int16_t);
+      unsigned char* q =
+          row + kHeaderBytes + block * table_bands * sizeof(int16_t);
       double s = 0.0;
       for (size_t d = 0; d < b; ++d) {
         double level = scale > 0.0f ? std::nearbyint(x[d] / scale) : 0.0;
@@ -107,11 +109,14 @@ double CentroidTable::LowerBound(const double* query_centroid, int query_bands,
   // to bands_ per block, and a zero band contributes exactly what a
   // missing one does.
   const int common = std::min(query_bands, bands_);
-  double result = std::abs(query_centroid[0] - static_cast<double>(LoadFloat(row + sizeof(float))));
+  double result = std::abs(query_centroid[0] -
+                           static_cast<double>(LoadFloat(row + sizeof(float))));
   for (int block = 0; block < 3; ++block) {
-    const double scale = static_cast<double>(LoadFloat(row + (2 + block) * sizeof(float)));
-    const unsigned char* q =
-        row + kHeaderBytes + static_cast<size_t>(block) * static_cast<size_t>(bands_) * sizeof(int16_t);
+    const double scale =
+        static_cast<double>(LoadFloat(row + (2 + block) * sizeof(float)));
+    const unsigned char* q = row + kHeaderBytes +
+                             static_cast<size_t>(block) *
+                                 static_cast<size_t>(bands_) * sizeof(int16_t);
     const double* x = query_centroid + 1 + block * query_bands;
     double s = 0.0;
     for (int d = 0; d < common; ++d) {

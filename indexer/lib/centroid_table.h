@@ -39,7 +39,9 @@ class CentroidTable {
       size_t n, const std::function<const PreparedSignature*(uint32_t)>& item);
 
   // size returns the number of slots.
-  size_t size() const { return row_bytes_ == 0 ? 0 : rows_.size() / row_bytes_; }
+  size_t size() const {
+    return row_bytes_ == 0 ? 0 : rows_.size() / row_bytes_;
+  }
   // MemoryBytes returns the heap bytes this table holds.
   size_t MemoryBytes() const { return rows_.capacity(); }
 
@@ -53,7 +55,8 @@ class CentroidTable {
   // N(q - c) = EmdLowerBound, and it is below it by at most 2e; e is about
   // 1e-4 N(c) (16-bit values per band block). Precondition: i < size().
   // Cost O(bands), no allocation; thread-safe.
-  double LowerBound(const double* query_centroid, int query_bands, uint32_t i) const;
+  double LowerBound(const double* query_centroid, int query_bands,
+                    uint32_t i) const;
 
  private:
   int bands_ = 0;         // largest bands() over present items

@@ -18,9 +18,9 @@
 //   arcs:  i -> n+j for every cell, cost Dist(a_i, b_j), uncapacitated;
 //          R -> v for every node, cost 0, never allowed to enter.
 // The spanning tree is stored as parent pointers, depths and a thread
-// (preorder successor and predecessor); the flow of the tree arc joining v to parent[v] is flow[v]. The
-// direction of a tree arc follows from the node types (supply -> demand,
-// root -> anything), so it is not stored.
+// (preorder successor and predecessor); the flow of the tree arc joining v to
+// parent[v] is flow[v]. The direction of a tree arc follows from the node types
+// (supply -> demand, root -> anything), so it is not stored.
 //
 // Start. A greedy assignment (least reduced cost per row, see
 // InitialBasis) ships all mass along at most n + m - 1 cells, which form a
@@ -63,7 +63,6 @@
 
 namespace tpr::index {
 namespace {
-
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -138,8 +137,8 @@ __attribute__((target("avx512f"))) inline int CollectBlocksAvx512(
     const double* row = cost + static_cast<size_t>(i) * cs + j0;
     const __m512d ui = _mm512_set1_pd(u[i]);
     for (int b = 0; b < B; ++b) {
-      const __m512d r = _mm512_sub_pd(
-          _mm512_add_pd(_mm512_loadu_pd(row + 8 * b), ui), vj[b]);
+      const __m512d r =
+          _mm512_sub_pd(_mm512_add_pd(_mm512_loadu_pd(row + 8 * b), ui), vj[b]);
       const __mmask8 lt = _mm512_cmp_pd_mask(r, mn[b], _CMP_LT_OQ);
       mn[b] = _mm512_mask_blend_pd(lt, mn[b], r);
       arg[b] = _mm512_mask_blend_pd(lt, arg[b], idx);
@@ -158,31 +157,33 @@ __attribute__((target("avx512f"))) inline int CollectBlocksAvx512(
   return count;
 }
 
-__attribute__((target("avx512f"))) int CollectAvx512(
-    const double* cost, int cs, int n, const double* u, const double* v,
-    double tol, int* cand_i, int* cand_j) {
+__attribute__((target("avx512f"))) int CollectAvx512(const double* cost, int cs,
+                                                     int n, const double* u,
+                                                     const double* v,
+                                                     double tol, int* cand_i,
+                                                     int* cand_j) {
   int count = 0;
   int j0 = 0;
   for (; j0 + 32 <= cs; j0 += 32) {
-    count = CollectBlocksAvx512<4>(cost, cs, n, u, v, tol, j0, cand_i,
-                                   cand_j, count);
+    count = CollectBlocksAvx512<4>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
+                                   count);
   }
   if (j0 + 16 <= cs) {
-    count = CollectBlocksAvx512<2>(cost, cs, n, u, v, tol, j0, cand_i,
-                                   cand_j, count);
+    count = CollectBlocksAvx512<2>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
+                                   count);
     j0 += 16;
   }
   if (j0 < cs) {
-    count = CollectBlocksAvx512<1>(cost, cs, n, u, v, tol, j0, cand_i,
-                                   cand_j, count);
+    count = CollectBlocksAvx512<1>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
+                                   count);
   }
   return count;
 }
 #pragma GCC diagnostic pop
 #endif
 
-using CollectFn = int (*)(const double*, int, int, const double*,
-                          const double*, double, int*, int*);
+using CollectFn = int (*)(const double*, int, int, const double*, const double*,
+                          double, int*, int*);
 
 CollectFn PickCollect() {
 #ifdef TPR_HAVE_X86_PRICING
@@ -227,9 +228,8 @@ __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
     arg = _mm512_mask_blend_pd(lt, arg, idx);
     idx = _mm512_add_pd(idx, step);
   }
-  const __mmask8 eq =
-      _mm512_cmp_pd_mask(mn, _mm512_set1_pd(_mm512_reduce_min_pd(mn)),
-                         _CMP_EQ_OQ);
+  const __mmask8 eq = _mm512_cmp_pd_mask(
+      mn, _mm512_set1_pd(_mm512_reduce_min_pd(mn)), _CMP_EQ_OQ);
   return static_cast<int>(_mm512_mask_reduce_min_pd(eq, arg));
 }
 #pragma GCC diagnostic pop
@@ -245,14 +245,13 @@ RowArgMinFn PickRowArgMin() {
   return RowArgMinScalar;
 }
 
-
 }  // namespace
 
 struct EmdSolver::Impl {
   // Problem.
   int n = 0;
   int m = 0;
-  int cs = 0;  // cost row stride (multiple of 8)
+  int cs = 0;                // cost row stride (multiple of 8)
   std::vector<double> cost;  // n x cs
   std::vector<double> supply;
   std::vector<double> demand;
@@ -261,9 +260,9 @@ struct EmdSolver::Impl {
   std::vector<int> parent;
   std::vector<int> thread;      // preorder successor (circular through R)
   std::vector<int> rev_thread;  // preorder predecessor
-  std::vector<double> flow;  // flow of the arc joining v and parent[v]
-  std::vector<double> pi;    // potentials; u = pi[0..n), v = pi[n..n+m)
-  std::vector<int> depth;  // depth[R] = 0
+  std::vector<double> flow;     // flow of the arc joining v and parent[v]
+  std::vector<double> pi;       // potentials; u = pi[0..n), v = pi[n..n+m)
+  std::vector<int> depth;       // depth[R] = 0
 
   // Scratch.
   std::vector<double> vpad;
@@ -271,7 +270,7 @@ struct EmdSolver::Impl {
   std::vector<int> row_order;
   std::vector<double> rem_b;
   std::vector<double> col_mask;  // cs entries: -v_j open, +inf closed
-  std::vector<int> cand_i;  // pricing candidates (one per column at most)
+  std::vector<int> cand_i;       // pricing candidates (one per column at most)
   std::vector<int> cand_j;
   std::vector<int> cell_i;
   std::vector<int> cell_j;
@@ -368,9 +367,9 @@ struct EmdSolver::Impl {
 };
 
 // Initial basis (least reduced cost per row, below). The allocated cells
-// form a forest (see the top comment). Masses below kDust left over from rounding (the two
-// totals agree only to ~1e-16) are dropped, which changes the cost by less
-// than kDust x the largest cost.
+// form a forest (see the top comment). Masses below kDust left over from
+// rounding (the two totals agree only to ~1e-16) are dropped, which changes the
+// cost by less than kDust x the largest cost.
 void EmdSolver::Impl::InitialBasis() {
   constexpr double kDust = 1e-14;
   const int root = n + m;
@@ -670,7 +669,8 @@ double EmdSolver::Impl::Solve() {
     for (int c = 0; c < candidates; ++c) {
       const int i = cand_i[c];
       const int j = cand_j[c];
-      const double rc = (cost[static_cast<size_t>(i) * cs + j] + pi[i]) - pi[n + j];
+      const double rc =
+          (cost[static_cast<size_t>(i) * cs + j] + pi[i]) - pi[n + j];
       cand_i[kept] = i;
       cand_j[kept] = j;
       const bool lt = rc < best;
@@ -689,9 +689,8 @@ double EmdSolver::Impl::Solve() {
       fresh = true;
       // Major pass.
       for (int j = 0; j < m; ++j) vpad[j] = pi[n + j];
-      candidates =
-          collect(cost.data(), cs, n, pi.data(), vpad.data(), tol,
-                  cand_i.data(), cand_j.data());
+      candidates = collect(cost.data(), cs, n, pi.data(), vpad.data(), tol,
+                           cand_i.data(), cand_j.data());
       if (candidates == 0) break;  // optimal
       continue;
     }
@@ -860,7 +859,8 @@ double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
 
 std::vector<double> Centroid(const PreparedSignature& p) {
   std::vector<double> c(static_cast<size_t>(p.rows()));
-  for (int r = 0; r < p.rows(); ++r) c[static_cast<size_t>(r)] = CentroidRow(p, r);
+  for (int r = 0; r < p.rows(); ++r)
+    c[static_cast<size_t>(r)] = CentroidRow(p, r);
   return c;
 }
 

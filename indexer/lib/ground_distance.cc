@@ -46,8 +46,9 @@ absl::Status ValidateOptions(const GroundDistanceOptions& o) {
   const char* names[3] = {"k_scale", "a_scale", "h_scale"};
   for (int i = 0; i < 3; ++i) {
     if (!std::isfinite(s[i]) || s[i] <= 0.0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "ground distance ", names[i], " = ", s[i], " must be finite and > 0"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("ground distance ", names[i], " = ", s[i],
+                       " must be finite and > 0"));
     }
   }
   return ValidateSpectralOptions(o.spectral);
@@ -68,19 +69,19 @@ absl::Status ValidateSignature(const Signature& signature) {
   for (size_t i = 0; i < f.size(); ++i) {
     const Feature& x = f[i];
     if (!std::isfinite(x.weight) || x.weight < 0.0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("feature ", i, ": weight ", x.weight,
-                       " must be finite and >= 0"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "feature ", i, ": weight ", x.weight, " must be finite and >= 0"));
     }
     if (!std::isfinite(x.integral_geodesic)) {
       return absl::InvalidArgumentError(
           absl::StrCat("feature ", i, ": integral geodesic is not finite"));
     }
-    if (x.curvature.size() != bands || x.area.size() != bands || x.distance.size() != bands) {
+    if (x.curvature.size() != bands || x.area.size() != bands ||
+        x.distance.size() != bands) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "feature ", i, ": curvature, area, distance have lengths ", x.curvature.size(),
-          ", ", x.area.size(), ", ", x.distance.size(), "; expected ", bands,
-          " each (the length of feature 0's curvature)"));
+          "feature ", i, ": curvature, area, distance have lengths ",
+          x.curvature.size(), ", ", x.area.size(), ", ", x.distance.size(),
+          "; expected ", bands, " each (the length of feature 0's curvature)"));
     }
     for (const std::vector<double>* band : BandVectors(x)) {
       if (!AllFinite(*band)) {
@@ -95,9 +96,9 @@ absl::Status ValidateSignature(const Signature& signature) {
         "signature weights sum to ", sum, ", must sum to 1 (Eq. 6)"));
   }
   if (signature.spectrum.size() > static_cast<size_t>(kMaxSpectrum)) {
-    return absl::InvalidArgumentError(absl::StrCat("spectrum has ", signature.spectrum.size(),
-                                                   " values, at most ", kMaxSpectrum,
-                                                   " are supported"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("spectrum has ", signature.spectrum.size(),
+                     " values, at most ", kMaxSpectrum, " are supported"));
   }
   for (size_t i = 0; i < signature.spectrum.size(); ++i) {
     const double x = signature.spectrum[i];
@@ -120,13 +121,14 @@ PreparedSignature::PreparedSignature(const PreparedSignature& other)
   }
 }
 
-PreparedSignature& PreparedSignature::operator=(const PreparedSignature& other) {
+PreparedSignature& PreparedSignature::operator=(
+    const PreparedSignature& other) {
   if (this != &other) *this = PreparedSignature(other);
   return *this;
 }
 
-absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
-                                          const GroundDistanceOptions& options) {
+absl::StatusOr<PreparedSignature> Prepare(
+    const Signature& signature, const GroundDistanceOptions& options) {
   if (absl::Status s = ValidateOptions(options); !s.ok()) return s;
   if (absl::Status s = ValidateSignature(signature); !s.ok()) return s;
   const auto& f = signature.features;
@@ -139,11 +141,13 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   const int bands = p.bands_;
   const size_t un = static_cast<size_t>(n);
   const size_t rows = static_cast<size_t>(p.rows());
-  std::vector<double> spectral = SpectralEmbedding(signature.spectrum, options.spectral);
+  std::vector<double> spectral =
+      SpectralEmbedding(signature.spectrum, options.spectral);
   p.spectral_size_ = static_cast<int>(spectral.size());
   p.block_ = std::make_unique<std::byte[]>(p.BlockBytes());
   double* weights = reinterpret_cast<double*>(p.block_.get());
-  float* spectral32 = reinterpret_cast<float*>(p.block_.get() + sizeof(double) * un);
+  float* spectral32 =
+      reinterpret_cast<float*>(p.block_.get() + sizeof(double) * un);
   float* coords = spectral32 + spectral.size();
 
   double sum = 0.0;
@@ -152,8 +156,9 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
   for (size_t i = 0; i < spectral.size(); ++i) {
     spectral32[i] = static_cast<float>(spectral[i]);
     if (!std::isfinite(spectral32[i])) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "spectrum[", i, "] is too large (beyond float32 range once embedded)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("spectrum[", i,
+                       "] is too large (beyond float32 range once embedded)"));
     }
   }
 
@@ -167,7 +172,8 @@ absl::StatusOr<PreparedSignature> Prepare(const Signature& signature,
     for (size_t b = 0; b < static_cast<size_t>(bands); ++b) {
       coords[(1 + b) * un + i] = static_cast<float>(ck * x.curvature[b]);
       coords[(1 + bands + b) * un + i] = static_cast<float>(ca * x.area[b]);
-      coords[(1 + 2 * bands + b) * un + i] = static_cast<float>(ch * x.distance[b]);
+      coords[(1 + 2 * bands + b) * un + i] =
+          static_cast<float>(ch * x.distance[b]);
     }
   }
   // A finite double beyond float32's range (about 3.4e38) would become
@@ -222,8 +228,8 @@ double GroundDistance(const PreparedSignature& a, int i,
   const double k = std::sqrt(BlockSquared(a, i, 1, b, j, 1));
   const double ar =
       std::sqrt(BlockSquared(a, i, 1 + a.bands(), b, j, 1 + b.bands()));
-  const double h = std::sqrt(
-      BlockSquared(a, i, 1 + 2 * a.bands(), b, j, 1 + 2 * b.bands()));
+  const double h =
+      std::sqrt(BlockSquared(a, i, 1 + 2 * a.bands(), b, j, 1 + 2 * b.bands()));
   return ((g + k) + ar) + h;
 }
 
@@ -262,10 +268,10 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // dimension-major layout of PreparedSignature); a's coordinates are
 // broadcast. Coordinates are stored in float32 without padding: each block
 // of 8 features of b is widened to double once (WidenBlock, features at or
-// past b.size() as 0), so the arithmetic is the scalar kernel's. Each lane accumulates its bands in the
-// same order, so the matrix is symmetric under swapping a and b exactly:
-// (x - y)^2 and (y - x)^2 are the same double and fma(d, d, s) depends on
-// d only through d * d.
+// past b.size() as 0), so the arithmetic is the scalar kernel's. Each lane
+// accumulates its bands in the same order, so the matrix is symmetric under
+// swapping a and b exactly: (x - y)^2 and (y - x)^2 are the same double and
+// fma(d, d, s) depends on d only through d * d.
 
 // WidenBlock returns the columns j0 .. j0 + 7 of b's float32 coordinates
 // widened to double, row-major (row r at [8 r]), columns at or past
@@ -279,7 +285,8 @@ const double* WidenBlock(const PreparedSignature& b, int j0) {
   const size_t bs = static_cast<size_t>(b.size());
   const int valid = std::min(8, b.size() - j0);
   const float* bc = b.coords() + j0;
-  if (valid == 8) {  // a whole block: a fixed-length loop the compiler vectorizes
+  if (valid ==
+      8) {  // a whole block: a fixed-length loop the compiler vectorizes
     for (size_t r = 0; r < rows; ++r) {
       double* out = block.data() + r * 8;
       const float* in = bc + r * bs;
@@ -290,7 +297,8 @@ const double* WidenBlock(const PreparedSignature& b, int j0) {
   for (size_t r = 0; r < rows; ++r) {
     double* out = block.data() + r * 8;
     int c = 0;
-    for (; c < valid; ++c) out[c] = static_cast<double>(bc[r * bs + static_cast<size_t>(c)]);
+    for (; c < valid; ++c)
+      out[c] = static_cast<double>(bc[r * bs + static_cast<size_t>(c)]);
     for (; c < 8; ++c) out[c] = 0.0;
   }
   return block.data();
@@ -336,8 +344,10 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
         h1 = _mm256_fmadd_pd(t, t, h1);
       }
       const __m256d xg = _mm256_set1_pd(ac[i]);
-      __m256d g0 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk)));
-      __m256d g1 = _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk + 4)));
+      __m256d g0 =
+          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk)));
+      __m256d g1 =
+          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk + 4)));
       g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
                                        _mm256_sqrt_pd(a0)),
                          _mm256_sqrt_pd(h0));
@@ -378,14 +388,18 @@ __attribute__((target("avx512f"))) double KernelAvx512(
         const size_t ra = rk + static_cast<size_t>(bands);
         const size_t rh = ra + static_cast<size_t>(bands);
         __m512d t;
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]), _mm512_loadu_pd(blk + rk * 8));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]),
+                          _mm512_loadu_pd(blk + rk * 8));
         k = _mm512_fmadd_pd(t, t, k);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]), _mm512_loadu_pd(blk + ra * 8));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]),
+                          _mm512_loadu_pd(blk + ra * 8));
         ar = _mm512_fmadd_pd(t, t, ar);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]), _mm512_loadu_pd(blk + rh * 8));
+        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]),
+                          _mm512_loadu_pd(blk + rh * 8));
         h = _mm512_fmadd_pd(t, t, h);
       }
-      __m512d g = _mm512_abs_pd(_mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(blk)));
+      __m512d g = _mm512_abs_pd(
+          _mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(blk)));
       g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k)),
                                       _mm512_sqrt_pd(ar)),
                         _mm512_sqrt_pd(h));

@@ -157,7 +157,8 @@ class PreparedSignature {
   // options.spectral.eigenvalues, or 0 when the spectral weight is 0.
   // metric.h compares it.
   const float* spectral() const {
-    return reinterpret_cast<const float*>(block_.get() + sizeof(double) * Size(size_));
+    return reinterpret_cast<const float*>(block_.get() +
+                                          sizeof(double) * Size(size_));
   }
   int spectral_size() const { return spectral_size_; }
 
@@ -218,12 +219,11 @@ double GroundDistance(const PreparedSignature& a, int i,
 // distances into `out`, row i at out[i * out_stride], with
 // out_stride >= b.stride(); entries past b.size() in a row (up to
 // b.stride()) are written with finite values (the distance to the
-// origin). This is the vectorized kernel (AVX-512 or AVX2, chosen at run time) the EMD uses;
-// entries equal GroundDistance to rounding (about 1e-15 relative) and the
-// matrix of (b, a) is exactly the transpose of that of (a, b). Returns an
-// upper bound of the entries (the largest value written, padding
-// included), for scaling tolerances. Cost O(a.size() x b.size() x bands);
-// thread-safe.
+// origin). This is the vectorized kernel (AVX-512 or AVX2, chosen at run time)
+// the EMD uses; entries equal GroundDistance to rounding (about 1e-15 relative)
+// and the matrix of (b, a) is exactly the transpose of that of (a, b). Returns
+// an upper bound of the entries (the largest value written, padding included),
+// for scaling tolerances. Cost O(a.size() x b.size() x bands); thread-safe.
 double GroundDistanceMatrix(const PreparedSignature& a,
                             const PreparedSignature& b, double* out,
                             int out_stride);

@@ -2,7 +2,8 @@
 
 namespace tpr::index {
 
-double Distance(EmdSolver& solver, const PreparedSignature& a, const PreparedSignature& b) {
+double Distance(EmdSolver& solver, const PreparedSignature& a,
+                const PreparedSignature& b) {
   return solver.Distance(a, b) + SpectralDistance(a, b);
 }
 
@@ -10,7 +11,8 @@ double Distance(const PreparedSignature& a, const PreparedSignature& b) {
   return Emd(a, b) + SpectralDistance(a, b);
 }
 
-double DistanceLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
+double DistanceLowerBound(const PreparedSignature& a,
+                          const PreparedSignature& b) {
   return EmdLowerBound(a, b) + SpectralDistance(a, b);
 }
 

@@ -55,7 +55,8 @@ namespace tpr::index {
 
 // SpectralDistance returns S(a, b) above. Precondition: a and b prepared
 // with the same options (so spectral_size() agree). O(n); thread-safe.
-inline double SpectralDistance(const PreparedSignature& a, const PreparedSignature& b) {
+inline double SpectralDistance(const PreparedSignature& a,
+                               const PreparedSignature& b) {
   return SpectralDistance(a.spectral(), b.spectral(),
                           static_cast<size_t>(a.spectral_size()));
 }
@@ -63,14 +64,16 @@ inline double SpectralDistance(const PreparedSignature& a, const PreparedSignatu
 // Distance returns d(a, b) = EMD(a, b) + S(a, b), computed with `solver`
 // (one per thread). Preconditions: those of EmdSolver::Distance and of
 // SpectralDistance. Cost: one EMD plus O(n). Not thread-safe in `solver`.
-double Distance(EmdSolver& solver, const PreparedSignature& a, const PreparedSignature& b);
+double Distance(EmdSolver& solver, const PreparedSignature& a,
+                const PreparedSignature& b);
 
 // Distance with a thread_local solver (like Emd). Thread-safe.
 double Distance(const PreparedSignature& a, const PreparedSignature& b);
 
 // DistanceLowerBound returns EmdLowerBound(a, b) + S(a, b) <= d(a, b).
 // Cost O(bands + n), no allocation; thread-safe.
-double DistanceLowerBound(const PreparedSignature& a, const PreparedSignature& b);
+double DistanceLowerBound(const PreparedSignature& a,
+                          const PreparedSignature& b);
 
 }  // namespace tpr::index
 

@@ -24,21 +24,20 @@
 #include <unordered_map>
 
 #include "absl/strings/str_cat.h"
-#include "tbb/blocked_range.h"
-#include "tbb/parallel_for.h"
-#include "tbb/task_arena.h"
 #include "common/status_macros.h"
 #include "indexer/lib/byte_codec.h"
 #include "indexer/lib/centroid_table.h"
-#include "indexer/lib/metric.h"
 #include "indexer/lib/emd.h"
+#include "indexer/lib/metric.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+#include "tbb/task_arena.h"
 
 namespace tpr::index {
 
 namespace {
 
 using PreparedPtr = std::shared_ptr<const PreparedSignature>;
-
 
 // Fingerprint of a prepared signature: its exact coordinates and masses.
 // Prepared coordinates already include the ground-distance weights, so a
@@ -48,8 +47,10 @@ uint64_t Fingerprint(const PreparedSignature& p) {
   uint64_t h = Fnv1a(shape, sizeof shape);
   h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
   const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
-  h = Fnv1a(p.coords(), sizeof(float) * rows * static_cast<size_t>(p.size()), h);
-  h = Fnv1a(p.spectral(), sizeof(float) * static_cast<size_t>(p.spectral_size()), h);
+  h = Fnv1a(p.coords(), sizeof(float) * rows * static_cast<size_t>(p.size()),
+            h);
+  h = Fnv1a(p.spectral(),
+            sizeof(float) * static_cast<size_t>(p.spectral_size()), h);
   return h;
 }
 
@@ -107,7 +108,8 @@ struct SignatureIndex::Snapshot {
     if (item < 0 || Dead(static_cast<uint32_t>(item))) return -1;
     return item;
   }
-  bool Upsert(const std::string& id, PreparedPtr prepared, uint64_t fingerprint) {
+  bool Upsert(const std::string& id, PreparedPtr prepared,
+              uint64_t fingerprint) {
     const int64_t item = LiveTreeItem(id);
     if (item >= 0) Kill(static_cast<uint32_t>(item));
     auto it = std::lower_bound(buffer.begin(), buffer.end(), id, IdLess);
@@ -172,14 +174,16 @@ struct SignatureIndex::SearchPool {
 // returning, which TSan does see: it then checks the bodies and what they
 // share, which is what is ours.
 struct SignatureIndex::SearchPool {
-  explicit SearchPool(int threads) : threads(static_cast<size_t>(std::max(threads, 1))) {}
+  explicit SearchPool(int threads)
+      : threads(static_cast<size_t>(std::max(threads, 1))) {}
   void ParallelFor(size_t n, const std::function<void(size_t)>& body) {
     std::atomic<size_t> next{0};
     auto work = [&] {
       for (size_t i = next++; i < n; i = next++) body(i);
     };
     std::vector<std::thread> helpers;
-    for (size_t t = 1; t < std::min(n, threads); ++t) helpers.emplace_back(work);
+    for (size_t t = 1; t < std::min(n, threads); ++t)
+      helpers.emplace_back(work);
     work();
     for (std::thread& t : helpers) t.join();
   }
@@ -222,7 +226,8 @@ class IndexCursor : public SignatureIndex::Cursor {
     const bool spectral = query_.spectral_size() > 0;
     spec.lower_bounds.push_back([this, t, spectral](uint32_t i) {
       if (i >= n_tree_) {
-        return DistanceLowerBound(query_, *snapshot_->buffer[i - n_tree_].prepared);
+        return DistanceLowerBound(query_,
+                                  *snapshot_->buffer[i - n_tree_].prepared);
       }
       const double centroid =
           t->centroids.LowerBound(query_centroid_.data(), query_.bands(), i);
@@ -232,11 +237,14 @@ class IndexCursor : public SignatureIndex::Cursor {
     if (relaxed_bound) {
       spec.lower_bounds.push_back([this](uint32_t i) {
         const PreparedSignature* p = Item(i);
-        return p == nullptr ? 0.0 : RelaxedTransportBound(query_, *p) + SpectralDistance(query_, *p);
+        return p == nullptr ? 0.0
+                            : RelaxedTransportBound(query_, *p) +
+                                  SpectralDistance(query_, *p);
       });
     }
     spec.accept = [this, s, t](uint32_t i) {
-      if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i))) return false;
+      if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i)))
+        return false;
       return !filter_ || filter_(Id(i));
     };
     spec.tie_less = [this](uint32_t a, uint32_t b) { return Id(a) < Id(b); };
@@ -340,11 +348,12 @@ void SignatureIndex::WaitForRebuild() {
 absl::Status SignatureIndex::Upsert(const std::string& id,
                                     const Signature& signature) {
   if (id.empty()) return absl::InvalidArgumentError("empty model id");
-  absl::StatusOr<PreparedSignature> prepared = Prepare(signature, options_.ground);
+  absl::StatusOr<PreparedSignature> prepared =
+      Prepare(signature, options_.ground);
   if (!prepared.ok()) {
-    return absl::Status(prepared.status().code(),
-                        absl::StrCat("signature of '", id, "': ",
-                                     prepared.status().message()));
+    return absl::Status(
+        prepared.status().code(),
+        absl::StrCat("signature of '", id, "': ", prepared.status().message()));
   }
   const uint64_t fingerprint = Fingerprint(*prepared);
   auto shared = std::make_shared<const PreparedSignature>(*std::move(prepared));
@@ -364,13 +373,14 @@ absl::Status SignatureIndex::UpsertBatch(
     if (id.empty()) return absl::InvalidArgumentError("empty model id");
     absl::StatusOr<PreparedSignature> p = Prepare(signature, options_.ground);
     if (!p.ok()) {
-      return absl::Status(p.status().code(),
-                          absl::StrCat("signature of '", id, "': ",
-                                       p.status().message()));
+      return absl::Status(
+          p.status().code(),
+          absl::StrCat("signature of '", id, "': ", p.status().message()));
     }
     const uint64_t fingerprint = Fingerprint(*p);
     prepared.push_back(
-        {id, std::make_shared<const PreparedSignature>(*std::move(p)), fingerprint});
+        {id, std::make_shared<const PreparedSignature>(*std::move(p)),
+         fingerprint});
   }
   std::lock_guard<std::mutex> lock(mu_);
   auto next = std::make_shared<Snapshot>(*snapshot_);
@@ -420,7 +430,9 @@ size_t SignatureIndex::indexed() const {
 
 size_t SignatureIndex::buffered() const { return snapshot()->buffer.size(); }
 
-size_t SignatureIndex::tombstoned() const { return snapshot()->tombstones.size(); }
+size_t SignatureIndex::tombstoned() const {
+  return snapshot()->tombstones.size();
+}
 
 size_t SignatureIndex::MemoryBytes() const {
   const std::shared_ptr<const Snapshot> s = snapshot();
@@ -446,8 +458,8 @@ size_t SignatureIndex::MemoryBytes() const {
   for (const BufferEntry& e : s->buffer) {
     bytes += sizeof(BufferEntry) + string_bytes(e.id);
     if (e.prepared != nullptr) {
-      bytes += sizeof(PreparedSignature) + kControlBlock +
-               e.prepared->MemoryBytes();
+      bytes +=
+          sizeof(PreparedSignature) + kControlBlock + e.prepared->MemoryBytes();
     }
   }
   return bytes + s->tombstones.capacity() * sizeof(uint32_t);
@@ -459,9 +471,9 @@ absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
     std::function<bool()> stop) const {
   absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
   if (!prepared.ok()) {
-    return absl::Status(prepared.status().code(),
-                        absl::StrCat("query signature: ",
-                                     prepared.status().message()));
+    return absl::Status(
+        prepared.status().code(),
+        absl::StrCat("query signature: ", prepared.status().message()));
   }
   if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
@@ -528,7 +540,9 @@ void SignatureIndex::Rebuild() {
   const std::vector<PreparedPtr>& items = part->prepared;
   absl::StatusOr<VpTree> tree = VpTree::Build(
       items.size(),
-      [&items](uint32_t i, uint32_t j) { return Distance(*items[i], *items[j]); },
+      [&items](uint32_t i, uint32_t j) {
+        return Distance(*items[i], *items[j]);
+      },
       options_.tree, &cancel_);
   std::lock_guard<std::mutex> lock(mu_);
   journal_ = nullptr;
@@ -619,7 +633,8 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     ByteReader tail(bytes.substr(body));
     uint64_t checksum = 0;
     tail.U(8, &checksum);
-    if (checksum != Fnv1a(bytes.data(), body)) return Corrupt("checksum mismatch");
+    if (checksum != Fnv1a(bytes.data(), body))
+      return Corrupt("checksum mismatch");
   }
   ByteReader r(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
   const std::vector<double> want = OptionValues(options.ground);
@@ -642,7 +657,8 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   for (uint64_t i = 0; i < n; ++i) {
     uint64_t len;
     absl::string_view id;
-    if (!r.U(4, &len) || !r.Bytes(len, &id) || !r.U(8, &part->fingerprints[i])) {
+    if (!r.U(4, &len) || !r.Bytes(len, &id) ||
+        !r.U(8, &part->fingerprints[i])) {
       return Corrupt("truncated id table");
     }
     part->ids[i] = std::string(id);
@@ -664,21 +680,25 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   std::vector<bool> seen(n, false);
   std::unordered_map<std::string, bool> given;
   for (const auto& [id, signature] : items) {
-    if (id.empty()) return absl::InvalidArgumentError("empty model id in items");
+    if (id.empty())
+      return absl::InvalidArgumentError("empty model id in items");
     if (!given.emplace(id, true).second) {
-      return absl::InvalidArgumentError(absl::StrCat("duplicate id '", id, "' in items"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("duplicate id '", id, "' in items"));
     }
     absl::StatusOr<PreparedSignature> prepared =
         Prepare(signature, index->options_.ground);
     if (!prepared.ok()) {
       return absl::Status(prepared.status().code(),
-                          absl::StrCat("signature of '", id, "': ",
-                                       prepared.status().message()));
+                          absl::StrCat("signature of '", id,
+                                       "': ", prepared.status().message()));
     }
     const uint64_t fingerprint = Fingerprint(*prepared);
-    auto shared = std::make_shared<const PreparedSignature>(*std::move(prepared));
+    auto shared =
+        std::make_shared<const PreparedSignature>(*std::move(prepared));
     const int64_t item = part->ItemOf(id);
-    if (item >= 0 && part->fingerprints[static_cast<size_t>(item)] == fingerprint) {
+    if (item >= 0 &&
+        part->fingerprints[static_cast<size_t>(item)] == fingerprint) {
       part->prepared[static_cast<size_t>(item)] = std::move(shared);
       seen[static_cast<size_t>(item)] = true;
     } else {
@@ -687,8 +707,9 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
       snap->buffer.push_back({id, std::move(shared), fingerprint});
     }
   }
-  std::sort(snap->buffer.begin(), snap->buffer.end(),
-            [](const BufferEntry& a, const BufferEntry& b) { return a.id < b.id; });
+  std::sort(
+      snap->buffer.begin(), snap->buffer.end(),
+      [](const BufferEntry& a, const BufferEntry& b) { return a.id < b.id; });
   for (uint32_t i = 0; i < n; ++i) {
     if (!seen[i]) snap->tombstones.push_back(i);
   }

@@ -130,7 +130,9 @@ class SignatureIndex {
   size_t tombstoned() const;
   // rebuilds returns how many tree rebuilds completed since construction
   // (background or called). O(1); thread-safe.
-  uint64_t rebuilds() const { return rebuilds_.load(std::memory_order_relaxed); }
+  uint64_t rebuilds() const {
+    return rebuilds_.load(std::memory_order_relaxed);
+  }
   // MemoryBytes returns the heap bytes of the current snapshot: prepared
   // signatures, centroid table, VP-tree, ids and id map (an estimate for
   // the containers' node overheads). O(size()); thread-safe.

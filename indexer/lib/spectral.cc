@@ -18,13 +18,15 @@ const char* SpectralTransformName(SpectralTransform t) {
   return "?";
 }
 
-absl::StatusOr<SpectralTransform> ParseSpectralTransform(absl::string_view name) {
+absl::StatusOr<SpectralTransform> ParseSpectralTransform(
+    absl::string_view name) {
   for (SpectralTransform t :
-       {SpectralTransform::kRaw, SpectralTransform::kByIndex, SpectralTransform::kLog}) {
+       {SpectralTransform::kRaw, SpectralTransform::kByIndex,
+        SpectralTransform::kLog}) {
     if (name == SpectralTransformName(t)) return t;
   }
-  return absl::InvalidArgumentError(
-      absl::StrCat("spectral transform '", name, "' is not one of raw, by_index, log"));
+  return absl::InvalidArgumentError(absl::StrCat(
+      "spectral transform '", name, "' is not one of raw, by_index, log"));
 }
 
 absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
@@ -33,8 +35,9 @@ absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
         absl::StrCat("spectral weight ", o.weight, " must be finite and >= 0"));
   }
   if (o.eigenvalues < 1 || o.eigenvalues > kMaxSpectrum) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "spectral eigenvalues ", o.eigenvalues, " must be in 1..", kMaxSpectrum));
+    return absl::InvalidArgumentError(
+        absl::StrCat("spectral eigenvalues ", o.eigenvalues, " must be in 1..",
+                     kMaxSpectrum));
   }
   switch (o.transform) {
     case SpectralTransform::kRaw:
@@ -42,7 +45,8 @@ absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
     case SpectralTransform::kLog:
       return absl::OkStatus();
   }
-  return absl::InvalidArgumentError("spectral transform is not raw, by_index or log");
+  return absl::InvalidArgumentError(
+      "spectral transform is not raw, by_index or log");
 }
 
 std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,

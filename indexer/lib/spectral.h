@@ -40,7 +40,8 @@ enum class SpectralTransform { kRaw, kByIndex, kLog };
 // SpectralTransformName returns "raw", "by_index" or "log".
 const char* SpectralTransformName(SpectralTransform t);
 // ParseSpectralTransform is its inverse; INVALID_ARGUMENT for another name.
-absl::StatusOr<SpectralTransform> ParseSpectralTransform(absl::string_view name);
+absl::StatusOr<SpectralTransform> ParseSpectralTransform(
+    absl::string_view name);
 
 // kMaxSpectrum: the longest spectrum a signature may carry and the largest
 // options.eigenvalues.

@@ -505,8 +505,8 @@ class VpCursor : public NeighborCursor {
       // data() + offset, not &v[offset]: a tree that is one leaf has no
       // stored distances, and indexing an empty vector is undefined
       // (UBSan, found by tests/fuzz fuzz_vp_tree_load).
-      const double* row =
-          data_->item_dists.data() + data_->item_row[data_->leaf_items[node.begin]];
+      const double* row = data_->item_dists.data() +
+                          data_->item_row[data_->leaf_items[node.begin]];
       for (uint32_t p = node.begin; p < node.end; ++p, row += depth) {
         double bound = e.key;
         for (uint32_t j = 0; j < depth; ++j) {
@@ -562,9 +562,8 @@ void VpCursor::RefineBatch(const Entry& e) {
          (queue_.top().kind == kItemBound || queue_.top().kind == kRun)) {
     batch_.push_back(PopItemOrNode());
   }
-  const double cutoff = queue_.empty()
-                            ? std::numeric_limits<double>::infinity()
-                            : queue_.top().key;
+  const double cutoff = queue_.empty() ? std::numeric_limits<double>::infinity()
+                                       : queue_.top().key;
   const size_t levels = spec_.lower_bounds.size();
   slots_.assign(batch_.size(), Slot{});
   spec_.parallel_for(batch_.size(), [&](size_t i) {
@@ -696,8 +695,9 @@ class VpTreeReader {
     uint64_t version = 0;
     r.U(2, &version);
     if (version != kVersion) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "VP-tree bytes of version ", version, "; this build reads ", kVersion));
+      return absl::InvalidArgumentError(
+          absl::StrCat("VP-tree bytes of version ", version,
+                       "; this build reads ", kVersion));
     }
     if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
     const size_t body = bytes.size() - 8;
@@ -712,12 +712,14 @@ class VpTreeReader {
     VpTree tree;
     VpTree::Data& d = *tree.data_;
     uint32_t n_nodes;
-    if (!r.U32(&d.n_items) || !r.U32(&n_nodes)) return Corrupt("truncated header");
+    if (!r.U32(&d.n_items) || !r.U32(&n_nodes))
+      return Corrupt("truncated header");
     if (d.n_items == kNone) return Corrupt("item count");
     if (static_cast<uint64_t>(n_nodes) * 24 > r.remaining()) {
       return Corrupt("node count exceeds the bytes");
     }
-    if ((n_nodes == 0) != (d.n_items == 0)) return Corrupt("empty tree mismatch");
+    if ((n_nodes == 0) != (d.n_items == 0))
+      return Corrupt("empty tree mismatch");
     d.nodes.resize(n_nodes);
     for (VpTree::Node& n : d.nodes) {
       r.U32(&n.parent);
@@ -754,7 +756,8 @@ class VpTreeReader {
         if (n.parent >= i) return Corrupt(absl::StrCat("node ", i, " parent"));
         const VpTree::Node& p = d.nodes[n.parent];
         if (p.inner != i && p.outer != i) {
-          return Corrupt(absl::StrCat("node ", i, " not a child of its parent"));
+          return Corrupt(
+              absl::StrCat("node ", i, " not a child of its parent"));
         }
         n.depth = p.depth + 1;
       }

@@ -154,9 +154,9 @@ class VpTree {
   // n >= 2^32 - 1, CANCELLED when *cancel becomes true meanwhile.
   // Cost: about n * (log2(n / leaf_size) + 1) distances plus
   // vantage_candidates * vantage_sample per large node; O(n log n) memory.
-  static absl::StatusOr<VpTree> Build(size_t n, const PairDistance& distance,
-                                      const VpTreeOptions& options,
-                                      const std::atomic<bool>* cancel = nullptr);
+  static absl::StatusOr<VpTree> Build(
+      size_t n, const PairDistance& distance, const VpTreeOptions& options,
+      const std::atomic<bool>* cancel = nullptr);
 
   // size returns the number of items indexed.
   size_t size() const;

@@ -25,14 +25,15 @@ std::string EncodeSlot(const Acknowledged& state) {
 }
 
 std::optional<Acknowledged> DecodeSlot(absl::string_view bytes) {
-  if (bytes.size() < kSlotBytes || bytes.substr(0, 8) != absl::string_view(kMagic, 8)) {
+  if (bytes.size() < kSlotBytes ||
+      bytes.substr(0, 8) != absl::string_view(kMagic, 8)) {
     return std::nullopt;
   }
   tpr::index::ByteReader reader(bytes.substr(8, kSlotBytes - 8));
   Acknowledged state;
   uint64_t sum = 0;
-  if (!reader.U(8, &state.writes) || !reader.U(8, &state.models) || !reader.U(8, &sum) ||
-      sum != tpr::index::Fnv1a(bytes.data(), 24)) {
+  if (!reader.U(8, &state.writes) || !reader.U(8, &state.models) ||
+      !reader.U(8, &sum) || sum != tpr::index::Fnv1a(bytes.data(), 24)) {
     return std::nullopt;
   }
   return state;
@@ -49,7 +50,8 @@ absl::Status IoError(absl::string_view what) {
 
 }  // namespace
 
-absl::StatusOr<std::unique_ptr<AckFile>> AckFile::Open(const std::string& dir, bool create) {
+absl::StatusOr<std::unique_ptr<AckFile>> AckFile::Open(const std::string& dir,
+                                                       bool create) {
   const std::string path = dir + "/" + kName;
   int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0 && errno == ENOENT) {
@@ -75,17 +77,19 @@ absl::StatusOr<std::unique_ptr<AckFile>> AckFile::Open(const std::string& dir, b
     return IoError("cannot read");
   }
   const absl::string_view all(bytes, static_cast<size_t>(n));
-  std::optional<Acknowledged> slots[2] = {DecodeSlot(all.substr(0, kSlotBytes)),
-                                          all.size() > kSlotBytes
-                                              ? DecodeSlot(all.substr(kSlotBytes))
-                                              : std::nullopt};
+  std::optional<Acknowledged> slots[2] = {
+      DecodeSlot(all.substr(0, kSlotBytes)),
+      all.size() > kSlotBytes ? DecodeSlot(all.substr(kSlotBytes))
+                              : std::nullopt};
   if (n == 0) return std::unique_ptr<AckFile>(new AckFile(fd, std::nullopt, 0));
   if (!slots[0] && !slots[1]) {
     ::close(fd);
     return absl::DataLossError(absl::StrCat(
-        kName, " is damaged (", n, " bytes, no valid record): what was acknowledged is unknown"));
+        kName, " is damaged (", n,
+        " bytes, no valid record): what was acknowledged is unknown"));
   }
-  const int latest = !slots[1] || (slots[0] && slots[0]->writes >= slots[1]->writes) ? 0 : 1;
+  const int latest =
+      !slots[1] || (slots[0] && slots[0]->writes >= slots[1]->writes) ? 0 : 1;
   return std::unique_ptr<AckFile>(new AckFile(fd, slots[latest], 1 - latest));
 }
 
@@ -94,7 +98,8 @@ AckFile::~AckFile() { ::close(fd_); }
 absl::Status AckFile::Record(const Acknowledged& state) {
   const std::string slot = EncodeSlot(state);
   const off_t offset = static_cast<off_t>(next_slot_ * kSlotBytes);
-  if (::pwrite(fd_, slot.data(), slot.size(), offset) != static_cast<ssize_t>(slot.size())) {
+  if (::pwrite(fd_, slot.data(), slot.size(), offset) !=
+      static_cast<ssize_t>(slot.size())) {
     return IoError("cannot write");
   }
   if (::fdatasync(fd_) != 0) return IoError("cannot sync");

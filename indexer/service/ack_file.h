@@ -47,7 +47,8 @@ class AckFile {
   // is false, DATA_LOSS when it exists but neither slot is valid,
   // UNAVAILABLE on an I/O error. Cost: one small read (plus two fsyncs when
   // created).
-  static absl::StatusOr<std::unique_ptr<AckFile>> Open(const std::string& dir, bool create);
+  static absl::StatusOr<std::unique_ptr<AckFile>> Open(const std::string& dir,
+                                                       bool create);
 
   ~AckFile();
   AckFile(const AckFile&) = delete;

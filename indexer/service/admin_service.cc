@@ -49,15 +49,16 @@ grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
                                          const tpr::v1::BackupRequest* request,
                                          tpr::v1::BackupResponse* response) {
   if (request->keep_last() < 0) {
-    return common::ToGrpcStatus(absl::InvalidArgumentError(
-        absl::StrCat("keep_last is ", request->keep_last(), "; it must be >= 0")));
+    return common::ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
+        "keep_last is ", request->keep_last(), "; it must be >= 0")));
   }
   // The tree goes into the backup as it is now, so a restore loads it
   // instead of rebuilding.
-  if (absl::Status st = core_->PersistTree(); !st.ok()) return common::ToGrpcStatus(st);
+  if (absl::Status st = core_->PersistTree(); !st.ok())
+    return common::ToGrpcStatus(st);
   const int64_t models = static_cast<int64_t>(core_->storage().model_count());
-  absl::StatusOr<BackupResult> backup =
-      CreateBackup(core_->storage(), request->backup_dir(), request->keep_last());
+  absl::StatusOr<BackupResult> backup = CreateBackup(
+      core_->storage(), request->backup_dir(), request->keep_last());
   if (!backup.ok()) return common::ToGrpcStatus(backup.status());
   response->set_backup_id(backup->backup_id);
   response->set_size_bytes(backup->size_bytes);
@@ -67,23 +68,25 @@ grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
   response->set_unix_seconds(backup->unix_seconds);
   response->set_verified(true);
   if (options_.log) {
-    options_.log(absl::StrCat("backup ", backup->backup_id, " verified: ", backup->files,
-                              " files, ", backup->size_bytes, " bytes (", backup->copied_bytes,
-                              " copied)"));
+    options_.log(absl::StrCat(
+        "backup ", backup->backup_id, " verified: ", backup->files, " files, ",
+        backup->size_bytes, " bytes (", backup->copied_bytes, " copied)"));
   }
   return grpc::Status::OK;
 }
 
-grpc::Status IndexerAdminService::Restore(grpc::ServerContext*,
-                                          const tpr::v1::RestoreRequest* request,
-                                          tpr::v1::RestoreResponse* response) {
-  if (!request->data_dir().empty() && SamePath(request->data_dir(), core_->storage().dir())) {
+grpc::Status IndexerAdminService::Restore(
+    grpc::ServerContext*, const tpr::v1::RestoreRequest* request,
+    tpr::v1::RestoreResponse* response) {
+  if (!request->data_dir().empty() &&
+      SamePath(request->data_dir(), core_->storage().dir())) {
     return common::ToGrpcStatus(absl::FailedPreconditionError(
-        "data_dir is this indexer's own data directory; restore into an empty directory and "
+        "data_dir is this indexer's own data directory; restore into an empty "
+        "directory and "
         "start an indexer on it"));
   }
-  absl::StatusOr<RestoreResult> restored =
-      RestoreBackup(request->backup_dir(), request->backup_id(), request->data_dir());
+  absl::StatusOr<RestoreResult> restored = RestoreBackup(
+      request->backup_dir(), request->backup_id(), request->data_dir());
   if (!restored.ok()) return common::ToGrpcStatus(restored.status());
   // Counted by opening it as an indexer would (checks included).
   // create_if_missing: the database is there; ACKNOWLEDGED is made.
@@ -96,7 +99,8 @@ grpc::Status IndexerAdminService::Restore(grpc::ServerContext*,
   return grpc::Status::OK;
 }
 
-grpc::Status IndexerAdminService::Promote(grpc::ServerContext*, const tpr::v1::PromoteRequest*,
+grpc::Status IndexerAdminService::Promote(grpc::ServerContext*,
+                                          const tpr::v1::PromoteRequest*,
                                           tpr::v1::PromoteResponse* response) {
   if (follower_ == nullptr) return grpc::Status::OK;  // already a primary
   absl::StatusOr<tpr::v1::PromoteResponse> promoted = follower_->Promote();
@@ -120,15 +124,17 @@ grpc::Status IndexerAdminService::ReplicationStatus(
   return grpc::Status::OK;
 }
 
-grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
-                                             const tpr::v1::CheckpointRequest*,
-                                             grpc::ServerWriter<tpr::v1::CheckpointChunk>* writer) {
+grpc::Status IndexerAdminService::Checkpoint(
+    grpc::ServerContext* context, const tpr::v1::CheckpointRequest*,
+    grpc::ServerWriter<tpr::v1::CheckpointChunk>* writer) {
   if (!core_->following().empty()) {
-    return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
-        "this indexer is a follower of ", core_->following(), "; follow the primary")));
+    return common::ToGrpcStatus(absl::FailedPreconditionError(
+        absl::StrCat("this indexer is a follower of ", core_->following(),
+                     "; follow the primary")));
   }
-  const std::string dir = absl::StrCat(core_->storage().dir(), "/", kCheckpointPrefix,
-                                       getpid(), "-", ++checkpoints_);
+  const std::string dir =
+      absl::StrCat(core_->storage().dir(), "/", kCheckpointPrefix, getpid(),
+                   "-", ++checkpoints_);
   absl::StatusOr<uint64_t> sequence = CreateCheckpoint(core_->storage(), dir);
   struct Cleanup {
     std::string dir;
@@ -141,7 +147,8 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
   std::vector<std::string> files;
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    if (entry.is_regular_file()) files.push_back(entry.path().filename().string());
+    if (entry.is_regular_file())
+      files.push_back(entry.path().filename().string());
   }
   std::sort(files.begin(), files.end());
   std::string buffer(kChunkBytes, '\0');
@@ -149,7 +156,8 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
   for (const std::string& name : files) {
     std::FILE* f = std::fopen((dir + "/" + name).c_str(), "rb");
     if (f == nullptr) {
-      return common::ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
+      return common::ToGrpcStatus(absl::InternalError(
+          absl::StrCat("cannot read checkpoint file ", name)));
     }
     uint64_t offset = 0;
     bool first = true;
@@ -172,7 +180,8 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
     const bool failed = std::ferror(f) != 0;
     std::fclose(f);
     if (failed) {
-      return common::ToGrpcStatus(absl::InternalError(absl::StrCat("cannot read checkpoint file ", name)));
+      return common::ToGrpcStatus(absl::InternalError(
+          absl::StrCat("cannot read checkpoint file ", name)));
     }
   }
   absl::StatusOr<std::string> identity = DatabaseIdentity(core_->storage());
@@ -183,18 +192,19 @@ grpc::Status IndexerAdminService::Checkpoint(grpc::ServerContext* context,
   last.set_db_identity(*identity);
   writer->Write(last);
   if (options_.log) {
-    options_.log(absl::StrCat("sent a checkpoint at sequence ", *sequence, ": ", files.size(),
-                              " files, ", bytes, " bytes"));
+    options_.log(absl::StrCat("sent a checkpoint at sequence ", *sequence, ": ",
+                              files.size(), " files, ", bytes, " bytes"));
   }
   return grpc::Status::OK;
 }
 
-grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
-                                          const tpr::v1::TailLogRequest* request,
-                                          grpc::ServerWriter<tpr::v1::LogBatch>* writer) {
+grpc::Status IndexerAdminService::TailLog(
+    grpc::ServerContext* context, const tpr::v1::TailLogRequest* request,
+    grpc::ServerWriter<tpr::v1::LogBatch>* writer) {
   if (!core_->following().empty()) {
-    return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
-        "this indexer is a follower of ", core_->following(), "; follow the primary")));
+    return common::ToGrpcStatus(absl::FailedPreconditionError(
+        absl::StrCat("this indexer is a follower of ", core_->following(),
+                     "; follow the primary")));
   }
   Storage& storage = core_->storage();
   if (!request->db_identity().empty()) {
@@ -202,10 +212,12 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
     if (!identity.ok()) return common::ToGrpcStatus(identity.status());
     if (*identity != request->db_identity()) {
       return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
-          "this primary is database ", *identity, " but the follower copied database ",
-          request->db_identity(),
-          " (the primary was restored or replaced, or the follower points at the wrong "
-          "indexer); refusing to send another database's log: start the follower again from "
+          "this primary is database ", *identity,
+          " but the follower copied database ", request->db_identity(),
+          " (the primary was restored or replaced, or the follower points at "
+          "the wrong "
+          "indexer); refusing to send another database's log: start the "
+          "follower again from "
           "an empty directory")));
     }
   }
@@ -213,10 +225,12 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
   {
     const uint64_t latest = LatestSequence(storage);
     if (from > latest + 1) {
-      return common::ToGrpcStatus(absl::FailedPreconditionError(absl::StrCat(
-          "the follower asks for sequence ", from, " but this primary's latest is ", latest,
-          ": it is not this database's follower, or this primary lost writes; start the "
-          "follower from an empty directory")));
+      return common::ToGrpcStatus(absl::FailedPreconditionError(
+          absl::StrCat("the follower asks for sequence ", from,
+                       " but this primary's latest is ", latest,
+                       ": it is not this database's follower, or this primary "
+                       "lost writes; start the "
+                       "follower from an empty directory")));
     }
   }
   // One cursor for the whole stream: each poll reads only the new log.
@@ -225,7 +239,8 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
   while (!stopping_ && !context->IsCancelled()) {
     const uint64_t latest = LatestSequence(storage);
     if (from <= latest) {
-      absl::StatusOr<std::vector<LoggedBatch>> batches = cursor.Read(kLogMessageBytes);
+      absl::StatusOr<std::vector<LoggedBatch>> batches =
+          cursor.Read(kLogMessageBytes);
       if (!batches.ok()) return common::ToGrpcStatus(batches.status());
       for (LoggedBatch& b : *batches) {
         tpr::v1::LogBatch message;
@@ -248,7 +263,8 @@ grpc::Status IndexerAdminService::TailLog(grpc::ServerContext* context,
       if (!writer->Write(heartbeat)) return grpc::Status::OK;
       last_sent = std::chrono::steady_clock::now();
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(options_.tail_poll_ms));
+    std::this_thread::sleep_for(
+        std::chrono::milliseconds(options_.tail_poll_ms));
   }
   return grpc::Status::OK;
 }

@@ -37,21 +37,27 @@ struct AdminOptions {
 class IndexerAdminService final : public tpr::v1::IndexerAdmin::Service {
  public:
   // Removes checkpoint copies a crashed process left in the data directory.
-  IndexerAdminService(IndexerCore* core, Follower* follower, AdminOptions options);
+  IndexerAdminService(IndexerCore* core, Follower* follower,
+                      AdminOptions options);
 
-  grpc::Status Backup(grpc::ServerContext* context, const tpr::v1::BackupRequest* request,
+  grpc::Status Backup(grpc::ServerContext* context,
+                      const tpr::v1::BackupRequest* request,
                       tpr::v1::BackupResponse* response) override;
-  grpc::Status Restore(grpc::ServerContext* context, const tpr::v1::RestoreRequest* request,
+  grpc::Status Restore(grpc::ServerContext* context,
+                       const tpr::v1::RestoreRequest* request,
                        tpr::v1::RestoreResponse* response) override;
-  grpc::Status Promote(grpc::ServerContext* context, const tpr::v1::PromoteRequest* request,
+  grpc::Status Promote(grpc::ServerContext* context,
+                       const tpr::v1::PromoteRequest* request,
                        tpr::v1::PromoteResponse* response) override;
-  grpc::Status ReplicationStatus(grpc::ServerContext* context,
-                                 const tpr::v1::ReplicationStatusRequest* request,
-                                 tpr::v1::ReplicationStatusResponse* response) override;
-  grpc::Status Checkpoint(grpc::ServerContext* context,
-                          const tpr::v1::CheckpointRequest* request,
-                          grpc::ServerWriter<tpr::v1::CheckpointChunk>* writer) override;
-  grpc::Status TailLog(grpc::ServerContext* context, const tpr::v1::TailLogRequest* request,
+  grpc::Status ReplicationStatus(
+      grpc::ServerContext* context,
+      const tpr::v1::ReplicationStatusRequest* request,
+      tpr::v1::ReplicationStatusResponse* response) override;
+  grpc::Status Checkpoint(
+      grpc::ServerContext* context, const tpr::v1::CheckpointRequest* request,
+      grpc::ServerWriter<tpr::v1::CheckpointChunk>* writer) override;
+  grpc::Status TailLog(grpc::ServerContext* context,
+                       const tpr::v1::TailLogRequest* request,
                        grpc::ServerWriter<tpr::v1::LogBatch>* writer) override;
 
   // Stop ends every TailLog stream (they never end by themselves), so a

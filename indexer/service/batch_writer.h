@@ -4,7 +4,9 @@
 // group's fsync with receiving and validating the next one.
 //
 //   BatchWriter batch(core);
-//   while (reader->Read(&request)) TPR_RETURN_IF_ERROR(batch.Add(std::move(request)));
+//   while (reader->Read(&request)) {
+//     TPR_RETURN_IF_ERROR(batch.Add(std::move(request)));
+//   }
 //   absl::StatusOr<tpr::v1::BatchUpsertResponse> counts = batch.Finish();
 #ifndef TPR_INDEXER_SERVICE_BATCH_WRITER_H_
 #define TPR_INDEXER_SERVICE_BATCH_WRITER_H_
@@ -77,7 +79,7 @@ class BatchWriter {
 
   absl::Mutex mu_;
   std::optional<Group> handed_ ABSL_GUARDED_BY(mu_);  // waiting for the worker
-  bool busy_ ABSL_GUARDED_BY(mu_) = false;            // a group handed, not yet written
+  bool busy_ ABSL_GUARDED_BY(mu_) = false;  // a group handed, not yet written
   bool stopping_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status error_ ABSL_GUARDED_BY(mu_);
   tpr::v1::BatchUpsertResponse counts_ ABSL_GUARDED_BY(mu_);

@@ -17,17 +17,18 @@ constexpr double kAreaSlack = 1e-9;
 // CheckBand returns INVALID_ARGUMENT naming feature `i`, `field` and the
 // band at fault when an entry of `values` is not finite or outside [lo, hi].
 absl::Status CheckBand(int i, const char* field,
-                       const google::protobuf::RepeatedField<double>& values, double lo,
-                       double hi) {
+                       const google::protobuf::RepeatedField<double>& values,
+                       double lo, double hi) {
   for (int b = 0; b < values.size(); ++b) {
     const double x = values[b];
     if (!std::isfinite(x) || x < lo || x > hi) {
       const std::string range =
-          std::isfinite(hi) ? absl::StrCat(" and in [", lo, ", ", hi, "]")
+          std::isfinite(hi)   ? absl::StrCat(" and in [", lo, ", ", hi, "]")
           : std::isfinite(lo) ? absl::StrCat(" and >= ", lo)
                               : "";
-      return absl::InvalidArgumentError(absl::StrCat("signature feature ", i, ": ", field, "[",
-                                                     b, "] is ", x, "; must be finite", range));
+      return absl::InvalidArgumentError(
+          absl::StrCat("signature feature ", i, ": ", field, "[", b, "] is ", x,
+                       "; must be finite", range));
     }
   }
   return absl::OkStatus();
@@ -35,15 +36,18 @@ absl::Status CheckBand(int i, const char* field,
 
 }  // namespace
 
-absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s) {
+absl::StatusOr<tpr::index::Signature> ToIndexSignature(
+    const tpr::v1::Signature& s) {
   if (s.features_size() == 0) {
     return absl::InvalidArgumentError("signature has no feature");
   }
   if (s.signature_version() < kSignatureVersion) {
     return absl::FailedPreconditionError(absl::StrCat(
-        "signature version ", std::max(1, s.signature_version()), " is older than version ",
-        kSignatureVersion, " (which adds the Laplace-Beltrami spectrum) that this indexer "
-        "compares; re-extract the model with a current tpr-extractor: `tpr add --update`"));
+        "signature version ", std::max(1, s.signature_version()),
+        " is older than version ", kSignatureVersion,
+        " (which adds the Laplace-Beltrami spectrum) that this indexer "
+        "compares; re-extract the model with a current tpr-extractor: `tpr add "
+        "--update`"));
   }
   if (s.signature_version() > kSignatureVersion) {
     return absl::FailedPreconditionError(absl::StrCat(
@@ -57,38 +61,43 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature&
   }
   const int bands = s.options().bands();
   if (bands < 1 || bands > kMaxBands) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "signature options.bands is ", bands, "; must be in 1..", kMaxBands,
-        " (the extractor fills it)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("signature options.bands is ", bands, "; must be in 1..",
+                     kMaxBands, " (the extractor fills it)"));
   }
   constexpr double kInf = HUGE_VAL;
   tpr::index::Signature out;
   out.features.reserve(static_cast<size_t>(s.features_size()));
   for (int i = 0; i < s.features_size(); ++i) {
     const tpr::v1::Feature& f = s.features(i);
-    if (f.kind() != tpr::v1::FEATURE_KIND_POINT && f.kind() != tpr::v1::FEATURE_KIND_RING) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature feature ", i, " has no kind (point or ring)"));
-    }
-    if (f.curvature_size() != bands || f.area_size() != bands || f.distance_size() != bands) {
+    if (f.kind() != tpr::v1::FEATURE_KIND_POINT &&
+        f.kind() != tpr::v1::FEATURE_KIND_RING) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "signature feature ", i, ": curvature, area, distance have ", f.curvature_size(), ", ",
-          f.area_size(), ", ", f.distance_size(), " entries; each must have options.bands = ",
-          bands));
+          "signature feature ", i, " has no kind (point or ring)"));
+    }
+    if (f.curvature_size() != bands || f.area_size() != bands ||
+        f.distance_size() != bands) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "signature feature ", i, ": curvature, area, distance have ",
+          f.curvature_size(), ", ", f.area_size(), ", ", f.distance_size(),
+          " entries; each must have options.bands = ", bands));
     }
     if (!(f.weight() >= 0.0 && f.weight() < kInf)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "signature feature ", i, ": weight is ", f.weight(), "; must be finite and >= 0"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("signature feature ", i, ": weight is ", f.weight(),
+                       "; must be finite and >= 0"));
     }
     if (!(f.integral_geodesic() >= 0.0 && f.integral_geodesic() <= 1.0)) {
-      return absl::InvalidArgumentError(absl::StrCat("signature feature ", i,
-                                                     ": integral_geodesic is ",
-                                                     f.integral_geodesic(), "; must be in [0, 1]"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("signature feature ", i, ": integral_geodesic is ",
+                       f.integral_geodesic(), "; must be in [0, 1]"));
     }
-    if (absl::Status st =
-            CheckBand(i, "curvature", f.curvature(), -kMaxBandMagnitude, kMaxBandMagnitude);
-        !st.ok() || !(st = CheckBand(i, "area", f.area(), 0.0, 1.0 + kAreaSlack)).ok() ||
-        !(st = CheckBand(i, "distance", f.distance(), 0.0, kMaxBandMagnitude)).ok()) {
+    if (absl::Status st = CheckBand(i, "curvature", f.curvature(),
+                                    -kMaxBandMagnitude, kMaxBandMagnitude);
+        !st.ok() ||
+        !(st = CheckBand(i, "area", f.area(), 0.0, 1.0 + kAreaSlack)).ok() ||
+        !(st = CheckBand(i, "distance", f.distance(), 0.0, kMaxBandMagnitude))
+             .ok()) {
       return st;
     }
     tpr::index::Feature g;
@@ -102,29 +111,32 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature&
   // options.spectrum_eigenvalues 0 means "the default", so only the hard
   // bound applies then.
   const int requested = s.options().spectrum_eigenvalues();
-  const int max_spectrum =
-      requested > 0 ? std::min(requested, tpr::index::kMaxSpectrum) : tpr::index::kMaxSpectrum;
+  const int max_spectrum = requested > 0
+                               ? std::min(requested, tpr::index::kMaxSpectrum)
+                               : tpr::index::kMaxSpectrum;
   if (s.spectrum_size() > max_spectrum) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "signature spectrum has ", s.spectrum_size(), " values; at most ", max_spectrum,
-        " allowed (options.spectrum_eigenvalues is ", requested, ")"));
+        "signature spectrum has ", s.spectrum_size(), " values; at most ",
+        max_spectrum, " allowed (options.spectrum_eigenvalues is ", requested,
+        ")"));
   }
   for (int i = 0; i < s.spectrum_size(); ++i) {
     const double x = s.spectrum(i);
     if (!std::isfinite(x) || x <= 0.0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature spectrum[", i, "] is ", x, "; must be finite and > 0"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "signature spectrum[", i, "] is ", x, "; must be finite and > 0"));
     }
     if (i > 0 && x < s.spectrum(i - 1)) {
-      return absl::InvalidArgumentError(absl::StrCat("signature spectrum[", i, "] is ", x,
-                                                     ", below spectrum[", i - 1, "] = ",
-                                                     s.spectrum(i - 1), "; must be ascending"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "signature spectrum[", i, "] is ", x, ", below spectrum[", i - 1,
+          "] = ", s.spectrum(i - 1), "; must be ascending"));
     }
   }
   out.spectrum.assign(s.spectrum().begin(), s.spectrum().end());
   // What is left for the library's own check: the weights' sum (Eq. 6).
   if (absl::Status valid = tpr::index::ValidateSignature(out); !valid.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("malformed signature: ", valid.message()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("malformed signature: ", valid.message()));
   }
   return out;
 }
@@ -143,7 +155,8 @@ tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points) {
     w->mutable_distance()->Add(f.distance.begin(), f.distance.end());
   }
   if (!s.features.empty()) {
-    out.mutable_options()->set_bands(static_cast<int>(s.features[0].curvature.size()));
+    out.mutable_options()->set_bands(
+        static_cast<int>(s.features[0].curvature.size()));
   }
   out.mutable_spectrum()->Add(s.spectrum.begin(), s.spectrum.end());
   out.mutable_options()->set_spectrum_eigenvalues(

@@ -7,7 +7,7 @@
 // (extractor/service/convert.h); nothing else copies fields.
 //
 //   absl::StatusOr<index::Signature> s = ToIndexSignature(request.signature());
-//   if (!s.ok()) return s.status();            // INVALID_ARGUMENT, names the field
+//   if (!s.ok()) return s.status();  // INVALID_ARGUMENT, names the field
 #ifndef TPR_INDEXER_SERVICE_CONVERT_H_
 #define TPR_INDEXER_SERVICE_CONVERT_H_
 
@@ -51,7 +51,8 @@ inline constexpr double kMaxBandMagnitude = 1e15;
 //    that is set, not
 //    ascending, or holding a value that is not finite and > 0.
 // O(features x bands); thread-safe.
-absl::StatusOr<tpr::index::Signature> ToIndexSignature(const tpr::v1::Signature& s);
+absl::StatusOr<tpr::index::Signature> ToIndexSignature(
+    const tpr::v1::Signature& s);
 
 // ToWireSignature is the inverse of ToIndexSignature for code that builds
 // library signatures directly (tests, benchmarks, fuzz seeds): features

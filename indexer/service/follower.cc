@@ -1,6 +1,8 @@
 #include "indexer/service/follower.h"
 
 #include <fcntl.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -9,9 +11,6 @@
 #include <fstream>
 #include <sstream>
 #include <utility>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/grpc_status.h"
@@ -30,11 +29,15 @@ int64_t NowMs() {
 }
 
 absl::Status FsyncPath(const std::string& path, bool directory) {
-  const int fd = open(path.c_str(), directory ? O_RDONLY | O_DIRECTORY : O_RDONLY);
-  if (fd < 0) return absl::UnavailableError(absl::StrCat("cannot open ", path, " to sync"));
+  const int fd =
+      open(path.c_str(), directory ? O_RDONLY | O_DIRECTORY : O_RDONLY);
+  if (fd < 0)
+    return absl::UnavailableError(
+        absl::StrCat("cannot open ", path, " to sync"));
   const int rc = fsync(fd);
   close(fd);
-  if (rc != 0) return absl::UnavailableError(absl::StrCat("cannot sync ", path));
+  if (rc != 0)
+    return absl::UnavailableError(absl::StrCat("cannot sync ", path));
   return absl::OkStatus();
 }
 
@@ -47,12 +50,15 @@ absl::Status WriteMarker(const std::string& dir, const std::string& primary,
   {
     std::ofstream out(tmp, std::ios::trunc);
     out << "primary " << primary << "\nstate " << state << "\n";
-    if (!out.flush()) return absl::UnavailableError(absl::StrCat("cannot write ", tmp));
+    if (!out.flush())
+      return absl::UnavailableError(absl::StrCat("cannot write ", tmp));
   }
   TPR_RETURN_IF_ERROR(FsyncPath(tmp, false));
   std::error_code ec;
   fs::rename(tmp, path, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat("cannot rename ", tmp, ": ", ec.message()));
+  if (ec)
+    return absl::UnavailableError(
+        absl::StrCat("cannot rename ", tmp, ": ", ec.message()));
   return FsyncPath(dir, true);
 }
 
@@ -66,12 +72,15 @@ std::string ReadMarkerState(const std::string& dir) {
   return in.eof() || !state.empty() ? state : "";
 }
 
-grpc::ClientContext* Prepare(grpc::ClientContext* context, const std::string& api_key) {
-  if (!api_key.empty()) context->AddMetadata("authorization", absl::StrCat("Bearer ", api_key));
+grpc::ClientContext* Prepare(grpc::ClientContext* context,
+                             const std::string& api_key) {
+  if (!api_key.empty())
+    context->AddMetadata("authorization", absl::StrCat("Bearer ", api_key));
   return context;
 }
 
-std::unique_ptr<tpr::v1::IndexerAdmin::Stub> MakeStub(const FollowerOptions& options) {
+std::unique_ptr<tpr::v1::IndexerAdmin::Stub> MakeStub(
+    const FollowerOptions& options) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
   if (options.credentials != nullptr && !options.tls_server_name.empty()) {
@@ -79,7 +88,8 @@ std::unique_ptr<tpr::v1::IndexerAdmin::Stub> MakeStub(const FollowerOptions& opt
   }
   return tpr::v1::IndexerAdmin::NewStub(grpc::CreateCustomChannel(
       options.primary,
-      options.credentials != nullptr ? options.credentials : grpc::InsecureChannelCredentials(),
+      options.credentials != nullptr ? options.credentials
+                                     : grpc::InsecureChannelCredentials(),
       args));
 }
 
@@ -110,7 +120,8 @@ absl::StatusOr<Copied> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
     std::fclose(file);
     file = nullptr;
     return ok ? absl::OkStatus()
-              : absl::UnavailableError(absl::StrCat("cannot write ", open_name));
+              : absl::UnavailableError(
+                    absl::StrCat("cannot write ", open_name));
   };
   while (failed.ok() && reader->Read(&chunk)) {
     if (chunk.done()) {
@@ -120,9 +131,10 @@ absl::StatusOr<Copied> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
       continue;
     }
     const std::string& name = chunk.file();
-    if (name.empty() || name.find('/') != std::string::npos || name == "." || name == "..") {
-      failed = absl::InvalidArgumentError(
-          absl::StrCat("the primary sent a bad checkpoint file name '", name, "'"));
+    if (name.empty() || name.find('/') != std::string::npos || name == "." ||
+        name == "..") {
+      failed = absl::InvalidArgumentError(absl::StrCat(
+          "the primary sent a bad checkpoint file name '", name, "'"));
       break;
     }
     if (name != open_name) {
@@ -137,7 +149,8 @@ absl::StatusOr<Copied> FetchCheckpoint(tpr::v1::IndexerAdmin::Stub& stub,
       files.push_back(name);
     }
     if (!chunk.data().empty() &&
-        std::fwrite(chunk.data().data(), 1, chunk.data().size(), file) != chunk.data().size()) {
+        std::fwrite(chunk.data().data(), 1, chunk.data().size(), file) !=
+            chunk.data().size()) {
       failed = absl::UnavailableError(absl::StrCat("cannot write ", name));
     }
   }
@@ -159,7 +172,9 @@ absl::Status EmptyDir(const std::string& dir) {
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     fs::remove_all(entry.path(), ec);
-    if (ec) return absl::UnavailableError(absl::StrCat("cannot empty ", dir, ": ", ec.message()));
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat("cannot empty ", dir, ": ", ec.message()));
   }
   return absl::OkStatus();
 }
@@ -170,13 +185,17 @@ absl::Status PrepareFollowerDir(const FollowerOptions& options) {
   const std::string& dir = options.data_dir;
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat("cannot create ", dir, ": ", ec.message()));
+  if (ec)
+    return absl::UnavailableError(
+        absl::StrCat("cannot create ", dir, ": ", ec.message()));
   const std::string state = ReadMarkerState(dir);
   if (state == "ready") return absl::OkStatus();
   if (state.empty() && !fs::is_empty(dir, ec)) {
     return absl::FailedPreconditionError(absl::StrCat(
-        "data directory '", dir, "' holds data that is not a follower's (no ", kFollowerMarker,
-        " file: a primary's or a promoted follower's); --follow needs an empty directory or a "
+        "data directory '", dir, "' holds data that is not a follower's (no ",
+        kFollowerMarker,
+        " file: a primary's or a promoted follower's); --follow needs an empty "
+        "directory or a "
         "follower's, and never wipes a primary"));
   }
   auto log = [&](const std::string& line) {
@@ -198,26 +217,31 @@ absl::Status PrepareFollowerDir(const FollowerOptions& options) {
         // store itself. The database is there; Open makes its ACKNOWLEDGED
         // record.
         StorageOptions storage_options;
-        TPR_ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage, Storage::Open(dir, storage_options));
+        TPR_ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage,
+                             Storage::Open(dir, storage_options));
         TPR_RETURN_IF_ERROR(SetPrimaryIdentity(*storage, sequence->identity));
         TPR_RETURN_IF_ERROR(SetAppliedSequence(*storage, sequence->sequence));
       }
       TPR_RETURN_IF_ERROR(WriteMarker(dir, options.primary, "ready"));
-      const double ms =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-              .count();
-      log(absl::StrCat("copied a checkpoint of ", options.primary, " (database ",
-                       sequence->identity, ") at sequence ", sequence->sequence, " in ",
-                       static_cast<int64_t>(ms), " ms"));
+      const double ms = std::chrono::duration<double, std::milli>(
+                            std::chrono::steady_clock::now() - start)
+                            .count();
+      log(absl::StrCat("copied a checkpoint of ", options.primary,
+                       " (database ", sequence->identity, ") at sequence ",
+                       sequence->sequence, " in ", static_cast<int64_t>(ms),
+                       " ms"));
       return absl::OkStatus();
     }
-    if (!absl::IsUnavailable(sequence.status()) && !absl::IsDeadlineExceeded(sequence.status())) {
-      return absl::Status(sequence.status().code(),
-                          absl::StrCat("cannot copy a checkpoint of ", options.primary, ": ",
-                                       sequence.status().message()));
+    if (!absl::IsUnavailable(sequence.status()) &&
+        !absl::IsDeadlineExceeded(sequence.status())) {
+      return absl::Status(
+          sequence.status().code(),
+          absl::StrCat("cannot copy a checkpoint of ", options.primary, ": ",
+                       sequence.status().message()));
     }
     log(absl::StrCat("cannot copy a checkpoint of ", options.primary, " (",
-                     sequence.status().ToString(), "); retrying in ", wait_ms, " ms"));
+                     sequence.status().ToString(), "); retrying in ", wait_ms,
+                     " ms"));
     std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));
     wait_ms = std::min(wait_ms * 2, options.retry_max_ms);
   }
@@ -229,7 +253,8 @@ Follower::Follower(IndexerCore* core, FollowerOptions options)
 Follower::~Follower() { Stop(); }
 
 void Follower::Start(std::function<void()> on_resync) {
-  thread_ = std::thread([this, on_resync = std::move(on_resync)] { Run(on_resync); });
+  thread_ =
+      std::thread([this, on_resync = std::move(on_resync)] { Run(on_resync); });
 }
 
 void Follower::Stop() {
@@ -246,12 +271,13 @@ std::string Follower::Readiness() const {
   {
     absl::MutexLock lock(&state_mu_);
     if (!refused_.empty()) {
-      return absl::StrCat("the primary ", options_.primary, " refuses to be tailed: ", refused_);
+      return absl::StrCat("the primary ", options_.primary,
+                          " refuses to be tailed: ", refused_);
     }
   }
   if (caught_up_) return "";
-  return absl::StrCat("catching up with ", options_.primary, ": applied ", applied_.load(),
-                      ", primary at ", primary_seq_.load());
+  return absl::StrCat("catching up with ", options_.primary, ": applied ",
+                      applied_.load(), ", primary at ", primary_seq_.load());
 }
 
 tpr::v1::ReplicationStatusResponse Follower::Status() const {
@@ -287,8 +313,8 @@ absl::StatusOr<tpr::v1::PromoteResponse> Follower::Promote() {
   std::error_code ec;
   fs::remove(options_.data_dir + "/" + kFollowerMarker, ec);
   if (ec) {
-    return absl::UnavailableError(
-        absl::StrCat("promoted, but cannot remove the follower marker: ", ec.message()));
+    return absl::UnavailableError(absl::StrCat(
+        "promoted, but cannot remove the follower marker: ", ec.message()));
   }
   TPR_RETURN_IF_ERROR(FsyncPath(options_.data_dir, true));
   promoted_ = true;
@@ -306,7 +332,8 @@ void Follower::Run(std::function<void()> on_resync) {
   auto log = [this](const std::string& line) {
     if (options_.log) options_.log(line);
   };
-  absl::StatusOr<std::optional<uint64_t>> applied = AppliedSequence(core_->storage());
+  absl::StatusOr<std::optional<uint64_t>> applied =
+      AppliedSequence(core_->storage());
   if (!applied.ok() || !applied->has_value()) {
     log(absl::StrCat("no applied sequence in the store (",
                      applied.ok() ? "missing" : applied.status().ToString(),
@@ -318,8 +345,8 @@ void Follower::Run(std::function<void()> on_resync) {
   applied_ = **applied;
   absl::StatusOr<std::string> identity = PrimaryIdentity(core_->storage());
   if (!identity.ok()) {
-    log(absl::StrCat("cannot read the primary's identity (", identity.status().ToString(),
-                     "); not tailing"));
+    log(absl::StrCat("cannot read the primary's identity (",
+                     identity.status().ToString(), "); not tailing"));
     absl::MutexLock lock(&state_mu_);
     refused_ = identity.status().ToString();
     return;
@@ -351,11 +378,14 @@ void Follower::Run(std::function<void()> on_resync) {
       if (!heard) {
         heard = true;
         absl::MutexLock lock(&state_mu_);
-        if (!refused_.empty()) log(absl::StrCat("the primary ", options_.primary, " accepts us again"));
+        if (!refused_.empty())
+          log(absl::StrCat("the primary ", options_.primary,
+                           " accepts us again"));
         refused_.clear();
       }
       if (!batch.batch().empty()) {
-        absl::StatusOr<uint64_t> now = core_->ApplyReplicated(batch.batch(), batch.sequence());
+        absl::StatusOr<uint64_t> now =
+            core_->ApplyReplicated(batch.batch(), batch.sequence());
         if (!now.ok()) {
           failed = now.status();
           break;
@@ -365,7 +395,8 @@ void Follower::Run(std::function<void()> on_resync) {
       primary_seq_ = std::max(primary_seq_.load(), batch.primary_sequence());
       if (applied_.load() >= batch.primary_sequence() && !caught_up_) {
         caught_up_ = true;
-        log(absl::StrCat("caught up with ", options_.primary, " at sequence ", applied_.load()));
+        log(absl::StrCat("caught up with ", options_.primary, " at sequence ",
+                         applied_.load()));
       }
       wait_ms = options_.retry_min_ms;
     }
@@ -376,10 +407,12 @@ void Follower::Run(std::function<void()> on_resync) {
       context_ = nullptr;
       if (stopping_) return;
     }
-    absl::Status status = failed.ok() ? tpr::common::FromGrpcStatus(finished) : failed;
+    absl::Status status =
+        failed.ok() ? tpr::common::FromGrpcStatus(finished) : failed;
     if (absl::IsOutOfRange(status)) {
       log(absl::StrCat("fell behind the log ", options_.primary, " keeps (",
-                       status.message(), "); starting again from a fresh copy"));
+                       status.message(),
+                       "); starting again from a fresh copy"));
       WriteMarker(options_.data_dir, options_.primary, "resync").IgnoreError();
       if (on_resync) on_resync();
       return;
@@ -398,7 +431,8 @@ void Follower::Run(std::function<void()> on_resync) {
       wait_ms = options_.retry_max_ms;
     }
     if (error != last_error) {
-      log(absl::StrCat("tailing ", options_.primary, " stopped (", error, "); retrying"));
+      log(absl::StrCat("tailing ", options_.primary, " stopped (", error,
+                       "); retrying"));
       last_error = error;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));

@@ -37,6 +37,9 @@
 #ifndef TPR_INDEXER_SERVICE_FOLLOWER_H_
 #define TPR_INDEXER_SERVICE_FOLLOWER_H_
 
+#include <grpcpp/client_context.h>
+#include <grpcpp/security/credentials.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -44,9 +47,6 @@
 #include <memory>
 #include <string>
 #include <thread>
-
-#include <grpcpp/client_context.h>
-#include <grpcpp/security/credentials.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"

@@ -65,8 +65,8 @@ absl::Status CheckText(absl::string_view text, absl::string_view what) {
     }
     if (cp < 0x20 || (cp >= 0x7f && cp <= 0x9f)) {
       return absl::InvalidArgumentError(absl::StrCat(
-          what, " holds control character ", absl::StrFormat("U+%04X", cp), " (byte ", i,
-          "); ids and labels are printable UTF-8"));
+          what, " holds control character ", absl::StrFormat("U+%04X", cp),
+          " (byte ", i, "); ids and labels are printable UTF-8"));
     }
     i += len;
   }
@@ -76,8 +76,9 @@ absl::Status CheckText(absl::string_view text, absl::string_view what) {
 absl::Status CheckId(const std::string& id) {
   if (id.empty()) return absl::InvalidArgumentError("model id is empty");
   if (id.size() > kMaxIdBytes) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "model id is ", id.size(), " bytes; at most ", kMaxIdBytes, " allowed"));
+    return absl::InvalidArgumentError(absl::StrCat("model id is ", id.size(),
+                                                   " bytes; at most ",
+                                                   kMaxIdBytes, " allowed"));
   }
   return absl::OkStatus();
 }
@@ -88,15 +89,19 @@ absl::Status CheckId(const std::string& id) {
 // Open and load.
 
 IndexerCore::IndexerCore(CoreOptions options, std::unique_ptr<Storage> storage)
-    : options_(std::move(options)), storage_(std::move(storage)), follow_(options_.follow) {}
+    : options_(std::move(options)),
+      storage_(std::move(storage)),
+      follow_(options_.follow) {}
 
-absl::StatusOr<std::unique_ptr<IndexerCore>> IndexerCore::Open(CoreOptions options) {
+absl::StatusOr<std::unique_ptr<IndexerCore>> IndexerCore::Open(
+    CoreOptions options) {
   if (options.data_dir.empty()) {
     return absl::InvalidArgumentError("data directory is empty");
   }
   TPR_ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage,
                        Storage::Open(options.data_dir, options.storage));
-  std::unique_ptr<IndexerCore> core(new IndexerCore(std::move(options), std::move(storage)));
+  std::unique_ptr<IndexerCore> core(
+      new IndexerCore(std::move(options), std::move(storage)));
   TPR_RETURN_IF_ERROR(core->LoadIndex());
   core->persister_->Start();
   return core;
@@ -123,21 +128,24 @@ absl::Status IndexerCore::LoadIndex() {
     std::set<std::string> outdated;
     TPR_RETURN_IF_ERROR(storage_->ForEachModel(
         [&](uint64_t seq, tpr::v1::Model&& model) -> absl::Status {
-          absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+          absl::StatusOr<tpr::index::Signature> sig =
+              ToIndexSignature(model.signature());
           if (absl::IsFailedPrecondition(sig.status())) {
             // Another signature version: kept, listed, not indexed.
             absl::MutexLock items_lock(&items_mu);
-            infos.push_back({model.id(), {model.label(), model.added_unix_micros()}});
+            infos.push_back(
+                {model.id(), {model.label(), model.added_unix_micros()}});
             outdated.insert(model.id());
             return absl::OkStatus();
           }
           if (!sig.ok()) {
-            return absl::DataLossError(absl::StrCat("stored model '", model.id(),
-                                                    "': ", sig.status().message()));
+            return absl::DataLossError(absl::StrCat(
+                "stored model '", model.id(), "': ", sig.status().message()));
           }
           absl::MutexLock items_lock(&items_mu);
           if (seq > marker) ++after_marker;
-          infos.push_back({model.id(), {model.label(), model.added_unix_micros()}});
+          infos.push_back(
+              {model.id(), {model.label(), model.added_unix_micros()}});
           items.emplace_back(std::move(*model.mutable_id()), std::move(*sig));
           return absl::OkStatus();
         },
@@ -146,9 +154,10 @@ absl::Status IndexerCore::LoadIndex() {
     TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size() + outdated.size()));
     table_.Put(infos);
     if (!outdated.empty()) {
-      Log(absl::StrCat(outdated.size(), " stored models (e.g. '", *outdated.begin(),
-                       "') have an older signature version; they are kept but not searched "
-                       "until re-extracted with `tpr add --update`"));
+      Log(absl::StrCat(
+          outdated.size(), " stored models (e.g. '", *outdated.begin(),
+          "') have an older signature version; they are kept but not searched "
+          "until re-extracted with `tpr add --update`"));
     }
     absl::MutexLock view(&view_mu_);
     outdated_ = std::move(outdated);
@@ -168,16 +177,17 @@ absl::Status IndexerCore::LoadIndex() {
         tpr::index::SignatureIndex::Load(tree->bytes, items, options_.index);
     if (loaded.ok()) {
       index_ = std::move(*loaded);
-      persister_ = std::make_unique<TreePersister>(storage_.get(), index_.get(),
-                                                   std::move(persister_options));
+      persister_ = std::make_unique<TreePersister>(
+          storage_.get(), index_.get(), std::move(persister_options));
       persister_->MarkSaved(tree->bytes);
       const double ms = std::chrono::duration<double, std::milli>(
                             std::chrono::steady_clock::now() - start)
                             .count();
-      Log(absl::StrCat("opened ", items.size(), " models (", after_marker,
-                       " written after the last tree persist) from the persisted "
-                       "VP-tree in ",
-                       static_cast<int64_t>(ms), " ms"));
+      Log(absl::StrCat(
+          "opened ", items.size(), " models (", after_marker,
+          " written after the last tree persist) from the persisted "
+          "VP-tree in ",
+          static_cast<int64_t>(ms), " ms"));
       return absl::OkStatus();
     }
     Log(absl::StrCat("persisted VP-tree unusable (", loaded.status().ToString(),
@@ -196,16 +206,17 @@ absl::Status IndexerCore::LoadIndex() {
   TPR_RETURN_IF_ERROR(builder.UpsertBatch(items));
   builder.Rebuild();
   const std::string bytes = builder.SerializeTree();
-  TPR_ASSIGN_OR_RETURN(index_, tpr::index::SignatureIndex::Load(bytes, items, options_.index));
+  TPR_ASSIGN_OR_RETURN(
+      index_, tpr::index::SignatureIndex::Load(bytes, items, options_.index));
   if (!items.empty()) {
     TPR_RETURN_IF_ERROR(storage_->SaveTree(bytes, storage_->last_seq()));
   }
   persister_ = std::make_unique<TreePersister>(storage_.get(), index_.get(),
                                                std::move(persister_options));
   persister_->MarkSaved(bytes);
-  const double ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-          .count();
+  const double ms = std::chrono::duration<double, std::milli>(
+                        std::chrono::steady_clock::now() - start)
+                        .count();
   Log(absl::StrCat("opened ", items.size(), " models, VP-tree built in ",
                    static_cast<int64_t>(ms), " ms"));
   return absl::OkStatus();
@@ -231,21 +242,24 @@ absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
         absl::StrCat("model '", model.id(), "': ", label.message()));
   }
   if (model.label().size() > kMaxLabelBytes) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("model '", model.id(), "' has a label of ", model.label().size(),
-                     " bytes; at most ", kMaxLabelBytes, " allowed"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "model '", model.id(), "' has a label of ", model.label().size(),
+        " bytes; at most ", kMaxLabelBytes, " allowed"));
   }
   size_t metadata_bytes = 0;
-  for (const auto& [key, value] : model.metadata()) metadata_bytes += key.size() + value.size();
+  for (const auto& [key, value] : model.metadata())
+    metadata_bytes += key.size() + value.size();
   if (metadata_bytes > kMaxMetadataBytes) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("model '", model.id(), "' has ", metadata_bytes,
-                     " bytes of metadata; at most ", kMaxMetadataBytes, " allowed"));
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "model '", model.id(), "' has ", metadata_bytes,
+        " bytes of metadata; at most ", kMaxMetadataBytes, " allowed"));
   }
-  absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+  absl::StatusOr<tpr::index::Signature> sig =
+      ToIndexSignature(model.signature());
   if (!sig.ok()) {
-    return absl::Status(sig.status().code(),
-                        absl::StrCat("model '", model.id(), "': ", sig.status().message()));
+    return absl::Status(
+        sig.status().code(),
+        absl::StrCat("model '", model.id(), "': ", sig.status().message()));
   }
   *signature = std::move(*sig);
   return absl::OkStatus();
@@ -318,14 +332,17 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
   return outcome;
 }
 
-absl::StatusOr<bool> IndexerCore::Upsert(const tpr::v1::UpsertRequest& request) {
+absl::StatusOr<bool> IndexerCore::Upsert(
+    const tpr::v1::UpsertRequest& request) {
   std::vector<tpr::index::Signature> signatures(1);
   TPR_RETURN_IF_ERROR(CheckModel(request.model(), &signatures[0]));
   std::vector<tpr::v1::UpsertRequest> requests = {request};
-  TPR_ASSIGN_OR_RETURN(std::vector<WriteOutcome> outcome, WriteGroup(requests, signatures));
+  TPR_ASSIGN_OR_RETURN(std::vector<WriteOutcome> outcome,
+                       WriteGroup(requests, signatures));
   if (outcome[0] == WriteOutcome::kSkipped) {
-    return absl::AlreadyExistsError(absl::StrCat(
-        "model '", request.model().id(), "' exists; set overwrite to replace it"));
+    return absl::AlreadyExistsError(
+        absl::StrCat("model '", request.model().id(),
+                     "' exists; set overwrite to replace it"));
   }
   return outcome[0] == WriteOutcome::kCreated;
 }
@@ -360,11 +377,12 @@ absl::StatusOr<tpr::v1::Model> IndexerCore::Get(const std::string& id) const {
 absl::StatusOr<tpr::v1::ListResponse> IndexerCore::List(
     const tpr::v1::ListRequest& request) const {
   if (request.page_size() < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("page_size is ", request.page_size(), "; it must be >= 0"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "page_size is ", request.page_size(), "; it must be >= 0"));
   }
-  const size_t page_size =
-      request.page_size() == 0 ? 100 : std::min<size_t>(request.page_size(), 1000);
+  const size_t page_size = request.page_size() == 0
+                               ? 100
+                               : std::min<size_t>(request.page_size(), 1000);
   bool more = false;
   const std::vector<std::string> ids =
       table_.Page(request.page_token(), request.label(), page_size, &more);
@@ -414,17 +432,20 @@ tpr::v1::StatsResponse IndexerCore::Stats() const {
 // Search.
 
 absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
-    const tpr::v1::SearchRequest& request, std::function<bool()> cancelled) const {
+    const tpr::v1::SearchRequest& request,
+    std::function<bool()> cancelled) const {
   if (request.k() < 1) {
-    return absl::InvalidArgumentError(absl::StrCat("k is ", request.k(), "; it must be >= 1"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("k is ", request.k(), "; it must be >= 1"));
   }
   if (request.k() > options_.max_k) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("k is ", request.k(), "; at most ", options_.max_k, " allowed"));
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "k is ", request.k(), "; at most ", options_.max_k, " allowed"));
   }
   if (!(request.radius() >= 0.0) || !std::isfinite(request.radius())) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "radius is ", request.radius(), "; it must be finite and >= 0 (0: unlimited)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("radius is ", request.radius(),
+                     "; it must be finite and >= 0 (0: unlimited)"));
   }
   tpr::index::Signature query;
   std::string exclude;
@@ -435,22 +456,25 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     }
     case tpr::v1::SearchRequest::kId: {
       TPR_RETURN_IF_ERROR(CheckId(request.id()));
-      TPR_ASSIGN_OR_RETURN(tpr::v1::Model model, storage_->GetModel(request.id()));
-      absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+      TPR_ASSIGN_OR_RETURN(tpr::v1::Model model,
+                           storage_->GetModel(request.id()));
+      absl::StatusOr<tpr::index::Signature> sig =
+          ToIndexSignature(model.signature());
       if (absl::IsFailedPrecondition(sig.status())) {
-        return absl::FailedPreconditionError(
-            absl::StrCat("stored model '", request.id(), "': ", sig.status().message()));
+        return absl::FailedPreconditionError(absl::StrCat(
+            "stored model '", request.id(), "': ", sig.status().message()));
       }
       if (!sig.ok()) {
-        return absl::DataLossError(
-            absl::StrCat("stored model '", request.id(), "': ", sig.status().message()));
+        return absl::DataLossError(absl::StrCat("stored model '", request.id(),
+                                                "': ", sig.status().message()));
       }
       query = std::move(*sig);
       if (request.exclude_self()) exclude = request.id();
       break;
     }
     default:
-      return absl::InvalidArgumentError("search has no query: set signature or id");
+      return absl::InvalidArgumentError(
+          "search has no query: set signature or id");
   }
   const std::string label = request.label();
   std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor;
@@ -463,8 +487,10 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     if (!outdated_.empty()) {
       return absl::FailedPreconditionError(absl::StrCat(
           outdated_.size(), " stored models (e.g. '", *outdated_.begin(),
-          "') have an older signature version and cannot be compared with the others; "
-          "re-extract them with `tpr add --update` (nothing was lost: they are kept "
+          "') have an older signature version and cannot be compared with the "
+          "others; "
+          "re-extract them with `tpr add --update` (nothing was lost: they are "
+          "kept "
           "and listed until replaced)"));
     }
     labels = labels_.snapshot();
@@ -477,8 +503,8 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     // Cancellation is polled between EMDs inside the ranked search: one
     // cursor step may otherwise run many EMDs (a filtered or far-reaching
     // search), which kept the server busy after the client's deadline.
-    TPR_ASSIGN_OR_RETURN(cursor,
-                         index_->Search(query, request.radius(), filter, cancelled));
+    TPR_ASSIGN_OR_RETURN(
+        cursor, index_->Search(query, request.radius(), filter, cancelled));
   }
   return MakeSearchSession(std::move(cursor), request.k(), std::move(cancelled),
                            std::move(labels));

@@ -9,7 +9,8 @@
 //   batch_writer.h    the BatchUpsert stream's group commit
 //   search_session.h  one running search
 //
-//   absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(opts);
+//   absl::StatusOr<std::unique_ptr<IndexerCore>> core =
+//       IndexerCore::Open(opts);
 //   absl::StatusOr<bool> created = (*core)->Upsert(request);
 //   auto search = (*core)->StartSearch(search_request, /*cancelled=*/nullptr);
 //
@@ -131,7 +132,8 @@ class IndexerCore {
   // CheckModel validates `model` (id, metadata size, signature) and
   // converts its signature into *signature. Errors as for Upsert, with the
   // model's id in the message. Cost: O(model size). Thread-safe.
-  absl::Status CheckModel(const tpr::v1::Model& model, tpr::index::Signature* signature) const;
+  absl::Status CheckModel(const tpr::v1::Model& model,
+                          tpr::index::Signature* signature) const;
 
   // WriteGroup is the one write path of models (Upsert and BatchWriter use
   // it): it stores `requests` (validated by CheckModel, `signatures[i]`
@@ -164,7 +166,8 @@ class IndexerCore {
   // kMaxListPageBytes. INVALID_ARGUMENT for a negative page size.
   // Cost: O(log n + page) in memory plus one lookup per model returned;
   // with a label filter, O(models skipped) more.
-  absl::StatusOr<tpr::v1::ListResponse> List(const tpr::v1::ListRequest& request) const;
+  absl::StatusOr<tpr::v1::ListResponse> List(
+      const tpr::v1::ListRequest& request) const;
 
   // Stats returns counts and the data directory's size; the per-label
   // counts of the kMaxStatsLabels most populous labels (ties by label).
@@ -182,7 +185,8 @@ class IndexerCore {
   // message says to re-extract them with `tpr add --update`), or for a
   // query signature of another version. Cost: O(1) to start; see Next.
   absl::StatusOr<std::unique_ptr<SearchSession>> StartSearch(
-      const tpr::v1::SearchRequest& request, std::function<bool()> cancelled) const;
+      const tpr::v1::SearchRequest& request,
+      std::function<bool()> cancelled) const;
 
   // PersistTree saves the index's current VP-tree to the store when it
   // changed since the last save (TreePersister::PersistNow). Cost: O(n log n)
@@ -216,7 +220,8 @@ class IndexerCore {
   // indexer is not a follower (promoted meanwhile); the errors of
   // ApplyLoggedBatch. Cost: one fsync + O(batch). Thread-safe (serialized
   // with every other write). Defined in indexer_core_replica.cc.
-  absl::StatusOr<uint64_t> ApplyReplicated(const std::string& data, uint64_t sequence);
+  absl::StatusOr<uint64_t> ApplyReplicated(const std::string& data,
+                                           uint64_t sequence);
 
   // Promote makes a follower a primary: writes are accepted from then on
   // and the store's applied-sequence record is removed. Returns the former
@@ -245,7 +250,8 @@ class IndexerCore {
   absl::Status LoadIndex();
   absl::StatusOr<std::vector<WriteOutcome>> WriteGroupLocked(
       std::vector<tpr::v1::UpsertRequest>& requests,
-      std::vector<tpr::index::Signature>& signatures) ABSL_EXCLUSIVE_LOCKS_REQUIRED(write_mu_);
+      std::vector<tpr::index::Signature>& signatures)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(write_mu_);
 
   const CoreOptions options_;
   std::unique_ptr<Storage> storage_;

@@ -30,15 +30,18 @@ absl::StatusOr<uint64_t> IndexerCore::ApplyReplicated(const std::string& data,
                                                       uint64_t sequence) {
   absl::MutexLock lock(&write_mu_);
   if (following().empty()) {
-    return absl::FailedPreconditionError("not a follower (promoted): replication stopped");
+    return absl::FailedPreconditionError(
+        "not a follower (promoted): replication stopped");
   }
-  TPR_ASSIGN_OR_RETURN(AppliedBatch applied, ApplyLoggedBatch(*storage_, data, sequence));
+  TPR_ASSIGN_OR_RETURN(AppliedBatch applied,
+                       ApplyLoggedBatch(*storage_, data, sequence));
   if (applied.changes.empty()) return applied.last_sequence;
   // Durable from here on; the in-memory views follow, as in WriteGroup,
   // under one view lock (a search sees the batch whole or not at all). A
   // batch is atomic, so only each id's last change matters.
   std::unordered_map<std::string, size_t> last;
-  for (size_t i = 0; i < applied.changes.size(); ++i) last[applied.changes[i].id] = i;
+  for (size_t i = 0; i < applied.changes.size(); ++i)
+    last[applied.changes[i].id] = i;
   std::vector<std::pair<std::string, tpr::index::Signature>> entries;
   std::vector<std::string> removed;
   std::vector<std::string> outdated;
@@ -53,7 +56,8 @@ absl::StatusOr<uint64_t> IndexerCore::ApplyReplicated(const std::string& data,
       continue;
     }
     const tpr::v1::Model& model = *change.model;
-    absl::StatusOr<tpr::index::Signature> sig = ToIndexSignature(model.signature());
+    absl::StatusOr<tpr::index::Signature> sig =
+        ToIndexSignature(model.signature());
     if (absl::IsFailedPrecondition(sig.status())) {
       // Another signature version: kept and listed, not indexed (as Open).
       outdated.push_back(change.id);

@@ -13,8 +13,9 @@ namespace {
 
 absl::Status CancelledStatus(grpc::ServerContext* context) {
   // Past its deadline gRPC cancels the call; either way the client is gone.
-  return context->IsCancelled() ? absl::CancelledError("call cancelled or deadline exceeded")
-                                : absl::OkStatus();
+  return context->IsCancelled()
+             ? absl::CancelledError("call cancelled or deadline exceeded")
+             : absl::OkStatus();
 }
 
 }  // namespace
@@ -36,7 +37,8 @@ IndexerService::IndexerService(IndexerCore* core, ServiceOptions options)
           &IndexerService::BatchUpsertRaw));
 }
 
-grpc::Status IndexerService::Finish(const char* method, const absl::Status& status) const {
+grpc::Status IndexerService::Finish(const char* method,
+                                    const absl::Status& status) const {
   if (options_.log && !status.ok()) {
     switch (status.code()) {
       case absl::StatusCode::kInternal:
@@ -55,7 +57,8 @@ grpc::Status IndexerService::Finish(const char* method, const absl::Status& stat
 grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
                                     const tpr::v1::UpsertRequest* request,
                                     tpr::v1::UpsertResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Upsert", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("Upsert", c);
   absl::StatusOr<bool> created = core_->Upsert(*request);
   if (created.ok()) response->set_created(*created);
   return Finish("Upsert", created.status());
@@ -84,7 +87,8 @@ grpc::Status IndexerService::BatchUpsertRaw(
   // but the call reports the cancellation.
   absl::StatusOr<tpr::v1::BatchUpsertResponse> counts = batch.Finish();
   if (!counts.ok()) return Finish("BatchUpsert", counts.status());
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("BatchUpsert", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("BatchUpsert", c);
   *response = std::move(*counts);
   return grpc::Status::OK;
 }
@@ -92,13 +96,16 @@ grpc::Status IndexerService::BatchUpsertRaw(
 grpc::Status IndexerService::Delete(grpc::ServerContext* context,
                                     const tpr::v1::DeleteRequest* request,
                                     tpr::v1::DeleteResponse*) {
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Delete", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("Delete", c);
   return Finish("Delete", core_->Delete(request->id()));
 }
 
-grpc::Status IndexerService::Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+grpc::Status IndexerService::Get(grpc::ServerContext* context,
+                                 const tpr::v1::GetRequest* request,
                                  tpr::v1::Model* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Get", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("Get", c);
   absl::StatusOr<tpr::v1::Model> model = core_->Get(request->id());
   if (model.ok()) *response = std::move(*model);
   return Finish("Get", model.status());
@@ -107,28 +114,32 @@ grpc::Status IndexerService::Get(grpc::ServerContext* context, const tpr::v1::Ge
 grpc::Status IndexerService::List(grpc::ServerContext* context,
                                   const tpr::v1::ListRequest* request,
                                   tpr::v1::ListResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("List", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("List", c);
   absl::StatusOr<tpr::v1::ListResponse> page = core_->List(*request);
   if (page.ok()) *response = std::move(*page);
   return Finish("List", page.status());
 }
 
-grpc::Status IndexerService::Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest*,
+grpc::Status IndexerService::Stats(grpc::ServerContext* context,
+                                   const tpr::v1::StatsRequest*,
                                    tpr::v1::StatsResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok()) return Finish("Stats", c);
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("Stats", c);
   *response = core_->Stats();
   return grpc::Status::OK;
 }
 
-grpc::Status IndexerService::Search(grpc::ServerContext* context,
-                                    const tpr::v1::SearchRequest* request,
-                                    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
+grpc::Status IndexerService::Search(
+    grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
+    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
   // Admission: a slot or RESOURCE_EXHAUSTED, never an unbounded queue.
   if (searches_.fetch_add(1) >= options_.max_concurrent_searches) {
     searches_.fetch_sub(1);
-    return Finish("Search", absl::ResourceExhaustedError(absl::StrCat(
-                                "too many concurrent searches (limit ",
-                                options_.max_concurrent_searches, "); retry later")));
+    return Finish("Search",
+                  absl::ResourceExhaustedError(absl::StrCat(
+                      "too many concurrent searches (limit ",
+                      options_.max_concurrent_searches, "); retry later")));
   }
   struct Release {
     std::atomic<int>* n;
@@ -151,7 +162,8 @@ grpc::Status IndexerService::Search(grpc::ServerContext* context,
       const auto now = std::chrono::steady_clock::now();
       if (now < next) return false;
       next = now + std::chrono::milliseconds(2);
-      cancelled = context->IsCancelled() || std::chrono::system_clock::now() >= deadline;
+      cancelled = context->IsCancelled() ||
+                  std::chrono::system_clock::now() >= deadline;
       return cancelled;
     }
   };
@@ -165,21 +177,24 @@ grpc::Status IndexerService::Search(grpc::ServerContext* context,
   return status;
 }
 
-grpc::Status IndexerService::Stream(grpc::ServerContext* context, SearchSession& session,
-                                    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
+grpc::Status IndexerService::Stream(
+    grpc::ServerContext* context, SearchSession& session,
+    grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
   tpr::v1::SearchResponse response;
   while (std::optional<tpr::v1::Neighbor> n = session.Next()) {
     *response.mutable_neighbor() = std::move(*n);
     // Write fails once the client has gone: stop working for it.
     if (!writer->Write(response)) {
-      return Finish("Search", absl::CancelledError("client stopped reading the stream"));
+      return Finish("Search",
+                    absl::CancelledError("client stopped reading the stream"));
     }
   }
   // The probe compares the deadline itself, so the search may stop before
   // gRPC's own timer has ended the call: then the status sent is the
   // client's, DEADLINE_EXCEEDED (CANCELLED here reached clients under load).
   if (std::chrono::system_clock::now() >= context->deadline()) {
-    return Finish("Search", absl::DeadlineExceededError("the search reached the call's deadline"));
+    return Finish("Search", absl::DeadlineExceededError(
+                                "the search reached the call's deadline"));
   }
   if (context->IsCancelled()) {
     return Finish("Search", absl::CancelledError("call cancelled"));

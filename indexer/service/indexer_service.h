@@ -36,7 +36,8 @@ class IndexerService final : public tpr::v1::Indexer::Service {
  public:
   IndexerService(IndexerCore* core, ServiceOptions options);
 
-  grpc::Status Upsert(grpc::ServerContext* context, const tpr::v1::UpsertRequest* request,
+  grpc::Status Upsert(grpc::ServerContext* context,
+                      const tpr::v1::UpsertRequest* request,
                       tpr::v1::UpsertResponse* response) override;
   // BatchUpsert reads its stream as raw bytes (common/stream_messages.h):
   // the constructor registers this handler in place of the generated typed
@@ -45,16 +46,21 @@ class IndexerService final : public tpr::v1::Indexer::Service {
   grpc::Status BatchUpsertRaw(grpc::ServerContext* context,
                               grpc::ServerReader<grpc::ByteBuffer>* reader,
                               tpr::v1::BatchUpsertResponse* response);
-  grpc::Status Delete(grpc::ServerContext* context, const tpr::v1::DeleteRequest* request,
+  grpc::Status Delete(grpc::ServerContext* context,
+                      const tpr::v1::DeleteRequest* request,
                       tpr::v1::DeleteResponse* response) override;
-  grpc::Status Get(grpc::ServerContext* context, const tpr::v1::GetRequest* request,
+  grpc::Status Get(grpc::ServerContext* context,
+                   const tpr::v1::GetRequest* request,
                    tpr::v1::Model* response) override;
-  grpc::Status List(grpc::ServerContext* context, const tpr::v1::ListRequest* request,
+  grpc::Status List(grpc::ServerContext* context,
+                    const tpr::v1::ListRequest* request,
                     tpr::v1::ListResponse* response) override;
-  grpc::Status Stats(grpc::ServerContext* context, const tpr::v1::StatsRequest* request,
+  grpc::Status Stats(grpc::ServerContext* context,
+                     const tpr::v1::StatsRequest* request,
                      tpr::v1::StatsResponse* response) override;
-  grpc::Status Search(grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
-                      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
+  grpc::Status Search(
+      grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
+      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
 
   // SearchCounters: the work of the searches this service ran, for health
   // and metrics. Read at any time from any thread.
@@ -65,7 +71,9 @@ class IndexerService final : public tpr::v1::Indexer::Service {
     // past their deadline).
     int64_t emd_computations = 0;
   };
-  SearchCounters search_counters() const { return {searches_.load(), emd_computations_.load()}; }
+  SearchCounters search_counters() const {
+    return {searches_.load(), emd_computations_.load()};
+  }
 
  private:
   // Logs failures that are the server's fault (not the caller's input).

@@ -8,13 +8,15 @@ const std::string* LabelSnapshot::Find(const std::string& id) const {
   return it == shard.end() ? nullptr : &it->second;
 }
 
-LabelMap::LabelMap(const std::vector<std::pair<std::string, std::string>>& labels) {
+LabelMap::LabelMap(
+    const std::vector<std::pair<std::string, std::string>>& labels) {
   std::vector<LabelSnapshot::Shard> shards(kLabelShards);
   for (const auto& [id, label] : labels) shards[ShardOf(id)].emplace(id, label);
   auto snapshot = std::make_shared<LabelSnapshot>();
   snapshot->shards_.reserve(kLabelShards);
   for (LabelSnapshot::Shard& shard : shards) {
-    snapshot->shards_.push_back(std::make_shared<const LabelSnapshot::Shard>(std::move(shard)));
+    snapshot->shards_.push_back(
+        std::make_shared<const LabelSnapshot::Shard>(std::move(shard)));
   }
   current_ = std::move(snapshot);
 }

@@ -4,7 +4,7 @@
 //
 //   LabelMap labels({{"cat/1", "cat"}});
 //   std::shared_ptr<const LabelSnapshot> s = labels.snapshot();   // O(1)
-//   labels.Apply({{"cat/1", std::nullopt}});                      // s unchanged
+//   labels.Apply({{"cat/1", std::nullopt}});  // s unchanged
 //
 // The map is split into kLabelShards hash shards, each immutable once
 // published: a write copies only the shards it touches (plus the vector of
@@ -51,7 +51,8 @@ class LabelMap {
 
   // LabelMap builds the map holding `labels` (id, label); ids are unique.
   // Cost: O(n).
-  explicit LabelMap(const std::vector<std::pair<std::string, std::string>>& labels = {});
+  explicit LabelMap(
+      const std::vector<std::pair<std::string, std::string>>& labels = {});
 
   // snapshot returns the current state. Cost: O(1).
   std::shared_ptr<const LabelSnapshot> snapshot() const { return current_; }

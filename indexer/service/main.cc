@@ -4,7 +4,8 @@
 // finishes in-flight calls, persists the VP-tree and exits 0.
 //
 //   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
-//   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f --follow 127.0.0.1:7002
+//   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f \
+//       --follow 127.0.0.1:7002
 //   tpr-indexer ... --follow HOST:7002 --follow-tls --follow-tls-ca ca.pem
 //               (and TPR_INDEXER_FOLLOW_API_KEY): a secured primary
 //
@@ -33,7 +34,8 @@
 #include "tpr/connection_flags.h"
 
 int main(int argc, char** argv) {
-  CLI::App app{"tpr-indexer: stores TPR signatures and answers EMD k-NN searches"};
+  CLI::App app{
+      "tpr-indexer: stores TPR signatures and answers EMD k-NN searches"};
   tpr::common::ServerOptions server_options;
   server_options.listen_address = "127.0.0.1:7002";
   server_options.log_name = "tpr-indexer";
@@ -45,7 +47,8 @@ int main(int argc, char** argv) {
   std::string follow;
   std::string follow_api_key;
   tpr::indexer::StorageOptions storage_options;
-  app.add_option("--data-dir", data_dir, "Directory of the RocksDB store (created if missing)")
+  app.add_option("--data-dir", data_dir,
+                 "Directory of the RocksDB store (created if missing)")
       ->required();
   tpr::common::AddServerThreadsFlag(app, &ops_flags);
   app.add_option("--max-concurrent-searches", max_searches,
@@ -55,19 +58,24 @@ int main(int argc, char** argv) {
   app.add_option("--max-k", max_k, "Largest k a search may ask for")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--follow", follow,
-                 "Be a read-only follower of the primary tpr-indexer at HOST:PORT "
-                 "(copies it into an empty --data-dir, then tails its write-ahead log)");
-  app.add_option("--follow-api-key", follow_api_key,
-                 "API key (admin role) this follower presents to its primary; prefer the "
-                 "environment variable TPR_INDEXER_FOLLOW_API_KEY, which ps does not show");
+  app.add_option(
+      "--follow", follow,
+      "Be a read-only follower of the primary tpr-indexer at HOST:PORT "
+      "(copies it into an empty --data-dir, then tails its write-ahead log)");
+  app.add_option(
+      "--follow-api-key", follow_api_key,
+      "API key (admin role) this follower presents to its primary; prefer the "
+      "environment variable TPR_INDEXER_FOLLOW_API_KEY, which ps does not "
+      "show");
   tpr::client::ConnectionOptions primary_connection;
-  tpr::client::AddPeerConnectionFlags(app, "follow", "the primary", &primary_connection);
+  tpr::client::AddPeerConnectionFlags(app, "follow", "the primary",
+                                      &primary_connection);
   app.add_option("--wal-keep-seconds", storage_options.wal_keep_seconds,
                  "Keep closed write-ahead logs this long for followers (s)")
       ->capture_default_str();
-  app.add_option("--wal-keep-mb", storage_options.wal_keep_mb,
-                 "Keep at most this many MB of closed write-ahead logs for followers")
+  app.add_option(
+         "--wal-keep-mb", storage_options.wal_keep_mb,
+         "Keep at most this many MB of closed write-ahead logs for followers")
       ->capture_default_str();
   tpr::common::AddServerFlags(app, &ops_flags);
   tpr::common::ConfigSupport config =
@@ -80,7 +88,9 @@ int main(int argc, char** argv) {
   server_options.readiness_service = "tpr.v1.Indexer";
 
   const std::string name = server_options.log_name;
-  auto log = [name](const std::string& line) { tpr::common::LogEvent(name, line); };
+  auto log = [name](const std::string& line) {
+    tpr::common::LogEvent(name, line);
+  };
 
   tpr::indexer::CoreOptions core_options;
   core_options.data_dir = data_dir;
@@ -95,8 +105,10 @@ int main(int argc, char** argv) {
     prometheus::Histogram* write_seconds =
         &prometheus::BuildHistogram()
              .Name("tpr_indexer_storage_write_duration_seconds")
-             .Help("Each durable model write: lookups, RocksDB write with its log sync, "
-                   "acknowledgement record")
+             .Help(
+                 "Each durable model write: lookups, RocksDB write with its "
+                 "log sync, "
+                 "acknowledgement record")
              .Register(registry)
              .Add({}, tpr::common::FineSecondsBuckets());
     prometheus::Histogram* sync_seconds =
@@ -105,20 +117,25 @@ int main(int argc, char** argv) {
              .Help("Each fsync of RocksDB's write-ahead log")
              .Register(registry)
              .Add({}, tpr::common::FineSecondsBuckets());
-    core_options.storage.on_write = [write_seconds](double s) { write_seconds->Observe(s); };
-    core_options.storage.on_wal_sync = [sync_seconds](double s) { sync_seconds->Observe(s); };
+    core_options.storage.on_write = [write_seconds](double s) {
+      write_seconds->Observe(s);
+    };
+    core_options.storage.on_wal_sync = [sync_seconds](double s) {
+      sync_seconds->Observe(s);
+    };
   }
   // While the data directory opens (a store scan, possibly a tree build),
   // the port already answers health checks: alive, not ready; other calls
   // get UNAVAILABLE. The real server then takes the same port over.
   absl::StatusOr<std::unique_ptr<tpr::common::LoadingServer>> loading =
-      tpr::common::StartLoadingServer(server_options, "loading the data directory");
+      tpr::common::StartLoadingServer(server_options,
+                                      "loading the data directory");
   if (!loading.ok()) {
     log(loading.status().ToString());
     return 1;
   }
-  server_options.listen_address =
-      tpr::common::ListenAddressWithPort(server_options.listen_address, (*loading)->port);
+  server_options.listen_address = tpr::common::ListenAddressWithPort(
+      server_options.listen_address, (*loading)->port);
   // A follower copies its primary first (health: alive, not ready).
   tpr::indexer::FollowerOptions follower_options;
   if (!follow.empty()) {
@@ -135,7 +152,8 @@ int main(int argc, char** argv) {
     follower_options.credentials = *std::move(credentials);
     follower_options.tls_server_name = primary_connection.tls_server_name;
     follower_options.log = log;
-    if (absl::Status st = tpr::indexer::PrepareFollowerDir(follower_options); !st.ok()) {
+    if (absl::Status st = tpr::indexer::PrepareFollowerDir(follower_options);
+        !st.ok()) {
       log(absl::StrCat("cannot start as a follower: ", st.ToString()));
       return 1;
     }
@@ -144,29 +162,36 @@ int main(int argc, char** argv) {
   absl::StatusOr<std::unique_ptr<tpr::indexer::IndexerCore>> core =
       tpr::indexer::IndexerCore::Open(core_options);
   if (!core.ok()) {
-    log(absl::StrCat("cannot open the data directory: ", core.status().ToString()));
+    log(absl::StrCat("cannot open the data directory: ",
+                     core.status().ToString()));
     return 1;
   }
   if (server_options.metrics != nullptr) {
     const tpr::indexer::IndexerCore* c = core->get();
     tpr::common::Metrics& m = *server_options.metrics;
     const tpr::index::SignatureIndex* index = &c->index();
-    m.AddGaugeCallback("tpr_indexer_tombstoned", "Deleted or replaced entries still in the VP-tree",
-                       [index] { return static_cast<double>(index->tombstoned()); });
-    m.AddCounterCallback("tpr_indexer_tree_rebuilds_total", "VP-tree rebuilds completed",
-                         [index] { return static_cast<double>(index->rebuilds()); });
-    m.AddGaugeCallback("tpr_indexer_memory_bytes", "Heap bytes of the in-memory index",
-                       [index] { return static_cast<double>(index->MemoryBytes()); });
+    m.AddGaugeCallback(
+        "tpr_indexer_tombstoned",
+        "Deleted or replaced entries still in the VP-tree",
+        [index] { return static_cast<double>(index->tombstoned()); });
+    m.AddCounterCallback(
+        "tpr_indexer_tree_rebuilds_total", "VP-tree rebuilds completed",
+        [index] { return static_cast<double>(index->rebuilds()); });
+    m.AddGaugeCallback(
+        "tpr_indexer_memory_bytes", "Heap bytes of the in-memory index",
+        [index] { return static_cast<double>(index->MemoryBytes()); });
     // RocksDB's counters and sizes (one read per series at each scrape; each
     // is a few property reads).
     auto engine = [c](uint64_t tpr::indexer::EngineStats::*field) {
-      return [c, field] { return static_cast<double>(c->engine_stats().*field); };
+      return
+          [c, field] { return static_cast<double>(c->engine_stats().*field); };
     };
     using tpr::indexer::EngineStats;
-    m.AddCounterCallback("tpr_indexer_storage_stall_seconds_total",
-                         "Time RocksDB delayed or stopped writes (STALL_MICROS)", [c] {
-                           return static_cast<double>(c->engine_stats().stall_micros) / 1e6;
-                         });
+    m.AddCounterCallback(
+        "tpr_indexer_storage_stall_seconds_total",
+        "Time RocksDB delayed or stopped writes (STALL_MICROS)", [c] {
+          return static_cast<double>(c->engine_stats().stall_micros) / 1e6;
+        });
     m.AddCounterCallback("tpr_indexer_storage_delayed_stalls_total",
                          "Times RocksDB entered the delayed-write condition",
                          engine(&EngineStats::delayed_stalls));
@@ -174,28 +199,36 @@ int main(int argc, char** argv) {
                          "Times RocksDB entered the stopped-write condition",
                          engine(&EngineStats::stopped_stalls));
     m.AddCounterCallback("tpr_indexer_storage_wal_syncs_total",
-                         "Syncs of RocksDB's write-ahead log", engine(&EngineStats::wal_syncs));
-    m.AddGaugeCallback("tpr_indexer_storage_live_data_bytes",
-                       "RocksDB's estimate of its live data (rocksdb.estimate-live-data-size)",
-                       engine(&EngineStats::live_data_bytes));
+                         "Syncs of RocksDB's write-ahead log",
+                         engine(&EngineStats::wal_syncs));
+    m.AddGaugeCallback(
+        "tpr_indexer_storage_live_data_bytes",
+        "RocksDB's estimate of its live data (rocksdb.estimate-live-data-size)",
+        engine(&EngineStats::live_data_bytes));
     m.AddGaugeCallback("tpr_indexer_storage_sst_bytes",
                        "RocksDB table files (rocksdb.total-sst-files-size)",
                        engine(&EngineStats::sst_bytes));
     m.AddGaugeCallback("tpr_indexer_storage_memtable_bytes",
                        "RocksDB memtables (rocksdb.cur-size-all-mem-tables)",
                        engine(&EngineStats::memtable_bytes));
-    m.AddGaugeCallback("tpr_indexer_models", "Models stored",
-                       [c] { return static_cast<double>(c->Stats().models()); });
-    m.AddGaugeCallback("tpr_indexer_indexed", "Models in the VP-tree proper",
-                       [c] { return static_cast<double>(c->Stats().indexed()); });
-    m.AddGaugeCallback("tpr_indexer_buffered", "Models waiting in the insert buffer",
-                       [c] { return static_cast<double>(c->Stats().buffered()); });
-    m.AddGaugeCallback("tpr_indexer_disk_bytes", "Size of the data directory, bytes",
-                       [c] { return static_cast<double>(c->Stats().disk_bytes()); });
+    m.AddGaugeCallback("tpr_indexer_models", "Models stored", [c] {
+      return static_cast<double>(c->Stats().models());
+    });
+    m.AddGaugeCallback(
+        "tpr_indexer_indexed", "Models in the VP-tree proper",
+        [c] { return static_cast<double>(c->Stats().indexed()); });
+    m.AddGaugeCallback(
+        "tpr_indexer_buffered", "Models waiting in the insert buffer",
+        [c] { return static_cast<double>(c->Stats().buffered()); });
+    m.AddGaugeCallback(
+        "tpr_indexer_disk_bytes", "Size of the data directory, bytes",
+        [c] { return static_cast<double>(c->Stats().disk_bytes()); });
   }
   // Readiness: NOT_SERVING while writes fail for lack of disk space (it
   // turns back by itself once space is freed).
-  server_options.readiness_check = [c = core->get()] { return c->WriteReadiness(); };
+  server_options.readiness_check = [c = core->get()] {
+    return c->WriteReadiness();
+  };
   tpr::indexer::ServiceOptions service_options;
   service_options.max_concurrent_searches = max_searches;
   service_options.log = log;
@@ -203,7 +236,8 @@ int main(int argc, char** argv) {
   std::unique_ptr<tpr::indexer::Follower> follower;
   std::atomic<bool> resync{false};
   if (!follow.empty()) {
-    follower = std::make_unique<tpr::indexer::Follower>(core->get(), follower_options);
+    follower =
+        std::make_unique<tpr::indexer::Follower>(core->get(), follower_options);
     tpr::indexer::Follower* f = follower.get();
     // A follower is ready once caught up and while its disk has room.
     server_options.readiness_check = [f, c = core->get()] {
@@ -213,7 +247,8 @@ int main(int argc, char** argv) {
   }
   tpr::indexer::AdminOptions admin_options;
   admin_options.log = log;
-  tpr::indexer::IndexerAdminService admin(core->get(), follower.get(), admin_options);
+  tpr::indexer::IndexerAdminService admin(core->get(), follower.get(),
+                                          admin_options);
 
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(server_options, {&service, &admin});
@@ -244,7 +279,8 @@ int main(int argc, char** argv) {
   if (resync) {
     log("restarting to copy the primary afresh");
     execv("/proc/self/exe", argv);
-    log("cannot restart; exiting with 75 (EX_TEMPFAIL) for the supervisor to restart");
+    log("cannot restart; exiting with 75 (EX_TEMPFAIL) for the supervisor to "
+        "restart");
     return 75;
   }
   return code;

@@ -12,12 +12,14 @@ std::optional<int64_t> ModelTable::AddedTime(const std::string& id) const {
   return it->second.added_unix_micros;
 }
 
-void ModelTable::Put(const std::vector<std::pair<std::string, ModelInfo>>& models) {
+void ModelTable::Put(
+    const std::vector<std::pair<std::string, ModelInfo>>& models) {
   absl::MutexLock lock(&mu_);
   for (const auto& [id, info] : models) {
     auto [it, created] = models_.try_emplace(id);
     if (!created) {
-      if (--label_counts_[it->second.label] == 0) label_counts_.erase(it->second.label);
+      if (--label_counts_[it->second.label] == 0)
+        label_counts_.erase(it->second.label);
     }
     it->second = info;
     ++label_counts_[info.label];
@@ -28,12 +30,14 @@ bool ModelTable::Erase(const std::string& id) {
   absl::MutexLock lock(&mu_);
   auto it = models_.find(id);
   if (it == models_.end()) return false;
-  if (--label_counts_[it->second.label] == 0) label_counts_.erase(it->second.label);
+  if (--label_counts_[it->second.label] == 0)
+    label_counts_.erase(it->second.label);
   models_.erase(it);
   return true;
 }
 
-std::vector<std::string> ModelTable::Page(const std::string& after, const std::string& label,
+std::vector<std::string> ModelTable::Page(const std::string& after,
+                                          const std::string& label,
                                           size_t page_size, bool* more) const {
   std::vector<std::string> ids;
   *more = false;
@@ -55,7 +59,8 @@ size_t ModelTable::size() const {
   return models_.size();
 }
 
-std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(size_t max) const {
+std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(
+    size_t max) const {
   std::vector<std::pair<std::string, int64_t>> out;
   {
     absl::ReaderMutexLock lock(&mu_);
@@ -65,7 +70,8 @@ std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(size_t max) c
     return a.second != b.second ? a.second > b.second : a.first < b.first;
   };
   if (out.size() > max) {
-    std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(max), out.end(),
+    std::partial_sort(out.begin(),
+                      out.begin() + static_cast<std::ptrdiff_t>(max), out.end(),
                       more_models);
     out.resize(max);
   } else {

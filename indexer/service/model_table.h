@@ -50,8 +50,9 @@ class ModelTable {
   // `after` (empty: from the first), only those labelled `label` when it is
   // non-empty. *more is set when further matching ids follow. Cost:
   // O(log n + page) plus the ids skipped by the label filter.
-  std::vector<std::string> Page(const std::string& after, const std::string& label,
-                                size_t page_size, bool* more) const;
+  std::vector<std::string> Page(const std::string& after,
+                                const std::string& label, size_t page_size,
+                                bool* more) const;
 
   // size returns the number of models. Cost: O(1).
   size_t size() const;

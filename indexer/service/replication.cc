@@ -31,7 +31,8 @@ absl::Status Rocks(const rocksdb::Status& s, absl::string_view what) {
   if (s.IsCorruption()) return absl::DataLossError(message);
   if (s.IsNotFound()) return absl::NotFoundError(message);
   if (s.IsInvalidArgument()) return absl::InvalidArgumentError(message);
-  if (s.IsIOError() || s.IsBusy() || s.IsTryAgain()) return absl::UnavailableError(message);
+  if (s.IsIOError() || s.IsBusy() || s.IsTryAgain())
+    return absl::UnavailableError(message);
   return absl::InternalError(message);
 }
 
@@ -43,7 +44,8 @@ std::string EncodeU64(uint64_t v) {
 
 uint64_t DecodeU64(const std::string& s) {
   uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= static_cast<uint64_t>(static_cast<unsigned char>(s[i])) << (8 * i);
+  for (int i = 0; i < 8; ++i)
+    v |= static_cast<uint64_t>(static_cast<unsigned char>(s[i])) << (8 * i);
   return v;
 }
 
@@ -52,14 +54,16 @@ uint64_t TreeBytes(const std::string& dir) {
   uint64_t total = 0;
   std::error_code ec;
   for (auto it = std::filesystem::recursive_directory_iterator(dir, ec);
-       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
+       !ec && it != std::filesystem::recursive_directory_iterator();
+       it.increment(ec)) {
     std::error_code size_ec;
     if (it->is_regular_file(size_ec)) total += it->file_size(size_ec);
   }
   return total;
 }
 
-bool Inside(const std::filesystem::path& child, const std::filesystem::path& parent) {
+bool Inside(const std::filesystem::path& child,
+            const std::filesystem::path& parent) {
   std::error_code ec;
   const auto c = std::filesystem::weakly_canonical(child, ec);
   const auto p = std::filesystem::weakly_canonical(parent, ec);
@@ -74,7 +78,8 @@ bool Inside(const std::filesystem::path& child, const std::filesystem::path& par
 // Collects the model puts and deletes of a replicated batch.
 class ChangeCollector : public rocksdb::WriteBatch::Handler {
  public:
-  explicit ChangeCollector(uint32_t models_family) : models_family_(models_family) {}
+  explicit ChangeCollector(uint32_t models_family)
+      : models_family_(models_family) {}
 
   rocksdb::Status PutCF(uint32_t family, const rocksdb::Slice& key,
                         const rocksdb::Slice& value) override {
@@ -84,7 +89,8 @@ class ChangeCollector : public rocksdb::WriteBatch::Handler {
     tpr::v1::Model model;
     // Storage's value layout: 8-byte write sequence, then the model.
     if (value.size() < 8 ||
-        !model.ParseFromArray(value.data() + 8, static_cast<int>(value.size() - 8))) {
+        !model.ParseFromArray(value.data() + 8,
+                              static_cast<int>(value.size() - 8))) {
       error_ = absl::DataLossError(
           absl::StrCat("replicated model '", change.id, "' does not parse"));
       return rocksdb::Status::Corruption("model does not parse");
@@ -93,11 +99,14 @@ class ChangeCollector : public rocksdb::WriteBatch::Handler {
     changes_.push_back(std::move(change));
     return rocksdb::Status::OK();
   }
-  rocksdb::Status DeleteCF(uint32_t family, const rocksdb::Slice& key) override {
-    if (family == models_family_) changes_.push_back({key.ToString(), std::nullopt});
+  rocksdb::Status DeleteCF(uint32_t family,
+                           const rocksdb::Slice& key) override {
+    if (family == models_family_)
+      changes_.push_back({key.ToString(), std::nullopt});
     return rocksdb::Status::OK();
   }
-  rocksdb::Status SingleDeleteCF(uint32_t family, const rocksdb::Slice& key) override {
+  rocksdb::Status SingleDeleteCF(uint32_t family,
+                                 const rocksdb::Slice& key) override {
     return DeleteCF(family, key);
   }
   rocksdb::Status DeleteRangeCF(uint32_t family, const rocksdb::Slice&,
@@ -105,10 +114,12 @@ class ChangeCollector : public rocksdb::WriteBatch::Handler {
     if (family != models_family_) return rocksdb::Status::OK();
     // Storage never writes range deletions; a follower cannot mirror one
     // into its index without a scan.
-    error_ = absl::InternalError("replicated batch holds a range deletion of models");
+    error_ = absl::InternalError(
+        "replicated batch holds a range deletion of models");
     return rocksdb::Status::NotSupported("range deletion");
   }
-  rocksdb::Status MergeCF(uint32_t family, const rocksdb::Slice&, const rocksdb::Slice&) override {
+  rocksdb::Status MergeCF(uint32_t family, const rocksdb::Slice&,
+                          const rocksdb::Slice&) override {
     if (family != models_family_) return rocksdb::Status::OK();
     error_ = absl::InternalError("replicated batch holds a merge of models");
     return rocksdb::Status::NotSupported("merge");
@@ -125,12 +136,14 @@ class ChangeCollector : public rocksdb::WriteBatch::Handler {
 
 }  // namespace
 
-absl::StatusOr<BackupResult> CreateBackup(Storage& storage, const std::string& backup_dir,
+absl::StatusOr<BackupResult> CreateBackup(Storage& storage,
+                                          const std::string& backup_dir,
                                           int keep_last) {
-  if (backup_dir.empty()) return absl::InvalidArgumentError("backup_dir is empty");
+  if (backup_dir.empty())
+    return absl::InvalidArgumentError("backup_dir is empty");
   if (Inside(backup_dir, storage.dir())) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("backup_dir '", backup_dir, "' lies inside the data directory"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "backup_dir '", backup_dir, "' lies inside the data directory"));
   }
   // One writer per backup set (RocksDB's rule); backups are rare, so one
   // lock for the process is enough.
@@ -139,13 +152,13 @@ absl::StatusOr<BackupResult> CreateBackup(Storage& storage, const std::string& b
   std::error_code ec;
   std::filesystem::create_directories(backup_dir, ec);
   if (ec) {
-    return absl::UnavailableError(
-        absl::StrCat("cannot create backup_dir '", backup_dir, "': ", ec.message()));
+    return absl::UnavailableError(absl::StrCat(
+        "cannot create backup_dir '", backup_dir, "': ", ec.message()));
   }
   rocksdb::BackupEngine* raw = nullptr;
-  TPR_RETURN_IF_ERROR(Rocks(rocksdb::BackupEngine::Open(rocksdb::Env::Default(),
-                                                        rocksdb::BackupEngineOptions(backup_dir),
-                                                        &raw),
+  TPR_RETURN_IF_ERROR(Rocks(rocksdb::BackupEngine::Open(
+                                rocksdb::Env::Default(),
+                                rocksdb::BackupEngineOptions(backup_dir), &raw),
                             "cannot open the backup set"));
   std::unique_ptr<rocksdb::BackupEngine> engine(raw);
   const uint64_t before = TreeBytes(backup_dir);
@@ -154,19 +167,24 @@ absl::StatusOr<BackupResult> CreateBackup(Storage& storage, const std::string& b
   // no write-ahead log.
   options.flush_before_backup = true;
   rocksdb::BackupID id = 0;
-  TPR_RETURN_IF_ERROR(Rocks(engine->CreateNewBackupWithMetadata(options, storage.rocks().db,
-                                                                "tpr-indexer", &id),
-                            "backup failed"));
+  TPR_RETURN_IF_ERROR(
+      Rocks(engine->CreateNewBackupWithMetadata(options, storage.rocks().db,
+                                                "tpr-indexer", &id),
+            "backup failed"));
   // Verified: every file's size and checksum re-read from the set.
-  if (rocksdb::IOStatus v = engine->VerifyBackup(id, /*verify_with_checksum=*/true); !v.ok()) {
+  if (rocksdb::IOStatus v =
+          engine->VerifyBackup(id, /*verify_with_checksum=*/true);
+      !v.ok()) {
     return absl::DataLossError(
         absl::StrCat("backup ", id, " failed verification: ", v.ToString()));
   }
   rocksdb::BackupInfo info;
-  TPR_RETURN_IF_ERROR(Rocks(engine->GetBackupInfo(id, &info), "cannot read the backup"));
+  TPR_RETURN_IF_ERROR(
+      Rocks(engine->GetBackupInfo(id, &info), "cannot read the backup"));
   if (keep_last > 0) {
-    TPR_RETURN_IF_ERROR(Rocks(engine->PurgeOldBackups(static_cast<uint32_t>(keep_last)),
-                              "cannot delete old backups"));
+    TPR_RETURN_IF_ERROR(
+        Rocks(engine->PurgeOldBackups(static_cast<uint32_t>(keep_last)),
+              "cannot delete old backups"));
   }
   BackupResult result;
   result.backup_id = id;
@@ -178,50 +196,56 @@ absl::StatusOr<BackupResult> CreateBackup(Storage& storage, const std::string& b
   return result;
 }
 
-absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint32_t backup_id,
+absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir,
+                                            uint32_t backup_id,
                                             const std::string& data_dir) {
-  if (backup_dir.empty()) return absl::InvalidArgumentError("backup_dir is empty");
+  if (backup_dir.empty())
+    return absl::InvalidArgumentError("backup_dir is empty");
   if (data_dir.empty()) return absl::InvalidArgumentError("data_dir is empty");
   std::error_code ec;
   if (std::filesystem::exists(data_dir, ec)) {
     if (!std::filesystem::is_directory(data_dir, ec)) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("'", data_dir, "' is not a directory; restore needs an empty one"));
+      return absl::FailedPreconditionError(absl::StrCat(
+          "'", data_dir, "' is not a directory; restore needs an empty one"));
     }
     if (!std::filesystem::is_empty(data_dir, ec)) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "data directory '", data_dir,
-          "' is not empty; restore only into an empty or absent directory (nothing was changed)"));
+      return absl::FailedPreconditionError(
+          absl::StrCat("data directory '", data_dir,
+                       "' is not empty; restore only into an empty or absent "
+                       "directory (nothing was changed)"));
     }
   }
   if (!std::filesystem::exists(backup_dir + "/meta", ec)) {
-    return absl::NotFoundError(absl::StrCat("no backup set in '", backup_dir, "'"));
+    return absl::NotFoundError(
+        absl::StrCat("no backup set in '", backup_dir, "'"));
   }
   rocksdb::BackupEngineReadOnly* raw = nullptr;
-  TPR_RETURN_IF_ERROR(Rocks(
-      rocksdb::BackupEngineReadOnly::Open(rocksdb::Env::Default(),
-                                          rocksdb::BackupEngineOptions(backup_dir), &raw),
-      "cannot open the backup set"));
+  TPR_RETURN_IF_ERROR(Rocks(rocksdb::BackupEngineReadOnly::Open(
+                                rocksdb::Env::Default(),
+                                rocksdb::BackupEngineOptions(backup_dir), &raw),
+                            "cannot open the backup set"));
   std::unique_ptr<rocksdb::BackupEngineReadOnly> engine(raw);
   if (backup_id == 0) {
     rocksdb::BackupInfo latest;
     rocksdb::Status s = engine->GetLatestBackupInfo(&latest);
     if (s.IsNotFound()) {
-      return absl::NotFoundError(absl::StrCat("backup set '", backup_dir, "' holds no backup"));
+      return absl::NotFoundError(
+          absl::StrCat("backup set '", backup_dir, "' holds no backup"));
     }
     TPR_RETURN_IF_ERROR(Rocks(s, "cannot read the backup set"));
     backup_id = latest.backup_id;
   } else {
     rocksdb::BackupInfo info;
     if (!engine->GetBackupInfo(backup_id, &info).ok()) {
-      return absl::NotFoundError(
-          absl::StrCat("backup set '", backup_dir, "' holds no backup ", backup_id));
+      return absl::NotFoundError(absl::StrCat("backup set '", backup_dir,
+                                              "' holds no backup ", backup_id));
     }
   }
-  if (rocksdb::IOStatus v = engine->VerifyBackup(backup_id, /*verify_with_checksum=*/true);
+  if (rocksdb::IOStatus v =
+          engine->VerifyBackup(backup_id, /*verify_with_checksum=*/true);
       !v.ok()) {
-    return absl::DataLossError(
-        absl::StrCat("backup ", backup_id, " failed verification: ", v.ToString()));
+    return absl::DataLossError(absl::StrCat(
+        "backup ", backup_id, " failed verification: ", v.ToString()));
   }
   std::filesystem::create_directories(data_dir, ec);
   if (ec) {
@@ -229,7 +253,8 @@ absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint3
         absl::StrCat("cannot create '", data_dir, "': ", ec.message()));
   }
   TPR_RETURN_IF_ERROR(
-      Rocks(engine->RestoreDBFromBackup(backup_id, data_dir, data_dir), "restore failed"));
+      Rocks(engine->RestoreDBFromBackup(backup_id, data_dir, data_dir),
+            "restore failed"));
   // A restored database is a new history: followers of the original must
   // not tail it (their sequence numbers are the original's), so it gets an
   // identity of its own when first opened.
@@ -237,10 +262,12 @@ absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint3
   return RestoreResult{backup_id};
 }
 
-absl::StatusOr<uint64_t> CreateCheckpoint(Storage& storage, const std::string& dir) {
+absl::StatusOr<uint64_t> CreateCheckpoint(Storage& storage,
+                                          const std::string& dir) {
   rocksdb::Checkpoint* raw = nullptr;
   TPR_RETURN_IF_ERROR(
-      Rocks(rocksdb::Checkpoint::Create(storage.rocks().db, &raw), "cannot start a checkpoint"));
+      Rocks(rocksdb::Checkpoint::Create(storage.rocks().db, &raw),
+            "cannot start a checkpoint"));
   std::unique_ptr<rocksdb::Checkpoint> checkpoint(raw);
   uint64_t sequence = 0;
   // log_size_for_flush 0: always flush first. The returned number is "part
@@ -270,9 +297,10 @@ absl::StatusOr<std::vector<LoggedBatch>> LogCursor::Read(size_t max_bytes) {
   rocksdb::DB* db = storage_.rocks().db;
   if (next_ > db->GetLatestSequenceNumber()) return out;
   const auto purged = [&](uint64_t first) {
-    return absl::OutOfRangeError(absl::StrCat(
-        "sequence ", next_, " is no longer in the kept write-ahead log (it starts at ", first,
-        "); start again from a checkpoint"));
+    return absl::OutOfRangeError(
+        absl::StrCat("sequence ", next_,
+                     " is no longer in the kept write-ahead log (it starts at ",
+                     first, "); start again from a checkpoint"));
   };
   std::unique_ptr<rocksdb::TransactionLogIterator>& it = it_->it;
   // Two rounds at most: the open iterator, then (when it had nothing: a new
@@ -302,8 +330,10 @@ absl::StatusOr<std::vector<LoggedBatch>> LogCursor::Read(size_t max_bytes) {
       seen = true;
       rocksdb::BatchResult batch = it->GetBatch();
       it->Next();  // GetBatch moved the batch out: never look at it twice
-      const uint32_t count = static_cast<uint32_t>(batch.writeBatchPtr->Count());
-      if (batch.sequence + count <= next_) continue;  // before next_: sent already
+      const uint32_t count =
+          static_cast<uint32_t>(batch.writeBatchPtr->Count());
+      if (batch.sequence + count <= next_)
+        continue;  // before next_: sent already
       if (batch.sequence > next_) {
         // The log between is missing: deleted (a fresh iterator starts at
         // the oldest kept batch), or this iterator skipped (reopen).
@@ -321,7 +351,8 @@ absl::StatusOr<std::vector<LoggedBatch>> LogCursor::Read(size_t max_bytes) {
     }
     if (stale) it.reset();
     if (!out.empty()) return out;
-    const rocksdb::Status status = it == nullptr ? rocksdb::Status::OK() : it->status();
+    const rocksdb::Status status =
+        it == nullptr ? rocksdb::Status::OK() : it->status();
     if (fresh) {
       it.reset();
       if (!status.ok() && !status.IsTryAgain()) {
@@ -337,11 +368,13 @@ absl::StatusOr<std::vector<LoggedBatch>> LogCursor::Read(size_t max_bytes) {
   return out;
 }
 
-absl::StatusOr<AppliedBatch> ApplyLoggedBatch(Storage& storage, const std::string& data,
+absl::StatusOr<AppliedBatch> ApplyLoggedBatch(Storage& storage,
+                                              const std::string& data,
                                               uint64_t sequence) {
   if (data.size() < 12) {
     return absl::InvalidArgumentError(
-        absl::StrCat("replicated batch at ", sequence, " is ", data.size(), " bytes: too short"));
+        absl::StrCat("replicated batch at ", sequence, " is ", data.size(),
+                     " bytes: too short"));
   }
   rocksdb::WriteBatch batch(data);
   const RocksHandles h = storage.rocks();
@@ -351,27 +384,32 @@ absl::StatusOr<AppliedBatch> ApplyLoggedBatch(Storage& storage, const std::strin
   rocksdb::Status iterated = batch.Iterate(&collector);
   if (!collector.error().ok()) return collector.error();
   if (!iterated.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("replicated batch at ", sequence,
-                                                   " does not parse: ", iterated.ToString()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("replicated batch at ", sequence,
+                     " does not parse: ", iterated.ToString()));
   }
   TPR_RETURN_IF_ERROR(
       Rocks(batch.Put(h.meta, kAppliedSeqKey, EncodeU64(applied.last_sequence)),
             "cannot extend the replicated batch"));
   rocksdb::WriteOptions w;
   w.sync = true;
-  TPR_RETURN_IF_ERROR(Rocks(h.db->Write(w, &batch), "cannot apply a replicated batch"));
+  TPR_RETURN_IF_ERROR(
+      Rocks(h.db->Write(w, &batch), "cannot apply a replicated batch"));
   TPR_RETURN_IF_ERROR(storage.ReloadCounters());
   applied.changes = std::move(collector.changes());
   return applied;
 }
 
-absl::StatusOr<std::optional<uint64_t>> AppliedSequence(const Storage& storage) {
+absl::StatusOr<std::optional<uint64_t>> AppliedSequence(
+    const Storage& storage) {
   const RocksHandles h = storage.rocks();
   std::string value;
-  rocksdb::Status s = h.db->Get(rocksdb::ReadOptions(), h.meta, kAppliedSeqKey, &value);
+  rocksdb::Status s =
+      h.db->Get(rocksdb::ReadOptions(), h.meta, kAppliedSeqKey, &value);
   if (s.IsNotFound()) return std::optional<uint64_t>();
   TPR_RETURN_IF_ERROR(Rocks(s, "cannot read the applied sequence"));
-  if (value.size() != 8) return absl::DataLossError("the applied sequence is malformed");
+  if (value.size() != 8)
+    return absl::DataLossError("the applied sequence is malformed");
   return std::optional<uint64_t>(DecodeU64(value));
 }
 
@@ -386,8 +424,10 @@ absl::Status SetAppliedSequence(Storage& storage, uint64_t sequence) {
 absl::Status ClearAppliedSequence(Storage& storage) {
   const RocksHandles h = storage.rocks();
   rocksdb::WriteBatch batch;
-  TPR_RETURN_IF_ERROR(Rocks(batch.Delete(h.meta, kAppliedSeqKey), "cannot clear"));
-  TPR_RETURN_IF_ERROR(Rocks(batch.Delete(h.meta, kPrimaryIdentityKey), "cannot clear"));
+  TPR_RETURN_IF_ERROR(
+      Rocks(batch.Delete(h.meta, kAppliedSeqKey), "cannot clear"));
+  TPR_RETURN_IF_ERROR(
+      Rocks(batch.Delete(h.meta, kPrimaryIdentityKey), "cannot clear"));
   rocksdb::WriteOptions w;
   w.sync = true;
   return Rocks(h.db->Write(w, &batch), "cannot clear the applied sequence");
@@ -395,8 +435,8 @@ absl::Status ClearAppliedSequence(Storage& storage) {
 
 absl::StatusOr<std::string> DatabaseIdentity(const Storage& storage) {
   std::string identity;
-  TPR_RETURN_IF_ERROR(
-      Rocks(storage.rocks().db->GetDbIdentity(identity), "cannot read the database identity"));
+  TPR_RETURN_IF_ERROR(Rocks(storage.rocks().db->GetDbIdentity(identity),
+                            "cannot read the database identity"));
   return identity;
 }
 
@@ -421,7 +461,8 @@ absl::Status SetPrimaryIdentity(Storage& storage, const std::string& identity) {
 absl::StatusOr<std::string> PrimaryIdentity(const Storage& storage) {
   const RocksHandles h = storage.rocks();
   std::string value;
-  rocksdb::Status s = h.db->Get(rocksdb::ReadOptions(), h.meta, kPrimaryIdentityKey, &value);
+  rocksdb::Status s =
+      h.db->Get(rocksdb::ReadOptions(), h.meta, kPrimaryIdentityKey, &value);
   if (s.IsNotFound()) return std::string();
   TPR_RETURN_IF_ERROR(Rocks(s, "cannot read the primary's identity"));
   return value;

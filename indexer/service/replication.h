@@ -4,13 +4,17 @@
 // tail (GetUpdatesSince) and apply. No consensus of our own: one primary per
 // shard, followers copy it, promotion is an operator's command.
 //
-//   absl::StatusOr<BackupResult> b = CreateBackup(storage, "/backups/shard0", 7);
-//   absl::StatusOr<RestoreResult> r = RestoreBackup("/backups/shard0", 0, "/data/new");
-//   absl::StatusOr<uint64_t> seq = CreateCheckpoint(storage, dir + "/.checkpoint-1");
+//   absl::StatusOr<BackupResult> b =
+//       CreateBackup(storage, "/backups/shard0", 7);
+//   absl::StatusOr<RestoreResult> r =
+//       RestoreBackup("/backups/shard0", 0, "/data/new");
+//   absl::StatusOr<uint64_t> seq =
+//       CreateCheckpoint(storage, dir + "/.checkpoint-1");
 //   LogCursor cursor(storage, seq + 1);
 //   absl::StatusOr<std::vector<LoggedBatch>> log = cursor.Read(4 << 20);
-//   absl::StatusOr<AppliedBatch> a = ApplyLoggedBatch(follower_storage, log[0].data,
-//                                                     log[0].sequence);
+//   absl::StatusOr<AppliedBatch> a =
+//       ApplyLoggedBatch(follower_storage, log[0].data,
+//                        log[0].sequence);
 //
 // Everything the persisted VP-tree needs travels with the models: the tree
 // and its marker live in the same RocksDB database (storage.h), so a
@@ -57,7 +61,8 @@ struct BackupResult {
 // files not yet in the set and a read of the whole backup. Thread-safe
 // (concurrent backups into the same set are serialized by a process-wide
 // lock; RocksDB forbids concurrent writers of one set).
-absl::StatusOr<BackupResult> CreateBackup(Storage& storage, const std::string& backup_dir,
+absl::StatusOr<BackupResult> CreateBackup(Storage& storage,
+                                          const std::string& backup_dir,
                                           int keep_last);
 
 // RestoreResult: what RestoreBackup restored.
@@ -74,7 +79,8 @@ struct RestoreResult {
 // NOT_FOUND for a missing set or backup id, DATA_LOSS when verification
 // fails, UNAVAILABLE/INTERNAL for I/O errors. Cost: a read of the backup and
 // a copy of its files. Thread-safe.
-absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint32_t backup_id,
+absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir,
+                                            uint32_t backup_id,
                                             const std::string& data_dir);
 
 // CreateCheckpoint writes a consistent copy of `storage`'s database into
@@ -82,7 +88,8 @@ absl::StatusOr<RestoreResult> RestoreBackup(const std::string& backup_dir, uint3
 // returns the RocksDB sequence number it reflects: a follower continues
 // from the next one. Cost: a flush and one link or copy per file.
 // Thread-safe.
-absl::StatusOr<uint64_t> CreateCheckpoint(Storage& storage, const std::string& dir);
+absl::StatusOr<uint64_t> CreateCheckpoint(Storage& storage,
+                                          const std::string& dir);
 
 // LatestSequence returns the RocksDB sequence number of the last write
 // (RocksDB numbers every key written). Thread-safe, O(1).
@@ -162,7 +169,8 @@ struct AppliedBatch {
 // does not parse; the store's errors. Cost: one synced write + the
 // batch's size. Call under the caller's writer lock (batches apply in
 // order).
-absl::StatusOr<AppliedBatch> ApplyLoggedBatch(Storage& storage, const std::string& data,
+absl::StatusOr<AppliedBatch> ApplyLoggedBatch(Storage& storage,
+                                              const std::string& data,
                                               uint64_t sequence);
 
 // AppliedSequence returns the primary sequence number a follower's store

@@ -10,7 +10,8 @@ namespace {
 class Session final : public SearchSession {
  public:
   Session(std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor, int k,
-          std::function<bool()> cancelled, std::shared_ptr<const LabelSnapshot> labels)
+          std::function<bool()> cancelled,
+          std::shared_ptr<const LabelSnapshot> labels)
       : cursor_(std::move(cursor)),
         k_(k),
         cancelled_(std::move(cancelled)),
@@ -58,7 +59,8 @@ class Session final : public SearchSession {
 
 std::unique_ptr<SearchSession> MakeSearchSession(
     std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor, int k,
-    std::function<bool()> cancelled, std::shared_ptr<const LabelSnapshot> labels) {
+    std::function<bool()> cancelled,
+    std::shared_ptr<const LabelSnapshot> labels) {
   return std::make_unique<Session>(std::move(cursor), k, std::move(cancelled),
                                    std::move(labels));
 }

@@ -2,7 +2,8 @@
 // neighbours of an index snapshot in ascending EMD (Tam & Lau 2007,
 // section 6.2) with the labels of the same moment.
 //
-//   absl::StatusOr<std::unique_ptr<SearchSession>> s = core->StartSearch(request, cancelled);
+//   absl::StatusOr<std::unique_ptr<SearchSession>> s =
+//       core->StartSearch(request, cancelled);
 //   while (std::optional<tpr::v1::Neighbor> n = (*s)->Next()) Send(*n);
 //   tpr::v1::SearchStats stats = (*s)->Stats();
 #ifndef TPR_INDEXER_SERVICE_SEARCH_SESSION_H_
@@ -36,7 +37,8 @@ class SearchSession {
 // once it returns true Next() returns nullopt. Cost: O(1).
 std::unique_ptr<SearchSession> MakeSearchSession(
     std::unique_ptr<tpr::index::SignatureIndex::Cursor> cursor, int k,
-    std::function<bool()> cancelled, std::shared_ptr<const LabelSnapshot> labels);
+    std::function<bool()> cancelled,
+    std::shared_ptr<const LabelSnapshot> labels);
 
 }  // namespace tpr::indexer
 

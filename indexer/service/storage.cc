@@ -3,17 +3,16 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdarg>
 #include <cstdio>
-#include <optional>
-#include <unordered_map>
 #include <cstring>
-#include <filesystem>
-#include <chrono>
-#include <condition_variable>
 #include <deque>
+#include <filesystem>
 #include <mutex>
+#include <optional>
 #include <thread>
+#include <unordered_map>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -42,7 +41,8 @@ constexpr char kWriteCountKey[] = "write_count";
 
 std::string EncodeSeq(uint64_t seq) {
   std::string out(8, '\0');
-  for (int i = 0; i < 8; ++i) out[i] = static_cast<char>((seq >> (8 * i)) & 0xff);
+  for (int i = 0; i < 8; ++i)
+    out[i] = static_cast<char>((seq >> (8 * i)) & 0xff);
   return out;
 }
 
@@ -66,8 +66,8 @@ absl::Status FromRocks(const rocksdb::Status& s, absl::string_view what,
   // Disk full: RESOURCE_EXHAUSTED, which clients do not retry (UNAVAILABLE
   // they do, and would hammer a full disk); Storage::WriteState recovers.
   if (s.IsNoSpace()) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat(message, " (the disk is full; writes resume once space is freed)"));
+    return absl::ResourceExhaustedError(absl::StrCat(
+        message, " (the disk is full; writes resume once space is freed)"));
   }
   if (s.IsNotFound()) return absl::NotFoundError(message);
   if (s.IsIOError() && s.ToString().find("lock") != std::string::npos) {
@@ -87,7 +87,8 @@ absl::StatusOr<std::pair<uint64_t, tpr::v1::Model>> DecodeModel(
   }
   std::pair<uint64_t, tpr::v1::Model> out;
   out.first = DecodeSeq(value.data());
-  if (!out.second.ParseFromArray(value.data() + 8, static_cast<int>(value.size() - 8))) {
+  if (!out.second.ParseFromArray(value.data() + 8,
+                                 static_cast<int>(value.size() - 8))) {
     return absl::DataLossError(
         absl::StrCat("stored model '", key.ToString(), "' does not parse"));
   }
@@ -102,21 +103,24 @@ std::string DescribeFiles(const std::string& dir) {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".log") == 0) logs.push_back(name);
+    if (name.size() > 4 && name.compare(name.size() - 4, 4, ".log") == 0)
+      logs.push_back(name);
   }
   std::sort(logs.begin(), logs.end());
   if (FILE* f = std::fopen((dir + "/CURRENT").c_str(), "r")) {
     char line[256] = {0};
     if (std::fgets(line, sizeof line, f) != nullptr) {
       manifest = line;
-      while (!manifest.empty() && (manifest.back() == '\n' || manifest.back() == '\r')) {
+      while (!manifest.empty() &&
+             (manifest.back() == '\n' || manifest.back() == '\r')) {
         manifest.pop_back();
       }
     }
     std::fclose(f);
   }
-  return absl::StrCat(manifest, ", write-ahead log",
-                      logs.empty() ? "s: none" : absl::StrCat(": ", absl::StrJoin(logs, ", ")));
+  return absl::StrCat(
+      manifest, ", write-ahead log",
+      logs.empty() ? "s: none" : absl::StrCat(": ", absl::StrJoin(logs, ", ")));
 }
 
 // What the meta family records about the models, written in the same batch
@@ -128,11 +132,13 @@ struct Counters {
   std::optional<uint64_t> models;  // absent in databases written before it
 };
 
-absl::StatusOr<Counters> ReadCounters(rocksdb::DB* db, rocksdb::ColumnFamilyHandle* meta,
+absl::StatusOr<Counters> ReadCounters(rocksdb::DB* db,
+                                      rocksdb::ColumnFamilyHandle* meta,
                                       const std::string& dir) {
   Counters out;
   std::string value;
-  rocksdb::Status s = db->Get(rocksdb::ReadOptions(), meta, kLastSeqKey, &value);
+  rocksdb::Status s =
+      db->Get(rocksdb::ReadOptions(), meta, kLastSeqKey, &value);
   if (s.ok() && value.size() == 8) {
     out.last_seq = DecodeSeq(value.data());
   } else if (!s.ok() && !s.IsNotFound()) {
@@ -159,17 +165,19 @@ absl::StatusOr<Counters> ReadCounters(rocksdb::DB* db, rocksdb::ColumnFamilyHand
 // same number with a different model count means models are. More batches
 // than acknowledged is a crash between a write and its record (the record
 // follows the write), not a loss.
-absl::Status CheckAgainstAcknowledged(const Acknowledged& ack, const Counters& db,
+absl::Status CheckAgainstAcknowledged(const Acknowledged& ack,
+                                      const Counters& db,
                                       const std::string& dir) {
   const bool writes_lost = db.writes < ack.writes;
-  const bool models_lost =
-      db.writes == ack.writes && db.models.has_value() && *db.models != ack.models;
+  const bool models_lost = db.writes == ack.writes && db.models.has_value() &&
+                           *db.models != ack.models;
   if (!writes_lost && !models_lost) return absl::OkStatus();
   return absl::DataLossError(absl::StrCat(
       "the database holds ", db.writes, " write batches (",
       db.models.has_value() ? absl::StrCat(*db.models) : std::string("unknown"),
-      " models) but ", ack.writes, " (", ack.models, " models) were acknowledged (",
-      AckFile::kName, "): acknowledged writes were lost from ", DescribeFiles(dir),
+      " models) but ", ack.writes, " (", ack.models,
+      " models) were acknowledged (", AckFile::kName,
+      "): acknowledged writes were lost from ", DescribeFiles(dir),
       "; refusing to serve a smaller database (see docs/recovery.md)"));
 }
 
@@ -217,7 +225,8 @@ rocksdb::Options DbOptions(const StorageOptions& options) {
   db_options.info_log = std::make_shared<StderrLogger>();
   db_options.create_if_missing = options.create_if_missing;
   db_options.create_missing_column_families = true;
-  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
+  db_options.wal_recovery_mode =
+      rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
   db_options.paranoid_checks = true;
   db_options.best_efforts_recovery = false;
   db_options.track_and_verify_wals_in_manifest = true;
@@ -244,7 +253,8 @@ std::vector<rocksdb::ColumnFamilyDescriptor> Families() {
   models_options.table_factory.reset(rocksdb::NewBlockBasedTableFactory(table));
   rocksdb::ColumnFamilyOptions meta_options;
   meta_options.compression = rocksdb::kNoCompression;
-  return {{rocksdb::kDefaultColumnFamilyName, meta_options}, {kModelsFamily, models_options}};
+  return {{rocksdb::kDefaultColumnFamilyName, meta_options},
+          {kModelsFamily, models_options}};
 }
 
 // Counts write stalls and times the write-ahead log's syncs for metrics
@@ -267,7 +277,9 @@ class EngineListener final : public rocksdb::EventListener {
       on_wal_sync_(std::chrono::duration<double>(info.duration).count());
     }
   }
-  bool ShouldBeNotifiedOnFileIO() override { return static_cast<bool>(on_wal_sync_); }
+  bool ShouldBeNotifiedOnFileIO() override {
+    return static_cast<bool>(on_wal_sync_);
+  }
 
   std::atomic<uint64_t> delayed{0};
   std::atomic<uint64_t> stopped{0};
@@ -342,8 +354,8 @@ struct Storage::Impl {
 Storage::Storage(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Storage::~Storage() = default;
 
-absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
-                                                       const StorageOptions& options) {
+absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(
+    const std::string& dir, const StorageOptions& options) {
   if (dir.empty()) return absl::InvalidArgumentError("data directory is empty");
   if (options.create_if_missing) {
     std::error_code ec;
@@ -358,11 +370,12 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   impl->options = options;
 
   const bool existed = std::filesystem::exists(dir + "/CURRENT");
-  absl::StatusOr<std::unique_ptr<AckFile>> ack = AckFile::Open(dir, options.create_if_missing);
+  absl::StatusOr<std::unique_ptr<AckFile>> ack =
+      AckFile::Open(dir, options.create_if_missing);
   if (!ack.ok()) {
     if (absl::IsDataLoss(ack.status())) {
-      return absl::DataLossError(absl::StrCat(ack.status().message(),
-                                              "; see docs/recovery.md"));
+      return absl::DataLossError(
+          absl::StrCat(ack.status().message(), "; see docs/recovery.md"));
     }
     return ack.status();
   }
@@ -374,13 +387,14 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   auto open_failed = [&dir](const rocksdb::Status& s) {
     absl::Status st = FromRocks(s, "cannot open the model database", dir);
     if (!absl::IsDataLoss(st)) return st;
-    return absl::DataLossError(absl::StrCat(st.message(), " (", DescribeFiles(dir),
-                                            "); see docs/recovery.md"));
+    return absl::DataLossError(absl::StrCat(
+        st.message(), " (", DescribeFiles(dir), "); see docs/recovery.md"));
   };
   if (acknowledged.has_value() && !existed) {
     return absl::DataLossError(absl::StrCat(
         "the database is gone (no CURRENT file) but ", acknowledged->writes,
-        " write batches (", acknowledged->models, " models) were acknowledged (", AckFile::kName,
+        " write batches (", acknowledged->models,
+        " models) were acknowledged (", AckFile::kName,
         "); refusing to start an empty database (see docs/recovery.md)"));
   }
   if (acknowledged.has_value()) {
@@ -392,17 +406,21 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
     rocksdb::FileLock* lock = nullptr;
     rocksdb::Status s = env->LockFile(dir + "/LOCK", &lock);
     if (!s.ok()) return FromRocks(s, "cannot open the model database", dir);
-    s = rocksdb::DB::OpenForReadOnly(db_options, dir, Families(), &handles, &raw);
+    s = rocksdb::DB::OpenForReadOnly(db_options, dir, Families(), &handles,
+                                     &raw);
     absl::Status checked;
     if (!s.ok()) {
       checked = open_failed(s);
     } else {
       std::unique_ptr<rocksdb::DB> db(raw);
-      absl::StatusOr<Counters> counters = ReadCounters(db.get(), handles[0], dir);
-      for (rocksdb::ColumnFamilyHandle* h : handles) db->DestroyColumnFamilyHandle(h);
+      absl::StatusOr<Counters> counters =
+          ReadCounters(db.get(), handles[0], dir);
+      for (rocksdb::ColumnFamilyHandle* h : handles)
+        db->DestroyColumnFamilyHandle(h);
       handles.clear();
-      checked = counters.ok() ? CheckAgainstAcknowledged(*acknowledged, *counters, dir)
-                              : counters.status();
+      checked = counters.ok()
+                    ? CheckAgainstAcknowledged(*acknowledged, *counters, dir)
+                    : counters.status();
     }
     env->UnlockFile(lock).PermitUncheckedError();
     TPR_RETURN_IF_ERROR(checked);
@@ -412,11 +430,13 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   // operation) and the listener, on the serving open.
   rocksdb::Options serving_options = db_options;
   serving_options.statistics = rocksdb::CreateDBStatistics();
-  serving_options.statistics->set_stats_level(rocksdb::StatsLevel::kExceptHistogramOrTimers);
+  serving_options.statistics->set_stats_level(
+      rocksdb::StatsLevel::kExceptHistogramOrTimers);
   impl->statistics = serving_options.statistics;
   impl->listener = std::make_shared<EngineListener>(options.on_wal_sync);
   serving_options.listeners.push_back(impl->listener);
-  rocksdb::Status s = rocksdb::DB::Open(serving_options, dir, Families(), &handles, &raw);
+  rocksdb::Status s =
+      rocksdb::DB::Open(serving_options, dir, Families(), &handles, &raw);
   if (!s.ok()) return open_failed(s);
   impl->db.reset(raw);
   impl->meta = handles[0];
@@ -425,10 +445,12 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
   // The next sequence number continues after everything on disk: every
   // model write records the last number it used in the same atomic batch, so
   // no scan is needed (the tree marker is never above it).
-  absl::StatusOr<Counters> counters = ReadCounters(impl->db.get(), impl->meta, dir);
+  absl::StatusOr<Counters> counters =
+      ReadCounters(impl->db.get(), impl->meta, dir);
   if (!counters.ok()) return counters.status();
   if (acknowledged.has_value()) {
-    TPR_RETURN_IF_ERROR(CheckAgainstAcknowledged(*acknowledged, *counters, dir));
+    TPR_RETURN_IF_ERROR(
+        CheckAgainstAcknowledged(*acknowledged, *counters, dir));
   }
   if (!counters->models.has_value()) {
     // A database written before the model count existed (or a new one):
@@ -437,23 +459,25 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& dir,
     std::unique_ptr<rocksdb::Iterator> it(
         impl->db->NewIterator(rocksdb::ReadOptions(), impl->models));
     for (it->SeekToFirst(); it->Valid(); it->Next()) ++n;
-    TPR_RETURN_IF_ERROR(FromRocks(it->status(), "cannot count the models", dir));
+    TPR_RETURN_IF_ERROR(
+        FromRocks(it->status(), "cannot count the models", dir));
     rocksdb::WriteBatch batch;
     batch.Put(impl->meta, kModelCountKey, EncodeSeq(n));
     rocksdb::WriteOptions w;
     w.sync = true;
-    TPR_RETURN_IF_ERROR(
-        FromRocks(impl->db->Write(w, &batch), "cannot record the model count", dir));
+    TPR_RETURN_IF_ERROR(FromRocks(impl->db->Write(w, &batch),
+                                  "cannot record the model count", dir));
     counters->models = n;
   }
   impl->last_seq = counters->last_seq;
   impl->writes = counters->writes;
   impl->model_count = *counters->models;
-  if (!acknowledged.has_value() ||
-      acknowledged->writes != counters->writes || acknowledged->models != *counters->models) {
+  if (!acknowledged.has_value() || acknowledged->writes != counters->writes ||
+      acknowledged->models != *counters->models) {
     // New file (new or older database), or a crash between a write and its
     // record (the database is then ahead, never behind: checked above).
-    TPR_RETURN_IF_ERROR(impl->ack->Record({counters->writes, *counters->models}));
+    TPR_RETURN_IF_ERROR(
+        impl->ack->Record({counters->writes, *counters->models}));
   }
   return std::unique_ptr<Storage>(new Storage(std::move(impl)));
 }
@@ -472,7 +496,8 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
     auto it = present.find(id);
     if (it != present.end()) return it->second;
     rocksdb::PinnableSlice value;
-    rocksdb::Status s = impl_->db->Get(rocksdb::ReadOptions(), impl_->models, id, &value);
+    rocksdb::Status s =
+        impl_->db->Get(rocksdb::ReadOptions(), impl_->models, id, &value);
     if (s.IsNotFound()) return false;
     if (!s.ok()) return FromRocks(s, "cannot read a model", impl_->dir);
     return true;
@@ -490,14 +515,16 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
     }
     value = EncodeSeq(++seq);
     if (!w.model->AppendToString(&value)) {
-      return absl::InternalError(absl::StrCat("cannot serialize model '", w.id, "'"));
+      return absl::InternalError(
+          absl::StrCat("cannot serialize model '", w.id, "'"));
     }
     batch.Put(impl_->models, w.id, value);
     if (!*was) ++models;
     present[w.id] = true;
   }
   batch.Put(impl_->meta, kLastSeqKey, EncodeSeq(seq));
-  batch.Put(impl_->meta, kModelCountKey, EncodeSeq(static_cast<uint64_t>(models)));
+  batch.Put(impl_->meta, kModelCountKey,
+            EncodeSeq(static_cast<uint64_t>(models)));
   // Every batch, deletes included, counts one write, so that a crash between
   // a write and its ACKNOWLEDGED record leaves the database ahead of the
   // record (see CheckAgainstAcknowledged).
@@ -516,11 +543,13 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
   // Without sync_writes nothing is durable yet; the record is written at
   // close, after the flush.
   if (impl_->options.sync_writes) {
-    TPR_RETURN_IF_ERROR(impl_->ack->Record({writes_after, static_cast<uint64_t>(models)}));
+    TPR_RETURN_IF_ERROR(
+        impl_->ack->Record({writes_after, static_cast<uint64_t>(models)}));
   }
   if (impl_->options.on_write) {
-    impl_->options.on_write(
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+    impl_->options.on_write(std::chrono::duration<double>(
+                                std::chrono::steady_clock::now() - started)
+                                .count());
   }
   return absl::OkStatus();
 }
@@ -529,7 +558,8 @@ absl::StatusOr<tpr::v1::Model> Storage::GetModel(const std::string& id) const {
   rocksdb::PinnableSlice value;
   rocksdb::Status s =
       impl_->db->Get(rocksdb::ReadOptions(), impl_->models, id, &value);
-  if (s.IsNotFound()) return absl::NotFoundError(absl::StrCat("no model with id '", id, "'"));
+  if (s.IsNotFound())
+    return absl::NotFoundError(absl::StrCat("no model with id '", id, "'"));
   if (!s.ok()) return FromRocks(s, "cannot read a model");
   auto decoded = DecodeModel(value, id);
   if (!decoded.ok()) return decoded.status();
@@ -543,7 +573,8 @@ absl::Status Storage::ForEachModel(
   // A full scan should not evict hot blocks; it reads each block once.
   read.fill_cache = false;
   read.readahead_size = 2 << 20;
-  std::unique_ptr<rocksdb::Iterator> it(impl_->db->NewIterator(read, impl_->models));
+  std::unique_ptr<rocksdb::Iterator> it(
+      impl_->db->NewIterator(read, impl_->models));
   if (threads <= 1) {
     for (it->SeekToFirst(); it->Valid(); it->Next()) {
       auto decoded = DecodeModel(it->value(), it->key());
@@ -588,8 +619,9 @@ absl::Status Storage::ForEachModel(
       for (auto& [key, value] : chunk) {
         if (failed) return;
         auto decoded = DecodeModel(value, key);
-        absl::Status st = decoded.ok() ? fn(decoded->first, std::move(decoded->second))
-                                       : decoded.status();
+        absl::Status st = decoded.ok()
+                              ? fn(decoded->first, std::move(decoded->second))
+                              : decoded.status();
         if (!st.ok()) {
           record(std::move(st));
           ready.notify_all();
@@ -631,7 +663,8 @@ absl::Status Storage::SaveTree(const std::string& tree_bytes, uint64_t seq) {
   batch.Put(impl_->meta, kTreeSeqKey, EncodeSeq(seq));
   rocksdb::WriteOptions w;
   w.sync = true;
-  absl::Status st = FromRocks(impl_->db->Write(w, &batch), "cannot persist the VP-tree", impl_->dir);
+  absl::Status st = FromRocks(impl_->db->Write(w, &batch),
+                              "cannot persist the VP-tree", impl_->dir);
   if (absl::IsResourceExhausted(st)) impl_->MarkNoSpace(st);
   return st;
 }
@@ -651,7 +684,8 @@ absl::StatusOr<PersistedTree> Storage::LoadTree() const {
   }
   if (!s1.ok()) return FromRocks(s1, "cannot read the VP-tree");
   if (!s2.ok()) return FromRocks(s2, "cannot read the VP-tree marker");
-  if (seq.size() != 8) return absl::DataLossError("VP-tree marker is malformed");
+  if (seq.size() != 8)
+    return absl::DataLossError("VP-tree marker is malformed");
   tree.seq = DecodeSeq(seq.data());
   return tree;
 }
@@ -678,7 +712,8 @@ absl::Status Storage::WriteState() {
     // Busy: RocksDB's own recovery (SstFileManager) is under way; the
     // original reason still says more than "Resource busy".
     if (!s.IsBusy()) {
-      impl_->no_space_reason = FromRocks(s, "cannot resume writes", impl_->dir).ToString();
+      impl_->no_space_reason =
+          FromRocks(s, "cannot resume writes", impl_->dir).ToString();
     }
   }
   return absl::ResourceExhaustedError(absl::StrCat(
@@ -694,7 +729,8 @@ absl::Status Storage::CheckScanned(uint64_t scanned) const {
   return absl::DataLossError(absl::StrCat(
       "the models family holds ", scanned, " models but ", recorded,
       " were recorded with the acknowledged writes: models were lost from ",
-      DescribeFiles(impl_->dir), "; refusing to serve a smaller database (see docs/recovery.md)"));
+      DescribeFiles(impl_->dir),
+      "; refusing to serve a smaller database (see docs/recovery.md)"));
 }
 
 RocksHandles Storage::rocks() const {
@@ -705,7 +741,8 @@ const std::string& Storage::dir() const { return impl_->dir; }
 
 absl::Status Storage::ReloadCounters() {
   std::lock_guard<std::mutex> lock(impl_->write_mu);
-  absl::StatusOr<Counters> counters = ReadCounters(impl_->db.get(), impl_->meta, impl_->dir);
+  absl::StatusOr<Counters> counters =
+      ReadCounters(impl_->db.get(), impl_->meta, impl_->dir);
   if (!counters.ok()) return counters.status();
   impl_->last_seq = counters->last_seq;
   impl_->writes = counters->writes;
@@ -717,7 +754,8 @@ int64_t Storage::DiskBytes() const {
   int64_t total = 0;
   std::error_code ec;
   for (auto it = std::filesystem::recursive_directory_iterator(impl_->dir, ec);
-       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
+       !ec && it != std::filesystem::recursive_directory_iterator();
+       it.increment(ec)) {
     std::error_code size_ec;
     if (it->is_regular_file(size_ec)) {
       const auto size = it->file_size(size_ec);
@@ -730,8 +768,10 @@ int64_t Storage::DiskBytes() const {
 EngineStats Storage::engine_stats() const {
   EngineStats stats;
   if (impl_->statistics) {
-    stats.stall_micros = impl_->statistics->getTickerCount(rocksdb::STALL_MICROS);
-    stats.wal_syncs = impl_->statistics->getTickerCount(rocksdb::WAL_FILE_SYNCED);
+    stats.stall_micros =
+        impl_->statistics->getTickerCount(rocksdb::STALL_MICROS);
+    stats.wal_syncs =
+        impl_->statistics->getTickerCount(rocksdb::WAL_FILE_SYNCED);
   }
   if (impl_->listener) {
     stats.delayed_stalls = impl_->listener->delayed.load();
@@ -740,13 +780,16 @@ EngineStats Storage::engine_stats() const {
   for (rocksdb::ColumnFamilyHandle* family : {impl_->meta, impl_->models}) {
     if (family == nullptr) continue;
     uint64_t value = 0;
-    if (impl_->db->GetIntProperty(family, "rocksdb.estimate-live-data-size", &value)) {
+    if (impl_->db->GetIntProperty(family, "rocksdb.estimate-live-data-size",
+                                  &value)) {
       stats.live_data_bytes += value;
     }
-    if (impl_->db->GetIntProperty(family, "rocksdb.total-sst-files-size", &value)) {
+    if (impl_->db->GetIntProperty(family, "rocksdb.total-sst-files-size",
+                                  &value)) {
       stats.sst_bytes += value;
     }
-    if (impl_->db->GetIntProperty(family, "rocksdb.cur-size-all-mem-tables", &value)) {
+    if (impl_->db->GetIntProperty(family, "rocksdb.cur-size-all-mem-tables",
+                                  &value)) {
       stats.memtable_bytes += value;
     }
   }

@@ -151,12 +151,11 @@ class Storage {
   // Write applies `writes` atomically in one RocksDB batch (synced when
   // options.sync_writes), assigns each put the next sequence number, counts
   // the batch and keeps the model count (a delete of an absent id changes
-  // nothing), then records both counts in ACKNOWLEDGED. Returns UNAVAILABLE/INTERNAL on an
-  // I/O error (then nothing was written, unless only the ACKNOWLEDGED
-  // record failed); RESOURCE_EXHAUSTED when the disk is full (see
-  // WriteState). Cost: one point lookup per id (Bloom-filtered), one
-  // fsync of the log and one of ACKNOWLEDGED, plus O(total bytes).
-  // Thread-safe.
+  // nothing), then records both counts in ACKNOWLEDGED. Returns
+  // UNAVAILABLE/INTERNAL on an I/O error (then nothing was written, unless only
+  // the ACKNOWLEDGED record failed); RESOURCE_EXHAUSTED when the disk is full
+  // (see WriteState). Cost: one point lookup per id (Bloom-filtered), one fsync
+  // of the log and one of ACKNOWLEDGED, plus O(total bytes). Thread-safe.
   absl::Status Write(const std::vector<ModelWrite>& writes);
 
   // GetModel returns the stored model `id`; NOT_FOUND when absent, DATA_LOSS
@@ -172,7 +171,8 @@ class Storage {
   // under way finish). Used once at open. Cost: a full scan; parsing spread
   // over the threads. Thread-safe (reads a snapshot).
   absl::Status ForEachModel(
-      const std::function<absl::Status(uint64_t seq, tpr::v1::Model&& model)>& fn,
+      const std::function<absl::Status(uint64_t seq, tpr::v1::Model&& model)>&
+          fn,
       int threads = 1) const;
 
   // SaveTree persists `tree_bytes` with marker `seq`, atomically and synced.

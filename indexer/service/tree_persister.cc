@@ -8,7 +8,8 @@
 
 namespace tpr::indexer {
 
-TreePersister::TreePersister(Storage* storage, const tpr::index::SignatureIndex* index,
+TreePersister::TreePersister(Storage* storage,
+                             const tpr::index::SignatureIndex* index,
                              TreePersisterOptions options)
     : storage_(storage), index_(index), options_(std::move(options)) {}
 
@@ -62,8 +63,8 @@ absl::Status TreePersister::PersistNow() {
   TPR_RETURN_IF_ERROR(storage_->SaveTree(bytes, seq));
   saved_hash_ = hash;
   if (options_.log) {
-    options_.log(
-        absl::StrCat("persisted the VP-tree: ", indexed, " models, ", bytes.size(), " bytes"));
+    options_.log(absl::StrCat("persisted the VP-tree: ", indexed, " models, ",
+                              bytes.size(), " bytes"));
   }
   return absl::OkStatus();
 }
@@ -78,7 +79,8 @@ void TreePersister::Stop() {
   if (thread_.joinable()) thread_.join();
   absl::Status st = PersistNow();
   if (!st.ok() && options_.log) {
-    options_.log(absl::StrCat("cannot persist the VP-tree at close: ", st.ToString()));
+    options_.log(
+        absl::StrCat("cannot persist the VP-tree at close: ", st.ToString()));
   }
 }
 

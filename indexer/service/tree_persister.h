@@ -3,7 +3,8 @@
 // SignatureIndex::Load). A background thread checks every interval; Stop()
 // saves once more.
 //
-//   TreePersister persister(storage, index, {.interval_ms = 10000, .log = log});
+//   TreePersister persister(storage, index,
+//                           {.interval_ms = 10000, .log = log});
 //   persister.MarkSaved(bytes);        // the tree the index was loaded from
 //   persister.Start();  ...  persister.NoteWrites(n);  ...  persister.Stop();
 #ifndef TPR_INDEXER_SERVICE_TREE_PERSISTER_H_

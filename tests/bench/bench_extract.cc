@@ -52,8 +52,10 @@ const Mesh& BenchMesh(int64_t n) {
     // Capsule of radius 1 and length 4: perimeter 2 pi, profile length
     // pi + 4. Equal spacing h on both: n ~ around * rings.
     const double kPi = 3.14159265358979323846;
-    const double h = std::sqrt(2.0 * kPi * (kPi + 4.0) / static_cast<double>(n));
-    const int around = std::max(8, static_cast<int>(std::lround(2.0 * kPi / h)));
+    const double h =
+        std::sqrt(2.0 * kPi * (kPi + 4.0) / static_cast<double>(n));
+    const int around =
+        std::max(8, static_cast<int>(std::lround(2.0 * kPi / h)));
     const int rings = std::max(
         4, static_cast<int>(std::lround(static_cast<double>(n) / around)) + 1);
     mesh = std::make_unique<Mesh>(testing::Capsule(1.0, 4.0, rings, around));
@@ -142,7 +144,8 @@ void BM_Extract(benchmark::State& state) {
   }
   state.counters["points"] = points;
   state.counters["rings"] = rings;
-  for (const StageTiming& t : last.timings) state.counters["ms_" + t.stage] = t.milliseconds;
+  for (const StageTiming& t : last.timings)
+    state.counters["ms_" + t.stage] = t.milliseconds;
 }
 
 // The Laplace-Beltrami spectrum (issue 9: at most 100 ms at 10k vertices on
@@ -187,8 +190,15 @@ void BM_SimplifyMesh(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_Spectrum)->Apply(Sizes);
-BENCHMARK(BM_SimplifyMesh)->Arg(10000)->Arg(20000)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_SpectrumFullMesh)->Arg(2000)->Arg(3000)->Arg(5000)->Arg(10000)
+BENCHMARK(BM_SimplifyMesh)
+    ->Arg(10000)
+    ->Arg(20000)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_SpectrumFullMesh)
+    ->Arg(2000)
+    ->Arg(3000)
+    ->Arg(5000)
+    ->Arg(10000)
     ->Unit(benchmark::kMillisecond);
 
 // The synthetic generator (foundation issue): one posed shape per
@@ -200,8 +210,8 @@ void BM_GenerateShape(benchmark::State& state) {
   options.target_vertices = static_cast<int>(state.range(0));
   int64_t i = 0;
   for (auto _ : state) {
-    absl::StatusOr<Mesh> mesh =
-        synth::GenerateShape(classes[i % classes.size()], (i / classes.size()) % 8, options);
+    absl::StatusOr<Mesh> mesh = synth::GenerateShape(
+        classes[i % classes.size()], (i / classes.size()) % 8, options);
     if (!mesh.ok()) {
       state.SkipWithError("GenerateShape failed");
       break;
@@ -209,10 +219,13 @@ void BM_GenerateShape(benchmark::State& state) {
     benchmark::DoNotOptimize(mesh->positions.data());
     ++i;
   }
-  state.counters["meshes_per_s"] =
-      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["meshes_per_s"] = benchmark::Counter(
+      static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_GenerateShape)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_GenerateShape)
+    ->Arg(2000)
+    ->Arg(10000)
+    ->Unit(benchmark::kMillisecond);
 
 // Mesh intake (mesh_io.h): one LoadMeshFromBuffer per iteration, parse and
 // clean, over three SHREC'07 watertight meshes read once from ../shared
@@ -255,7 +268,10 @@ BENCHMARK(BM_Extract)
     ->Args({10000, 2})
     ->Args({100000, 2})
     ->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_BuildGraph)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_BuildGraph)
+    ->Arg(10000)
+    ->Arg(100000)
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace tpr::extract

@@ -4,13 +4,14 @@
 // conversion) holds on a noisy machine. Meshes: a synthetic biped at the
 // given vertex count, sent as OFF text.
 //
-//   bench_extractor_service --benchmark_filter='/10000/' --benchmark_repetitions=3
+//   bench_extractor_service --benchmark_filter='/10000/' \
+//       --benchmark_repetitions=3
+#include <benchmark/benchmark.h>
+
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
-
-#include <benchmark/benchmark.h>
 
 #include "common/server_lifecycle.h"
 #include "extractor/lib/extract.h"
@@ -32,8 +33,12 @@ const std::string& MeshOff(int vertices) {
     synth::ShapeOptions options;
     options.target_vertices = vertices;
     options.seed = 3;
-    absl::StatusOr<extract::Mesh> mesh = synth::GenerateShape("biped_adult", 1, options);
-    it = cache->emplace(vertices, mesh.ok() ? testing::ToOff(*mesh) : std::string()).first;
+    absl::StatusOr<extract::Mesh> mesh =
+        synth::GenerateShape("biped_adult", 1, options);
+    it = cache
+             ->emplace(vertices,
+                       mesh.ok() ? testing::ToOff(*mesh) : std::string())
+             .first;
   }
   return it->second;
 }
@@ -46,7 +51,8 @@ const std::string& ServerAddress() {
     auto* service = new extractor::ExtractorService(options);
     common::ServerOptions server_options;
     server_options.listen_address = "127.0.0.1:0";
-    absl::StatusOr<common::StartedServer> started = common::StartServer(server_options, {service});
+    absl::StatusOr<common::StartedServer> started =
+        common::StartServer(server_options, {service});
     if (!started.ok()) return new std::string();
     auto* port = new int(started->port);
     started->server.release();  // leaked on purpose, see above
@@ -59,13 +65,15 @@ const std::string& ServerAddress() {
 // signature; the server runs at most 2 extractions at once, the rest queue.
 void BM_ExtractorService(benchmark::State& state) {
   const std::string& off = MeshOff(static_cast<int>(state.range(0)));
-  absl::StatusOr<client::ExtractorClient> client = client::ExtractorClient::Connect(ServerAddress());
+  absl::StatusOr<client::ExtractorClient> client =
+      client::ExtractorClient::Connect(ServerAddress());
   if (!client.ok() || off.empty()) {
     state.SkipWithError("no server or mesh");
     return;
   }
   for (auto _ : state) {
-    absl::StatusOr<v1::ExtractResponse> r = client->ExtractBytes(off, "biped.off");
+    absl::StatusOr<v1::ExtractResponse> r =
+        client->ExtractBytes(off, "biped.off");
     if (!r.ok()) {
       state.SkipWithError(r.status().ToString().c_str());
       return;
@@ -74,20 +82,25 @@ void BM_ExtractorService(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations());
 }
-BENCHMARK(BM_ExtractorService)->Arg(2000)->Arg(10000)->Threads(4)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExtractorService)
+    ->Arg(2000)
+    ->Arg(10000)
+    ->Threads(4)
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 // The peer: intake + extraction in-process on 2 threads, no gRPC.
 void BM_ExtractInProcess(benchmark::State& state) {
   const std::string& off = MeshOff(static_cast<int>(state.range(0)));
   for (auto _ : state) {
-    absl::StatusOr<extract::LoadedMesh> loaded =
-        extract::LoadMeshFromBuffer(off, extract::MeshFormat::kOff, "biped.off", {});
+    absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
+        off, extract::MeshFormat::kOff, "biped.off", {});
     if (!loaded.ok()) {
       state.SkipWithError(loaded.status().ToString().c_str());
       return;
     }
-    absl::StatusOr<extract::ExtractResult> r =
-        extract::ExtractSignature(loaded->mesh, loaded->stats, extract::Options{});
+    absl::StatusOr<extract::ExtractResult> r = extract::ExtractSignature(
+        loaded->mesh, loaded->stats, extract::Options{});
     if (!r.ok()) {
       state.SkipWithError(r.status().ToString().c_str());
       return;
@@ -96,7 +109,12 @@ void BM_ExtractInProcess(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations());
 }
-BENCHMARK(BM_ExtractInProcess)->Arg(2000)->Arg(10000)->Threads(2)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ExtractInProcess)
+    ->Arg(2000)
+    ->Arg(10000)
+    ->Threads(2)
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace tpr::extractor

@@ -4,11 +4,12 @@
 //  * BM_Knn10SingleVsGateway/N/Q: a 10-NN query over N models (the same
 //    query, alternately) to one tpr-indexer and to the gateway over 4 shards
 //    holding the same N models; Q = 0: queries of the stored classes (not
-//    stored themselves), Q = 1: queries of other prototypes (worst case). Counters: p50 latency of each (ms, wall),
-//    their ratio (target <= 1.5 on a 2-core machine), EMDs per query of the
-//    single indexer, and per shard (each shard's full 10-NN on its part, run
-//    in process for the same queries: the most a shard does for one query;
-//    the gateway cancels shards early once 10 are sent).
+//    stored themselves), Q = 1: queries of other prototypes (worst case).
+//    Counters: p50 latency of each (ms, wall), their ratio (target <= 1.5 on a
+//    2-core machine), EMDs per query of the single indexer, and per shard (each
+//    shard's full 10-NN on its part, run in process for the same queries: the
+//    most a shard does for one query; the gateway cancels shards early once 10
+//    are sent).
 //  * BM_IngestSingle/N and BM_IngestGateway/N: a streamed BatchUpsert of N
 //    models into fresh data directories, durable (synced group commits), to
 //    one indexer or through the gateway to 4 shards; items/s.
@@ -17,27 +18,27 @@
 //    for 4 s; how long until the follower has applied each write (ms) and
 //    how many keys it was behind when sampled.
 //
-//   bench_gateway --benchmark_filter='BM_Knn10SingleVsGateway/100000/0|BM_Ingest.*/10000|BM_FollowerLag'
+//   bench_gateway --benchmark_filter=\
+//   'BM_Knn10SingleVsGateway/100000/0|BM_Ingest.*/10000|BM_FollowerLag'
 //
 // Signatures: tests/indexer/signature_testing.h, 20 clustered classes, 30
 // features x 20 bands (the paper's average size), as bench_service.
 #include <benchmark/benchmark.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
 #include <stdlib.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <deque>
-#include <mutex>
-#include <thread>
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/server_lifecycle.h"
@@ -65,7 +66,9 @@ constexpr int kShards = 4;
 
 using Indexer = bench::ServedIndexer;
 
-std::unique_ptr<Indexer> StartIndexer(bool durable) { return bench::ServeIndexer(durable); }
+std::unique_ptr<Indexer> StartIndexer(bool durable) {
+  return bench::ServeIndexer(durable);
+}
 
 // A gateway over `shards`, served on a loopback port.
 struct Gateway {
@@ -78,18 +81,21 @@ struct Gateway {
   }
 };
 
-std::unique_ptr<Gateway> StartGateway(const std::vector<std::unique_ptr<Indexer>>& shards) {
+std::unique_ptr<Gateway> StartGateway(
+    const std::vector<std::unique_ptr<Indexer>>& shards) {
   auto g = std::make_unique<Gateway>();
   GatewayOptions options;
-  for (const auto& s : shards) options.shards.shards.push_back({s->address(), {}});
+  for (const auto& s : shards)
+    options.shards.shards.push_back({s->address(), {}});
   g->service = std::make_unique<GatewayService>(options);
   g->server_options.shutdown_grace_ms = 1000;
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(g->server_options, {g->service.get()});
   if (!started.ok()) std::abort();
   g->server = std::move(*started);
-  g->stub = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
-      absl::StrCat("127.0.0.1:", g->server.port), grpc::InsecureChannelCredentials()));
+  g->stub = tpr::v1::Indexer::NewStub(
+      grpc::CreateChannel(absl::StrCat("127.0.0.1:", g->server.port),
+                          grpc::InsecureChannelCredentials()));
   return g;
 }
 
@@ -116,7 +122,8 @@ KnnSetup* KnnWith(int n) {
   {
     BatchWriter single(s.single->core.get());
     std::vector<std::unique_ptr<BatchWriter>> parts;
-    for (const auto& shard : s.shards) parts.push_back(std::make_unique<BatchWriter>(shard->core.get()));
+    for (const auto& shard : s.shards)
+      parts.push_back(std::make_unique<BatchWriter>(shard->core.get()));
     for (tpr::v1::UpsertRequest& r : UpsertRequests(n, 7, "m")) {
       const int owner = ShardOf(r.model().id(), kShards);
       if (!parts[static_cast<size_t>(owner)]->Add(r).ok()) std::abort();
@@ -136,22 +143,26 @@ KnnSetup* KnnWith(int n) {
 }
 
 // Runs one streamed search; returns its wall time in ms and the neighbours.
-double TimedSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::SearchRequest& q,
-                   int* neighbours, benchmark::State& state) {
+double TimedSearch(tpr::v1::Indexer::Stub* stub,
+                   const tpr::v1::SearchRequest& q, int* neighbours,
+                   benchmark::State& state) {
   const auto start = std::chrono::steady_clock::now();
   grpc::ClientContext context;
   auto reader = stub->Search(&context, q);
   tpr::v1::SearchResponse response;
   *neighbours = 0;
-  while (reader->Read(&response)) *neighbours += response.has_neighbor() ? 1 : 0;
+  while (reader->Read(&response))
+    *neighbours += response.has_neighbor() ? 1 : 0;
   if (!reader->Finish().ok()) state.SkipWithError("search failed");
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now() - start)
       .count();
 }
 
 void BM_Knn10SingleVsGateway(benchmark::State& state) {
   KnnSetup* s = KnnWith(static_cast<int>(state.range(0)));
-  const std::vector<tpr::v1::SearchRequest>& queries = s->queries[state.range(1) == 0 ? 0 : 1];
+  const std::vector<tpr::v1::SearchRequest>& queries =
+      s->queries[state.range(1) == 0 ? 0 : 1];
   std::vector<double> single_ms, gateway_ms;
   // Work per query: the single indexer's, and each shard's full 10-NN on
   // its part (measured once per distinct query, outside the timing).
@@ -222,7 +233,11 @@ void BM_IngestSingle(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * state.range(0));
 }
-BENCHMARK(BM_IngestSingle)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_IngestSingle)
+    ->Arg(2000)
+    ->Arg(10000)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_IngestGateway(benchmark::State& state) {
   const std::vector<tpr::v1::UpsertRequest> requests =
@@ -230,7 +245,8 @@ void BM_IngestGateway(benchmark::State& state) {
   for (auto _ : state) {
     state.PauseTiming();
     std::vector<std::unique_ptr<Indexer>> shards;
-    for (int i = 0; i < kShards; ++i) shards.push_back(StartIndexer(/*durable=*/true));
+    for (int i = 0; i < kShards; ++i)
+      shards.push_back(StartIndexer(/*durable=*/true));
     auto gateway = StartGateway(shards);
     state.ResumeTiming();
     Ingest(gateway->stub.get(), requests, state);
@@ -241,7 +257,11 @@ void BM_IngestGateway(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * state.range(0));
 }
-BENCHMARK(BM_IngestGateway)->Arg(2000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_IngestGateway)
+    ->Arg(2000)
+    ->Arg(10000)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // A primary or follower with the IndexerAdmin service (replication), served
 // on a loopback port; a follower of `primary` (copied and tailing on
@@ -264,7 +284,9 @@ struct ReplicaNode {
     std::error_code ec;
     std::filesystem::remove_all(dir, ec);
   }
-  std::string address() const { return absl::StrCat("127.0.0.1:", server.port); }
+  std::string address() const {
+    return absl::StrCat("127.0.0.1:", server.port);
+  }
 };
 
 std::unique_ptr<ReplicaNode> StartReplicaNode(const std::string& primary) {
@@ -273,23 +295,27 @@ std::unique_ptr<ReplicaNode> StartReplicaNode(const std::string& primary) {
   indexer::FollowerOptions follower_options;
   follower_options.primary = primary;
   follower_options.data_dir = x->dir;
-  if (!primary.empty() && !indexer::PrepareFollowerDir(follower_options).ok()) std::abort();
+  if (!primary.empty() && !indexer::PrepareFollowerDir(follower_options).ok())
+    std::abort();
   indexer::CoreOptions options;
   options.data_dir = x->dir;
   options.persist_interval_ms = 0;
   options.follow = primary;
-  absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(options);
+  absl::StatusOr<std::unique_ptr<IndexerCore>> core =
+      IndexerCore::Open(options);
   if (!core.ok()) std::abort();
   x->core = std::move(*core);
-  x->service = std::make_unique<indexer::IndexerService>(x->core.get(), indexer::ServiceOptions{});
+  x->service = std::make_unique<indexer::IndexerService>(
+      x->core.get(), indexer::ServiceOptions{});
   if (!primary.empty()) {
-    x->follower = std::make_unique<indexer::Follower>(x->core.get(), follower_options);
+    x->follower =
+        std::make_unique<indexer::Follower>(x->core.get(), follower_options);
   }
-  x->admin = std::make_unique<indexer::IndexerAdminService>(x->core.get(), x->follower.get(),
-                                                           indexer::AdminOptions{});
+  x->admin = std::make_unique<indexer::IndexerAdminService>(
+      x->core.get(), x->follower.get(), indexer::AdminOptions{});
   x->server_options.shutdown_grace_ms = 1000;
-  absl::StatusOr<tpr::common::StartedServer> started =
-      tpr::common::StartServer(x->server_options, {x->service.get(), x->admin.get()});
+  absl::StatusOr<tpr::common::StartedServer> started = tpr::common::StartServer(
+      x->server_options, {x->service.get(), x->admin.get()});
   if (!started.ok()) std::abort();
   x->server = std::move(*started);
   if (x->follower) x->follower->Start(nullptr);
@@ -320,22 +346,28 @@ void BM_FollowerLag(benchmark::State& state) {
     std::atomic<bool> done{false};
     std::atomic<bool> stuck{false};
     std::mutex mu;
-    std::deque<std::pair<std::chrono::steady_clock::time_point, uint64_t>> pending;
+    std::deque<std::pair<std::chrono::steady_clock::time_point, uint64_t>>
+        pending;
     std::thread watcher([&] {
       while (true) {
-        const uint64_t latest = indexer::LatestSequence(primary->core->storage());
-        const uint64_t applied = follower->follower->Status().applied_sequence();
+        const uint64_t latest =
+            indexer::LatestSequence(primary->core->storage());
+        const uint64_t applied =
+            follower->follower->Status().applied_sequence();
         const auto now = std::chrono::steady_clock::now();
         {
           std::lock_guard<std::mutex> lock(mu);
-          behind.push_back(static_cast<double>(latest > applied ? latest - applied : 0));
+          behind.push_back(
+              static_cast<double>(latest > applied ? latest - applied : 0));
           while (!pending.empty() && pending.front().second <= applied) {
-            lag_ms.push_back(
-                std::chrono::duration<double, std::milli>(now - pending.front().first).count());
+            lag_ms.push_back(std::chrono::duration<double, std::milli>(
+                                 now - pending.front().first)
+                                 .count());
             pending.pop_front();
           }
           if (done && pending.empty()) return;
-          if (now > end + std::chrono::seconds(20)) {  // bounded: report, then stop
+          if (now >
+              end + std::chrono::seconds(20)) {  // bounded: report, then stop
             stuck = true;
             return;
           }
@@ -344,13 +376,16 @@ void BM_FollowerLag(benchmark::State& state) {
       }
     });
     size_t next = 0;
-    for (auto t = start; t < end && next + batch <= all.size(); t += std::chrono::milliseconds(period_ms)) {
+    for (auto t = start; t < end && next + batch <= all.size();
+         t += std::chrono::milliseconds(period_ms)) {
       std::this_thread::sleep_until(t);
-      std::vector<tpr::v1::UpsertRequest> group(all.begin() + next, all.begin() + next + batch);
+      std::vector<tpr::v1::UpsertRequest> group(all.begin() + next,
+                                                all.begin() + next + batch);
       next += batch;
       std::vector<tpr::index::Signature> sigs(group.size());
       for (size_t i = 0; i < group.size(); ++i) {
-        if (!primary->core->CheckModel(group[i].model(), &sigs[i]).ok()) std::abort();
+        if (!primary->core->CheckModel(group[i].model(), &sigs[i]).ok())
+          std::abort();
       }
       if (!primary->core->WriteGroup(group, sigs).ok()) std::abort();
       std::lock_guard<std::mutex> lock(mu);
@@ -371,8 +406,8 @@ void BM_FollowerLag(benchmark::State& state) {
   state.counters["lag_max_ms"] = Percentile(lag_ms, 1.0);
   state.counters["behind_p50_keys"] = Percentile(behind, 0.5);
   state.counters["behind_max_keys"] = Percentile(behind, 1.0);
-  state.counters["models_per_s"] = benchmark::Counter(static_cast<double>(written),
-                                                      benchmark::Counter::kIsRate);
+  state.counters["models_per_s"] = benchmark::Counter(
+      static_cast<double>(written), benchmark::Counter::kIsRate);
 }
 // (batch, period ms): 16 models every 50 ms (320/s), 64 (1280/s), 256
 // (5120/s, beyond what one durable primary takes on this machine).

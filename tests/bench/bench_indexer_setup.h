@@ -74,7 +74,8 @@ inline std::vector<tpr::v1::SearchRequest> KnnQueries() {
 // query shaped like a known kind of model. KnnQueries' signatures come from
 // other prototypes (seed 99), far from every stored class, where the
 // VP-tree prunes little: the worst case.
-inline std::vector<tpr::v1::SearchRequest> InClassQueries(int n, uint64_t seed) {
+inline std::vector<tpr::v1::SearchRequest> InClassQueries(int n,
+                                                          uint64_t seed) {
   tpr::index::testing::SignatureGeneratorOptions o;
   o.seed = seed;
   o.classes = 20;

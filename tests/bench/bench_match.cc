@@ -29,11 +29,11 @@
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/synth/synth.h"
-#include "indexer/lib/emd.h"
-#include "indexer/lib/metric.h"
-#include "indexer/lib/ground_distance.h"
 #include "indexer/lib/brute_force_index.h"
 #include "indexer/lib/centroid_table.h"
+#include "indexer/lib/emd.h"
+#include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "indexer/lib/signature_index.h"
 #include "indexer/lib/vp_tree.h"
 #include "tests/indexer/emd_oracle.h"
@@ -113,8 +113,8 @@ void BM_EmdLowerBound(benchmark::State& state) {
       Pool(static_cast<int>(state.range(0)));
   size_t k = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(EmdLowerBound(pool[k % pool.size()],
-                                           pool[(k * 7 + 3) % pool.size()]));
+    benchmark::DoNotOptimize(
+        EmdLowerBound(pool[k % pool.size()], pool[(k * 7 + 3) % pool.size()]));
     ++k;
   }
 }
@@ -127,20 +127,20 @@ BENCHMARK(BM_EmdLowerBound)->Arg(30);
 // members of the same classes. Counters per query: emds (full EMDs),
 // emd_share (emds / database size), lbs (centroid bounds), nodes; build_s
 // and build_cpu_s are the one-off tree build time of that database (wall
-// and CPU; on a shared machine CPU is the figure to compare). Databases are built
-// once per process and kept in memory (nothing is cached on disk).
+// and CPU; on a shared machine CPU is the figure to compare). Databases are
+// built once per process and kept in memory (nothing is cached on disk).
 namespace knn {
 
 using tpr::index::BruteForceIndex;
 using tpr::index::Distance;
 using tpr::index::Emd;
-using tpr::index::SpectralDistance;
-using tpr::index::RelaxedTransportBound;
 using tpr::index::GroundDistanceOptions;
 using tpr::index::ItemNeighbor;
 using tpr::index::PreparedSignature;
 using tpr::index::QuerySpec;
+using tpr::index::RelaxedTransportBound;
 using tpr::index::SearchStats;
+using tpr::index::SpectralDistance;
 using tpr::index::VpTree;
 using tpr::index::VpTreeOptions;
 using tpr::index::testing::SignatureGenerator;
@@ -163,7 +163,8 @@ struct DbKey {
   // (the same data searched with the paper's distance).
   int spectral_permille = 0;
   bool operator<(const DbKey& o) const {
-    return std::tie(n, classes, jitter_permille, leaf_size, extracted, spectral_permille) <
+    return std::tie(n, classes, jitter_permille, leaf_size, extracted,
+                    spectral_permille) <
            std::tie(o.n, o.classes, o.jitter_permille, o.leaf_size, o.extracted,
                     o.spectral_permille);
   }
@@ -196,11 +197,13 @@ std::vector<tpr::index::Signature> ExtractedPrototypes(int count) {
   std::vector<tpr::index::Signature> out;
   for (int i = 0; static_cast<int>(out.size()) < count; ++i) {
     const std::string& cls = classes[i % classes.size()];
-    absl::StatusOr<tpr::extract::Mesh> mesh =
-        tpr::synth::GenerateShape(cls, i / static_cast<int>(classes.size()), shape);
+    absl::StatusOr<tpr::extract::Mesh> mesh = tpr::synth::GenerateShape(
+        cls, i / static_cast<int>(classes.size()), shape);
     if (!mesh.ok()) continue;
-    absl::StatusOr<tpr::extract::ExtractResult> r = tpr::extract::ExtractSignature(
-        *mesh, tpr::extract::ComputeMeshStats(*mesh), tpr::extract::Options{});
+    absl::StatusOr<tpr::extract::ExtractResult> r =
+        tpr::extract::ExtractSignature(*mesh,
+                                       tpr::extract::ComputeMeshStats(*mesh),
+                                       tpr::extract::Options{});
     if (!r.ok()) continue;
     out.push_back(tpr::eval::ToIndexSignature(r->signature));
   }
@@ -232,7 +235,8 @@ Db& GetDb(const DbKey& key) {
   slot = std::make_unique<Db>();
   GroundDistanceOptions ground;
   // Explicit, so that w_s = 0 stays the paper's distance whatever the default.
-  ground.spectral.weight = key.spectral_permille > 0 ? key.spectral_permille / 1000.0 : 0.0;
+  ground.spectral.weight =
+      key.spectral_permille > 0 ? key.spectral_permille / 1000.0 : 0.0;
   slot->items.reserve(static_cast<size_t>(key.n));
   Generate(key, [&](tpr::index::Signature s) {
     std::vector<PreparedSignature>& to =
@@ -251,9 +255,9 @@ Db& GetDb(const DbKey& key) {
       items.size(),
       [&items](uint32_t i, uint32_t j) { return Distance(items[i], items[j]); },
       tree_options);
-  slot->build_seconds = std::chrono::duration<double>(
-                            std::chrono::steady_clock::now() - start)
-                            .count();
+  slot->build_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+          .count();
   slot->build_cpu_seconds =
       static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
   return *slot;
@@ -269,7 +273,8 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
   // The query's centroid, computed once per query as the index does.
-  auto qc = std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
+  auto qc =
+      std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
   if (q.spectral_size() == 0) {
     spec.lower_bounds.push_back([&db, &q, qc](uint32_t i) {
       return db.centroids.LowerBound(qc->data(), q.bands(), i);
@@ -282,7 +287,8 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
   }
   if (bounds >= 2) {
     spec.lower_bounds.push_back([&db, &q](uint32_t i) {
-      return RelaxedTransportBound(q, db.items[i]) + SpectralDistance(q, db.items[i]);
+      return RelaxedTransportBound(q, db.items[i]) +
+             SpectralDistance(q, db.items[i]);
     });
   }
   return spec;
@@ -319,7 +325,8 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["build_cpu_s"] = db.build_cpu_seconds;
   state.counters["peak_rss_mib"] = PeakRssMiB();
   size_t bytes = db.tree.MemoryBytes() + db.centroids.MemoryBytes();
-  for (const PreparedSignature& p : db.items) bytes += sizeof(PreparedSignature) + p.MemoryBytes();
+  for (const PreparedSignature& p : db.items)
+    bytes += sizeof(PreparedSignature) + p.MemoryBytes();
   state.counters["bytes_per_model"] = static_cast<double>(bytes) / n;
 }
 
@@ -423,7 +430,8 @@ BENCHMARK(BM_KnnVpTreeExtractedCentroid)
 // at most 10%" side by side in one run.
 void BM_KnnVpTreeSpectral(benchmark::State& state) {
   DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.spectral_permille = state.range(2) == 0 ? -1 : static_cast<int>(state.range(2));
+  key.spectral_permille =
+      state.range(2) == 0 ? -1 : static_cast<int>(state.range(2));
   RunTree(state, key, static_cast<size_t>(state.range(1)));
 }
 BENCHMARK(BM_KnnVpTreeSpectral)
@@ -478,8 +486,8 @@ void BM_KnnBruteForce(benchmark::State& state) {
     QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()]);
     spec.lower_bounds.clear();
     SearchStats stats;
-    std::vector<ItemNeighbor> result =
-        oracle.Knn(std::move(spec), static_cast<size_t>(state.range(1)), &stats);
+    std::vector<ItemNeighbor> result = oracle.Knn(
+        std::move(spec), static_cast<size_t>(state.range(1)), &stats);
     benchmark::DoNotOptimize(result);
     total.emd_computations += stats.emd_computations;
     ++queries;

@@ -17,22 +17,20 @@
 // Signatures: tests/indexer/signature_testing.h, clustered classes, 30
 // features x 20 bands (the paper's average size).
 #include <benchmark/benchmark.h>
-
-#include <algorithm>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
 #include <stdlib.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/auth.h"
@@ -60,7 +58,8 @@ struct Served {
 };
 
 Served* ServedWith(int n) {
-  static std::map<int, std::unique_ptr<Served>>* cache = new std::map<int, std::unique_ptr<Served>>;
+  static std::map<int, std::unique_ptr<Served>>* cache =
+      new std::map<int, std::unique_ptr<Served>>;
   auto& slot = (*cache)[n];
   if (slot) return slot.get();
   slot = std::make_unique<Served>();
@@ -86,7 +85,8 @@ void BM_KnnGrpcVsInProcess(benchmark::State& state) {
     grpc::ClientContext context;
     auto reader = s->indexer->stub->Search(&context, q);
     tpr::v1::SearchResponse response;
-    while (reader->Read(&response)) neighbours += response.has_neighbor() ? 1 : 0;
+    while (reader->Read(&response))
+      neighbours += response.has_neighbor() ? 1 : 0;
     if (!reader->Finish().ok()) state.SkipWithError("search failed");
     auto t2 = std::chrono::steady_clock::now();
     const double a = std::chrono::duration<double, std::micro>(t1 - t0).count();
@@ -99,22 +99,28 @@ void BM_KnnGrpcVsInProcess(benchmark::State& state) {
   state.counters["grpc_p50_us"] = Percentile(grpc_us, 0.5);
   state.counters["added_p50_us"] = Percentile(added_us, 0.5);
   state.counters["added_p90_us"] = Percentile(added_us, 0.9);
-  state.counters["emds_per_query"] =
-      benchmark::Counter(static_cast<double>(emds), benchmark::Counter::kAvgIterations);
-  state.counters["neighbours"] = benchmark::Counter(static_cast<double>(neighbours),
-                                                    benchmark::Counter::kAvgIterations);
+  state.counters["emds_per_query"] = benchmark::Counter(
+      static_cast<double>(emds), benchmark::Counter::kAvgIterations);
+  state.counters["neighbours"] = benchmark::Counter(
+      static_cast<double>(neighbours), benchmark::Counter::kAvgIterations);
 }
-BENCHMARK(BM_KnnGrpcVsInProcess)->Arg(10)->Arg(1000)->Arg(10000)->Unit(benchmark::kMicrosecond)
+BENCHMARK(BM_KnnGrpcVsInProcess)
+    ->Arg(10)
+    ->Arg(1000)
+    ->Arg(10000)
+    ->Unit(benchmark::kMicrosecond)
     ->UseRealTime();
 
 void BM_BatchUpsertIngest(benchmark::State& state) {
   const int n = static_cast<int>(state.range(0));
   const bool durable = state.range(1) != 0;
-  const std::vector<tpr::v1::UpsertRequest> requests = UpsertRequests(n, 11, "b");
+  const std::vector<tpr::v1::UpsertRequest> requests =
+      UpsertRequests(n, 11, "b");
   int64_t items = 0;
   for (auto _ : state) {
     state.PauseTiming();
-    std::unique_ptr<bench::ServedIndexer> indexer = bench::ServeIndexer(durable);
+    std::unique_ptr<bench::ServedIndexer> indexer =
+        bench::ServeIndexer(durable);
     state.ResumeTiming();
     bench::Ingest(indexer->stub.get(), requests, state);
     items += n;
@@ -145,11 +151,12 @@ std::string DataDirWith(int n) {
     auto storage = std::move(*Storage::Open(dir, storage_options));
     constexpr int kChunk = 1000;
     for (int begin = 0; begin < n; begin += kChunk) {
-      std::vector<tpr::v1::UpsertRequest> chunk =
-          UpsertRequests(std::min(kChunk, n - begin), 1000 + static_cast<uint64_t>(begin),
-                   absl::StrCat("r", begin, "-"));
+      std::vector<tpr::v1::UpsertRequest> chunk = UpsertRequests(
+          std::min(kChunk, n - begin), 1000 + static_cast<uint64_t>(begin),
+          absl::StrCat("r", begin, "-"));
       std::vector<ModelWrite> writes;
-      for (tpr::v1::UpsertRequest& r : chunk) writes.push_back({r.model().id(), &r.model()});
+      for (tpr::v1::UpsertRequest& r : chunk)
+        writes.push_back({r.model().id(), &r.model()});
       if (!storage->Write(writes).ok()) std::abort();
     }
   }
@@ -173,16 +180,21 @@ void BM_ReopenDataDir(benchmark::State& state) {
     auto core = IndexerCore::Open(options);
     if (!core.ok()) state.SkipWithError("open failed");
     state.PauseTiming();
-    if (core.ok() && (*core)->index().size() != static_cast<size_t>(state.range(0))) {
+    if (core.ok() &&
+        (*core)->index().size() != static_cast<size_t>(state.range(0))) {
       state.SkipWithError("wrong model count");
     }
-    if (core.ok()) core->reset();  // Close: nothing changed, nothing re-persisted
+    if (core.ok())
+      core->reset();  // Close: nothing changed, nothing re-persisted
     state.ResumeTiming();
   }
 }
-BENCHMARK(BM_ReopenDataDir)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond)
-    ->UseRealTime()->Iterations(2);
-
+BENCHMARK(BM_ReopenDataDir)
+    ->Arg(10000)
+    ->Arg(100000)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 // BM_SecurityAndMetricsOverhead/N: the same cheap 10-NN search (N = 10
 // models: 10 EMDs) against three servers over one IndexerCore, timed side
@@ -198,12 +210,16 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
   const int n = static_cast<int>(state.range(0));
   const std::string dir = FreshDir("security");
   const std::string certs = absl::StrCat(
-      "cd ", dir, " && openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes "
+      "cd ", dir,
+      " && openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 "
+      "-nodes "
       "-keyout ca.key -out ca.pem -days 2 -subj /CN=bench-ca 2>/dev/null && "
-      "openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout server.key "
+      "openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes "
+      "-keyout server.key "
       "-out server.csr -subj /CN=localhost 2>/dev/null && "
       "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > san.ext && "
-      "openssl x509 -req -in server.csr -CA ca.pem -CAkey ca.key -CAcreateserial -days 2 "
+      "openssl x509 -req -in server.csr -CA ca.pem -CAkey ca.key "
+      "-CAcreateserial -days 2 "
       "-out server.pem -extfile san.ext 2>/dev/null");
   if (std::system(certs.c_str()) != 0) {
     state.SkipWithError("openssl failed");
@@ -212,7 +228,8 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
   const std::string key = *tpr::common::NewApiKey();
   {
     std::ofstream out(dir + "/keys");
-    out << tpr::common::KeyFileLine(key, tpr::common::Role::kRead, "bench") << "\n";
+    out << tpr::common::KeyFileLine(key, tpr::common::Role::kRead, "bench")
+        << "\n";
   }
   CoreOptions core_options;
   core_options.data_dir = dir + "/data";
@@ -232,14 +249,17 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
       tls.cert_file = dir + "/server.pem";
       tls.key_file = dir + "/server.key";
       options.credentials = *tpr::common::MakeTlsServerCredentials(tls);
-      options.api_keys = *tpr::common::ApiKeyAuthenticator::Open(dir + "/keys", "bench", 0);
+      options.api_keys =
+          *tpr::common::ApiKeyAuthenticator::Open(dir + "/keys", "bench", 0);
     }
     if (config == 2) options.metrics = metrics;
-    services.push_back(std::make_unique<IndexerService>(core.get(), ServiceOptions{}));
+    services.push_back(
+        std::make_unique<IndexerService>(core.get(), ServiceOptions{}));
     auto started = tpr::common::StartServer(options, {services.back().get()});
     if (!started.ok()) std::abort();
     const std::string address = absl::StrCat("127.0.0.1:", started->port);
-    std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+    std::shared_ptr<grpc::ChannelCredentials> credentials =
+        grpc::InsecureChannelCredentials();
     if (config == 1) {
       grpc::SslCredentialsOptions ssl;
       std::ifstream in(dir + "/ca.pem");
@@ -248,7 +268,8 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
       ssl.pem_root_certs = pem.str();
       credentials = grpc::SslCredentials(ssl);
     }
-    stubs.push_back(tpr::v1::Indexer::NewStub(grpc::CreateChannel(address, credentials)));
+    stubs.push_back(
+        tpr::v1::Indexer::NewStub(grpc::CreateChannel(address, credentials)));
     servers.push_back(std::move(*started));
   }
   const std::vector<tpr::v1::SearchRequest> queries = bench::KnnQueries();
@@ -278,7 +299,8 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
       const int config = static_cast<int>((i + static_cast<size_t>(k)) % 3);
       const auto t0 = std::chrono::steady_clock::now();
       if (!search(config, q)) state.SkipWithError("search failed");
-      t[config] = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0)
+      t[config] = std::chrono::duration<double, std::micro>(
+                      std::chrono::steady_clock::now() - t0)
                       .count();
       us[config].push_back(t[config]);
     }
@@ -296,13 +318,17 @@ void BM_SecurityAndMetricsOverhead(benchmark::State& state) {
   state.counters["metrics_p50_us"] = Percentile(us[2], 0.5);
   state.counters["tls_key_added_p50_us"] = Percentile(secure_added, 0.5);
   state.counters["metrics_added_p50_us"] = Percentile(metrics_added, 0.5);
-  state.counters["metrics_overhead_pct"] = 100.0 * (sum(us[2]) - sum(us[0])) / sum(us[0]);
+  state.counters["metrics_overhead_pct"] =
+      100.0 * (sum(us[2]) - sum(us[0])) / sum(us[0]);
   for (tpr::common::StartedServer& s : servers) {
     s.server->Shutdown(std::chrono::system_clock::now());
     s.server->Wait();
   }
 }
-BENCHMARK(BM_SecurityAndMetricsOverhead)->Arg(10)->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_SecurityAndMetricsOverhead)
+    ->Arg(10)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace tpr::indexer

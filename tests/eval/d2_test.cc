@@ -2,11 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
 #include <utility>
-
-#include <Eigen/Geometry>
 
 #include "eval/lib/plots.h"
 
@@ -17,9 +16,9 @@ namespace {
 extract::Mesh Icosphere(int levels) {
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
   extract::Mesh m;
-  m.positions = {{-1, t, 0}, {1, t, 0},  {-1, -t, 0}, {1, -t, 0},
-                 {0, -1, t}, {0, 1, t},  {0, -1, -t}, {0, 1, -t},
-                 {t, 0, -1}, {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  m.positions = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                 {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                 {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
   m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                  {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
                  {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
@@ -58,7 +57,8 @@ TEST(D2Test, SphereMatchesTheAnalyticDistribution) {
   const double mean = 4.0 / 3.0, width = options.range * mean / options.bins;
   double total = 0.0;
   for (int b = 0; b < options.bins; ++b) {
-    const double lo = std::min(2.0, b * width), hi = std::min(2.0, (b + 1) * width);
+    const double lo = std::min(2.0, b * width),
+                 hi = std::min(2.0, (b + 1) * width);
     EXPECT_NEAR(h[b], (hi * hi - lo * lo) / 4.0, 0.004) << "bin " << b;
     total += h[b];
   }
@@ -75,7 +75,8 @@ TEST(D2Test, InvariantToRigidMotionAndScale) {
   for (auto& p : b.positions) p = 1.7 * (r * p) + Eigen::Vector3d(5, -2, 1);
   D2Options options;
   options.pairs = 1 << 18;
-  const double same = D2Distance(D2Histogram(a, options), D2Histogram(b, options));
+  const double same =
+      D2Distance(D2Histogram(a, options), D2Histogram(b, options));
   const double sphere =
       D2Distance(D2Histogram(a, options), D2Histogram(Icosphere(3), options));
   EXPECT_LT(same, 0.03);
@@ -85,7 +86,8 @@ TEST(D2Test, InvariantToRigidMotionAndScale) {
 TEST(D2Test, SameSeedSameHistogramAndEmptyMeshIsEmpty) {
   D2Options options;
   options.pairs = 4096;
-  EXPECT_EQ(D2Histogram(Icosphere(1), options), D2Histogram(Icosphere(1), options));
+  EXPECT_EQ(D2Histogram(Icosphere(1), options),
+            D2Histogram(Icosphere(1), options));
   EXPECT_TRUE(D2Histogram(extract::Mesh{}, options).empty());
 }
 
@@ -98,7 +100,7 @@ TEST(PlotsTest, SvgsAreWellFormedAndNameEverySeries) {
   EXPECT_NE(pr.find("</svg>"), std::string::npos);
   SimilarityMatrix m{{"a", "b"}, {{0, 1}, {1, 0}}, {{1, 0}, {0, 1}}};
   const std::string sm = SimilaritySvg(m, "similarity");
-  EXPECT_NE(sm.find("rgb(0,0,0)"), std::string::npos);      // similarity 1
+  EXPECT_NE(sm.find("rgb(0,0,0)"), std::string::npos);        // similarity 1
   EXPECT_NE(sm.find("rgb(255,255,255)"), std::string::npos);  // similarity 0
 }
 

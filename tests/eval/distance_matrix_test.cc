@@ -86,7 +86,8 @@ TEST(DistanceMatrixTest, SeparationAndRestrict) {
   EXPECT_DOUBLE_EQ(s.within, 1.0);
   EXPECT_DOUBLE_EQ(s.between, 3.0);
   EXPECT_DOUBLE_EQ(s.Ratio(), 1.0 / 3.0);
-  EXPECT_EQ(Separation({"a", "a", "a"}, d).Ratio(), 0.0);  // no pair across classes
+  EXPECT_EQ(Separation({"a", "a", "a"}, d).Ratio(),
+            0.0);  // no pair across classes
   const ClassSeparation q = Separation({"a", "a", "b"}, LeaveOneOutQueries(d));
   EXPECT_DOUBLE_EQ(q.within, s.within);
   EXPECT_DOUBLE_EQ(q.between, s.between);

@@ -15,8 +15,8 @@ TEST(MetricsTest, HandWorkedRankingWithoutTies) {
   const Metrics& m = s.overall;
   EXPECT_EQ(m.queries, 1);
   EXPECT_DOUBLE_EQ(m.nn, 0.0);
-  EXPECT_DOUBLE_EQ(m.ft, 0.5);   // 1 relevant in the top 2
-  EXPECT_DOUBLE_EQ(m.st, 1.0);   // 2 relevant in the top 4
+  EXPECT_DOUBLE_EQ(m.ft, 0.5);  // 1 relevant in the top 2
+  EXPECT_DOUBLE_EQ(m.st, 1.0);  // 2 relevant in the top 4
   // E over the top 32: P = 2/32, R = 1.
   EXPECT_NEAR(m.e, 2.0 * (2.0 / 32) / (2.0 / 32 + 1.0), 1e-12);
   // DCG = 0 + 1/log2(2) + 0 + 1/log2(4) = 1.5; ideal = 1 + 1 = 2.

@@ -73,8 +73,10 @@ TEST(SavedSetTest, MalformedFilesNameTheLine) {
       {"tpr-eval-matrices v1\nx\n", ":2:"},
       {"tpr-eval-matrices v1\n2\na\tb\nno tab\n", ":4:"},
       {"tpr-eval-matrices v1\n2\na\tx\nb\tx\n1 2\n1 nan\n", ":6:"},
-      {"tpr-eval-matrices v1\n2\na\tx\nb\tx\n0\n0\n1 2\n", ":7:"},  // row of 2 for N = 2
-      {"tpr-eval-matrices v1\n2\na\tx\nb\tx\n0\n0\n0.5\n", ":8:"},  // D2 missing
+      {"tpr-eval-matrices v1\n2\na\tx\nb\tx\n0\n0\n1 2\n",
+       ":7:"},  // row of 2 for N = 2
+      {"tpr-eval-matrices v1\n2\na\tx\nb\tx\n0\n0\n0.5\n",
+       ":8:"},  // D2 missing
   };
   for (const auto& [text, where] : cases) {
     ASSERT_TRUE(WriteTextFile(path, text).ok());

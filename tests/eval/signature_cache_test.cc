@@ -15,12 +15,15 @@ namespace {
 
 TEST(SignatureCacheTest, RoundTripIncludingSpectrumAndMisses) {
   std::string pattern =
-      (std::filesystem::temp_directory_path() / "tpr-cache-test.XXXXXX").string();
+      (std::filesystem::temp_directory_path() / "tpr-cache-test.XXXXXX")
+          .string();
   ASSERT_NE(mkdtemp(pattern.data()), nullptr);
   const std::string dir = pattern;
   CachedDescription d;
-  d.signature.features.push_back({0.25, 0.5, {1.0 / 3, -2.0}, {0.1, 0.2}, {0.3, 0.4}});
-  d.signature.features.push_back({0.75, 1.0, {0.0, 1e-300}, {0.0, 1.0}, {2.5, 0.0}});
+  d.signature.features.push_back(
+      {0.25, 0.5, {1.0 / 3, -2.0}, {0.1, 0.2}, {0.3, 0.4}});
+  d.signature.features.push_back(
+      {0.75, 1.0, {0.0, 1e-300}, {0.0, 1.0}, {2.5, 0.0}});
   d.signature.spectrum = {2.0000000000000004, 2.1, 6.0, 1e5};
   d.points = 1;
   d.rings = 1;
@@ -55,7 +58,8 @@ TEST(SignatureCacheTest, RoundTripIncludingSpectrumAndMisses) {
   CachedDescription miss;
   EXPECT_FALSE(LoadCached(dir, "key two", &miss));
   // A truncated entry is a miss, not garbage.
-  const std::filesystem::path file = std::filesystem::path(dir) / CacheFileName("key one");
+  const std::filesystem::path file =
+      std::filesystem::path(dir) / CacheFileName("key one");
   std::filesystem::resize_file(file, std::filesystem::file_size(file) - 12);
   EXPECT_FALSE(LoadCached(dir, "key one", &miss));
   std::filesystem::remove_all(dir);
@@ -65,10 +69,12 @@ TEST(SignatureCacheTest, RoundTripIncludingSpectrumAndMisses) {
 // key and all, is a miss; the same entry in v2 (counts, no spectrum) reads.
 TEST(SignatureCacheTest, VersionOneEntryIsAMissVersionTwoReads) {
   std::string pattern =
-      (std::filesystem::temp_directory_path() / "tpr-cache-test.XXXXXX").string();
+      (std::filesystem::temp_directory_path() / "tpr-cache-test.XXXXXX")
+          .string();
   ASSERT_NE(mkdtemp(pattern.data()), nullptr);
   const std::string dir = pattern;
-  const std::filesystem::path file = std::filesystem::path(dir) / CacheFileName("k");
+  const std::filesystem::path file =
+      std::filesystem::path(dir) / CacheFileName("k");
   const std::string body = "1\n0.5 0.25\n1 1\n1 4\n1 5\nend\n";
   {
     std::ofstream out(file);

@@ -24,7 +24,8 @@ TEST(VertexLinksTest, ClosedFansHaveAsManyLinkEdgesAsNeighbours) {
   ASSERT_EQ(links.num_vertices(), static_cast<int32_t>(m.positions.size()));
   for (int32_t v = 0; v < links.num_vertices(); ++v) {
     EXPECT_EQ((links.link_end(v) - links.link_begin(v)) / 2, links.degree(v));
-    EXPECT_TRUE(std::is_sorted(links.neighbors_begin(v), links.neighbors_end(v)));
+    EXPECT_TRUE(
+        std::is_sorted(links.neighbors_begin(v), links.neighbors_end(v)));
   }
   Mesh tri;
   tri.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
@@ -45,7 +46,8 @@ TEST(CriticalPointsTest, CapsuleAndDumbbellHaveOneMaximumAtTheOtherPole) {
     const VertexLinks links = VertexLinks::Build(m);
     const int32_t top = 0;
     const int32_t bottom = static_cast<int32_t>(m.positions.size()) - 1;
-    absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(graph, links, top, {});
+    absl::StatusOr<CriticalPoints> cp =
+        AnalyzeCriticalPoints(graph, links, top, {});
     ASSERT_TRUE(cp.ok()) << cp.status();
     EXPECT_EQ(cp->maxima, std::vector<int32_t>{bottom});
     EXPECT_TRUE(cp->saddles.empty());
@@ -76,13 +78,16 @@ TEST(CriticalPointsTest, OneVertexPocketIsFilteredWithNEqualsOne) {
   const int32_t source = 5 * 11 + 0;  // Left middle, in line with the spike.
   auto near_spike = [&](const std::vector<int32_t>& vs) {
     for (int32_t v : vs) {
-      if ((m.positions[v] - m.positions[spike]).head<2>().norm() < 1.5 && v != spike) return true;
+      if ((m.positions[v] - m.positions[spike]).head<2>().norm() < 1.5 &&
+          v != spike)
+        return true;
     }
     return false;
   };
 
   CriticalPointOptions filtered;  // n = 1
-  absl::StatusOr<CriticalPoints> a = AnalyzeCriticalPoints(graph, links, source, filtered);
+  absl::StatusOr<CriticalPoints> a =
+      AnalyzeCriticalPoints(graph, links, source, filtered);
   ASSERT_TRUE(a.ok());
   EXPECT_FALSE(Contains(a->maxima, spike));
   EXPECT_FALSE(near_spike(a->saddles));
@@ -90,7 +95,8 @@ TEST(CriticalPointsTest, OneVertexPocketIsFilteredWithNEqualsOne) {
 
   CriticalPointOptions lsd;
   lsd.cycle_min_vertices = 0;
-  absl::StatusOr<CriticalPoints> b = AnalyzeCriticalPoints(graph, links, source, lsd);
+  absl::StatusOr<CriticalPoints> b =
+      AnalyzeCriticalPoints(graph, links, source, lsd);
   ASSERT_TRUE(b.ok());
   EXPECT_TRUE(Contains(b->maxima, spike));
   EXPECT_TRUE(near_spike(b->saddles));
@@ -109,7 +115,8 @@ TEST(CriticalPointsTest, HugeNTurnsEveryCandidateIntoRowsZeroOrOne) {
   CriticalPointOptions huge;
   huge.cycle_min_vertices = 100000;
   huge.search_hops = 100001;
-  absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(graph, links, 0, huge);
+  absl::StatusOr<CriticalPoints> cp =
+      AnalyzeCriticalPoints(graph, links, 0, huge);
   ASSERT_TRUE(cp.ok());
   EXPECT_TRUE(cp->saddles.empty());
   EXPECT_EQ(cp->candidates_one_valid_cycle, 0);
@@ -117,14 +124,16 @@ TEST(CriticalPointsTest, HugeNTurnsEveryCandidateIntoRowsZeroOrOne) {
   for (int k : {0, 1, 2}) {
     CriticalPointOptions opt;
     opt.cycle_min_vertices = k;
-    absl::StatusOr<CriticalPoints> c = AnalyzeCriticalPoints(graph, links, 0, opt);
+    absl::StatusOr<CriticalPoints> c =
+        AnalyzeCriticalPoints(graph, links, 0, opt);
     ASSERT_TRUE(c.ok());
     // Every candidate falls in exactly one row of Table 1.
-    EXPECT_EQ(static_cast<int>(c->saddles.size()) + c->candidates_one_valid_cycle +
-                  c->candidates_no_valid_cycle,
+    EXPECT_EQ(static_cast<int>(c->saddles.size()) +
+                  c->candidates_one_valid_cycle + c->candidates_no_valid_cycle,
               c->saddle_candidates);
     // The search is bounded: a few dozen vertices per candidate.
-    EXPECT_LE(c->search_visits, int64_t{2000} * std::max(1, c->saddle_candidates));
+    EXPECT_LE(c->search_visits,
+              int64_t{2000} * std::max(1, c->saddle_candidates));
   }
 }
 
@@ -147,13 +156,17 @@ TEST(CriticalPointsTest, StarFromATipFindsTheOtherTips) {
     // Source: the vertex nearest to tip 0.
     int32_t source = 0;
     for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-      if ((m->positions[v] - tips[0]).norm() < (m->positions[source] - tips[0]).norm()) source = v;
+      if ((m->positions[v] - tips[0]).norm() <
+          (m->positions[source] - tips[0]).norm())
+        source = v;
     }
-    absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(graph, links, source, {});
+    absl::StatusOr<CriticalPoints> cp =
+        AnalyzeCriticalPoints(graph, links, source, {});
     ASSERT_TRUE(cp.ok());
     for (int t = 1; t < arms; ++t) {
       double best = 1e300;
-      for (int32_t v : cp->maxima) best = std::min(best, (m->positions[v] - tips[t]).norm());
+      for (int32_t v : cp->maxima)
+        best = std::min(best, (m->positions[v] - tips[t]).norm());
       EXPECT_LT(best, 0.25) << arms << " arms, tip " << t;
     }
     EXPECT_GE(static_cast<int>(cp->saddles.size()), arms - 2);
@@ -166,7 +179,9 @@ TEST(CriticalPointsTest, RejectsBadArguments) {
   const VertexLinks links = VertexLinks::Build(m);
   EXPECT_EQ(AnalyzeCriticalPoints(graph, links, -1, {}).status().code(),
             absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(AnalyzeCriticalPoints(graph, links, graph.num_vertices(), {}).status().code(),
+  EXPECT_EQ(AnalyzeCriticalPoints(graph, links, graph.num_vertices(), {})
+                .status()
+                .code(),
             absl::StatusCode::kInvalidArgument);
   CriticalPointOptions bad;
   bad.search_hops = 1;

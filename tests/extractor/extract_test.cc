@@ -3,13 +3,12 @@
 // transforms, resolution and pose stability, threads, degenerate meshes.
 #include "extractor/lib/extract.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "extractor/lib/mesh.h"
 #include "extractor/synth/synth.h"
@@ -30,14 +29,16 @@ Mesh Shape(const std::string& name, int pose, int vertices, bool rigid = false,
 }
 
 ExtractResult Extract(const Mesh& mesh, Options options = {}) {
-  absl::StatusOr<ExtractResult> r = ExtractSignature(mesh, ComputeMeshStats(mesh), options);
+  absl::StatusOr<ExtractResult> r =
+      ExtractSignature(mesh, ComputeMeshStats(mesh), options);
   EXPECT_TRUE(r.ok()) << r.status();
   return r.ok() ? *r : ExtractResult{};
 }
 
 int Count(const Signature& s, FeatureKind kind) {
-  return static_cast<int>(std::count_if(s.features.begin(), s.features.end(),
-                                        [&](const Feature& f) { return f.kind == kind; }));
+  return static_cast<int>(
+      std::count_if(s.features.begin(), s.features.end(),
+                    [&](const Feature& f) { return f.kind == kind; }));
 }
 
 // Leaf bone ends: the protrusion tips of a skeleton.
@@ -87,7 +88,9 @@ void ExpectWellFormed(const ExtractResult& r) {
   bool seen_ring = false;
   for (const Feature& f : s.features) {
     if (f.kind == FeatureKind::kRing) seen_ring = true;
-    if (seen_ring) { EXPECT_EQ(f.kind, FeatureKind::kRing); }
+    if (seen_ring) {
+      EXPECT_EQ(f.kind, FeatureKind::kRing);
+    }
   }
 }
 
@@ -112,7 +115,9 @@ TEST(ExtractTest, StarWithKArmsHasKPointsAndKRings) {
       double best = 1e300;
       for (size_t i = 0; i < r.signature.features.size(); ++i) {
         if (r.signature.features[i].kind != FeatureKind::kPoint) continue;
-        best = std::min(best, (m->positions[r.explanation->feature_vertices[i][0]] - tip).norm());
+        best = std::min(
+            best,
+            (m->positions[r.explanation->feature_vertices[i][0]] - tip).norm());
       }
       EXPECT_LT(best, tol) << "arms " << k;
     }
@@ -135,7 +140,8 @@ TEST(ExtractTest, BipedHasHeadHandsFeetAndJointRings) {
     double best = 1e300;
     for (size_t i = 0; i < s.features.size(); ++i) {
       if (s.features[i].kind == FeatureKind::kPoint) {
-        best = std::min(best, (m.positions[e.feature_vertices[i][0]] - x).norm());
+        best =
+            std::min(best, (m.positions[e.feature_vertices[i][0]] - x).norm());
       }
     }
     return best;
@@ -143,14 +149,16 @@ TEST(ExtractTest, BipedHasHeadHandsFeetAndJointRings) {
   // Head, both hands, both feet: a point on each tip.
   std::vector<Eigen::Vector3d> tips = Tips(*sk);
   ASSERT_EQ(tips.size(), 5u);
-  for (const Eigen::Vector3d& tip : tips) EXPECT_LT(nearest_point(tip), 0.06 * diam);
+  for (const Eigen::Vector3d& tip : tips)
+    EXPECT_LT(nearest_point(tip), 0.06 * diam);
   // Extra points are small protrusions of the feet (the heel bump of the
   // ankle-foot blend): near a tip, never elsewhere.
   for (size_t i = 0; i < s.features.size(); ++i) {
     if (s.features[i].kind != FeatureKind::kPoint) continue;
     double to_tip = 1e300;
     for (const Eigen::Vector3d& tip : tips) {
-      to_tip = std::min(to_tip, (m.positions[e.feature_vertices[i][0]] - tip).norm());
+      to_tip = std::min(to_tip,
+                        (m.positions[e.feature_vertices[i][0]] - tip).norm());
     }
     EXPECT_LT(to_tip, 0.15 * diam);
   }
@@ -170,7 +178,8 @@ TEST(ExtractTest, BipedHasHeadHandsFeetAndJointRings) {
   int joints = 0;
   for (const synth::Bone& b : sk->bones) {
     const std::string& n = b.name;
-    if (n.find("neck") != std::string::npos || n.find("upper_arm") != std::string::npos ||
+    if (n.find("neck") != std::string::npos ||
+        n.find("upper_arm") != std::string::npos ||
         n.find("thigh") != std::string::npos) {
       ++joints;
       // A ring's centroid lies within a tenth of the body's size of the
@@ -198,7 +207,8 @@ TEST(ExtractTest, InvariantUnderSimilarityTransforms) {
     for (auto& p : moved.positions) p = scale * (q * p) + t;
     const ExtractResult b = Extract(moved);
     ASSERT_EQ(a.signature.features.size(), b.signature.features.size());
-    EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), Count(b.signature, FeatureKind::kPoint));
+    EXPECT_EQ(Count(a.signature, FeatureKind::kPoint),
+              Count(b.signature, FeatureKind::kPoint));
     ASSERT_EQ(a.signature.spectrum.size(), b.signature.spectrum.size());
     for (size_t i = 0; i < a.signature.spectrum.size(); ++i) {
       EXPECT_NEAR(a.signature.spectrum[i], b.signature.spectrum[i],
@@ -229,8 +239,10 @@ TEST(ExtractTest, InvariantUnderSimilarityTransforms) {
 TEST(ExtractTest, SynthRandomRigidGivesSameCounts) {
   const ExtractResult a = Extract(Shape("biped_child", 1, 6000, false));
   const ExtractResult b = Extract(Shape("biped_child", 1, 6000, true));
-  EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), Count(b.signature, FeatureKind::kPoint));
-  EXPECT_EQ(Count(a.signature, FeatureKind::kRing), Count(b.signature, FeatureKind::kRing));
+  EXPECT_EQ(Count(a.signature, FeatureKind::kPoint),
+            Count(b.signature, FeatureKind::kPoint));
+  EXPECT_EQ(Count(a.signature, FeatureKind::kRing),
+            Count(b.signature, FeatureKind::kRing));
 }
 
 TEST(ExtractTest, ResolutionChangesCountsLittle) {
@@ -238,17 +250,22 @@ TEST(ExtractTest, ResolutionChangesCountsLittle) {
     const ExtractResult lo = Extract(Shape(name, 0, 5000));
     const ExtractResult hi = Extract(Shape(name, 0, 20000));
     EXPECT_LE(std::abs(Count(lo.signature, FeatureKind::kPoint) -
-                       Count(hi.signature, FeatureKind::kPoint)), 1) << name;
+                       Count(hi.signature, FeatureKind::kPoint)),
+              1)
+        << name;
     EXPECT_LE(std::abs(Count(lo.signature, FeatureKind::kRing) -
-                       Count(hi.signature, FeatureKind::kRing)), 2) << name;
+                       Count(hi.signature, FeatureKind::kRing)),
+              2)
+        << name;
   }
 }
 
 TEST(ExtractTest, PointCountStableAcrossPoses) {
   std::vector<int> counts;
   for (int pose = 0; pose < 10; ++pose) {
-    counts.push_back(Count(Extract(Shape("quadruped_slender", pose, 4000)).signature,
-                           FeatureKind::kPoint));
+    counts.push_back(
+        Count(Extract(Shape("quadruped_slender", pose, 4000)).signature,
+              FeatureKind::kPoint));
   }
   std::vector<int> sorted = counts;
   std::sort(sorted.begin(), sorted.end());
@@ -269,9 +286,10 @@ TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
   synth::Bone ball;
   ball.start_radius = ball.end_radius = 0.35;
   sk.bones.push_back(ball);
-  for (const Eigen::Vector3d& d : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(-1, 0, 0),
-                                   Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, -1),
-                                   Eigen::Vector3d(0, 1, 0)}) {
+  for (const Eigen::Vector3d& d :
+       {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(-1, 0, 0),
+        Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, -1),
+        Eigen::Vector3d(0, 1, 0)}) {
     synth::Bone arm;
     arm.parent = 0;
     arm.end = (d.y() > 0 ? 0.55 : 1.3) * d;
@@ -290,8 +308,9 @@ TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
   EXPECT_EQ(Count(b.signature, FeatureKind::kPoint), 4);
   Options bad;
   bad.point_min_prominence = -0.1;
-  EXPECT_EQ(ExtractSignature(*mesh, ComputeMeshStats(*mesh), bad).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      ExtractSignature(*mesh, ComputeMeshStats(*mesh), bad).status().code(),
+      absl::StatusCode::kInvalidArgument);
 }
 
 TEST(ExtractTest, ThreadsGiveIdenticalResults) {
@@ -302,8 +321,10 @@ TEST(ExtractTest, ThreadsGiveIdenticalResults) {
   ASSERT_EQ(a.signature.features.size(), b.signature.features.size());
   for (size_t i = 0; i < a.signature.features.size(); ++i) {
     EXPECT_EQ(a.signature.features[i].weight, b.signature.features[i].weight);
-    EXPECT_EQ(a.signature.features[i].integral_geodesic, b.signature.features[i].integral_geodesic);
-    EXPECT_EQ(a.signature.features[i].curvature, b.signature.features[i].curvature);
+    EXPECT_EQ(a.signature.features[i].integral_geodesic,
+              b.signature.features[i].integral_geodesic);
+    EXPECT_EQ(a.signature.features[i].curvature,
+              b.signature.features[i].curvature);
   }
   EXPECT_EQ(a.signature.spectrum, b.signature.spectrum);
 }
@@ -318,20 +339,25 @@ TEST(ExtractTest, ReportsTimingsAndExplanation) {
     stages.push_back(t.stage);
     EXPECT_GE(t.milliseconds, 0.0);
   }
-  EXPECT_EQ(stages, (std::vector<std::string>{"graph", "source_points", "critical_points",
-                                              "topological_points", "point_features",
-                                              "topological_rings", "ring_features", "signature",
-                                              "spectrum"}));
+  EXPECT_EQ(stages,
+            (std::vector<std::string>{
+                "graph", "source_points", "critical_points",
+                "topological_points", "point_features", "topological_rings",
+                "ring_features", "signature", "spectrum"}));
   ASSERT_TRUE(r.explanation.has_value());
   EXPECT_EQ(r.explanation->vertex_region.size(), m.positions.size());
-  ASSERT_EQ(r.explanation->feature_vertices.size(), r.signature.features.size());
+  ASSERT_EQ(r.explanation->feature_vertices.size(),
+            r.signature.features.size());
   for (size_t i = 0; i < r.signature.features.size(); ++i) {
     const auto& fv = r.explanation->feature_vertices[i];
     ASSERT_FALSE(fv.empty());
-    if (r.signature.features[i].kind == FeatureKind::kPoint) { EXPECT_EQ(fv.size(), 1u); }
+    if (r.signature.features[i].kind == FeatureKind::kPoint) {
+      EXPECT_EQ(fv.size(), 1u);
+    }
     for (int32_t v : fv) EXPECT_LT(v, static_cast<int32_t>(m.positions.size()));
   }
-  for (int32_t reg : r.explanation->vertex_region) EXPECT_GE(reg, 0);  // One component.
+  for (int32_t reg : r.explanation->vertex_region)
+    EXPECT_GE(reg, 0);  // One component.
   EXPECT_TRUE(r.warnings.empty());
   EXPECT_FALSE(Extract(m).explanation.has_value());
   Options no_spectrum;
@@ -347,7 +373,8 @@ TEST(ExtractTest, SignatureCarriesTheSpectrum) {
   const Mesh m = Shape("biped_adult", 2, 4000);
   const ExtractResult r = Extract(m);
   ASSERT_EQ(r.signature.spectrum.size(), 50u);
-  EXPECT_TRUE(std::is_sorted(r.signature.spectrum.begin(), r.signature.spectrum.end()));
+  EXPECT_TRUE(
+      std::is_sorted(r.signature.spectrum.begin(), r.signature.spectrum.end()));
   SpectrumOptions options;
   absl::StatusOr<Spectrum> direct = LaplaceBeltramiSpectrum(m, options);
   ASSERT_TRUE(direct.ok()) << direct.status();
@@ -369,13 +396,17 @@ Mesh UvSphere(int rings, int segments) {
     const double th = M_PI * i / rings;
     for (int j = 0; j < segments; ++j) {
       const double ph = 2 * M_PI * j / segments;
-      m.positions.push_back({std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)});
+      m.positions.push_back({std::sin(th) * std::cos(ph),
+                             std::sin(th) * std::sin(ph), std::cos(th)});
     }
   }
   m.positions.push_back({0, 0, -1});
   const int south = static_cast<int>(m.positions.size()) - 1;
-  auto at = [&](int i, int j) { return 1 + (i - 1) * segments + (j % segments); };
-  for (int j = 0; j < segments; ++j) m.triangles.push_back({0, at(1, j), at(1, j + 1)});
+  auto at = [&](int i, int j) {
+    return 1 + (i - 1) * segments + (j % segments);
+  };
+  for (int j = 0; j < segments; ++j)
+    m.triangles.push_back({0, at(1, j), at(1, j + 1)});
   for (int i = 1; i + 1 < rings; ++i) {
     for (int j = 0; j < segments; ++j) {
       m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
@@ -397,8 +428,10 @@ TEST(ExtractTest, DegenerateMeshesStillGiveASignatureWithWarnings) {
   Mesh two = *star;
   const Mesh ball = UvSphere(10, 16);
   const int32_t offset = static_cast<int32_t>(two.positions.size());
-  for (const auto& p : ball.positions) two.positions.push_back(0.1 * p + Eigen::Vector3d(5, 5, 5));
-  for (auto t : ball.triangles) two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  for (const auto& p : ball.positions)
+    two.positions.push_back(0.1 * p + Eigen::Vector3d(5, 5, 5));
+  for (auto t : ball.triangles)
+    two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
   ExtractResult r = Extract(two);
   ExpectWellFormed(r);
   EXPECT_EQ(Count(r.signature, FeatureKind::kPoint), 4);
@@ -411,7 +444,8 @@ TEST(ExtractTest, DegenerateMeshesStillGiveASignatureWithWarnings) {
   r = Extract(open);
   ExpectWellFormed(r);
   bool boundary_warning = false;
-  for (const std::string& w : r.warnings) boundary_warning |= w.find("boundary") != std::string::npos;
+  for (const std::string& w : r.warnings)
+    boundary_warning |= w.find("boundary") != std::string::npos;
   EXPECT_TRUE(boundary_warning);
 
   // A sphere: nothing protrudes but the grid's poles; whatever the vote
@@ -420,7 +454,8 @@ TEST(ExtractTest, DegenerateMeshesStillGiveASignatureWithWarnings) {
   r = Extract(UvSphere(24, 32));
   ExpectWellFormed(r);
   bool fallback = false;
-  for (const std::string& w : r.warnings) fallback |= w.find("no topological point") != std::string::npos;
+  for (const std::string& w : r.warnings)
+    fallback |= w.find("no topological point") != std::string::npos;
   if (fallback) {
     ASSERT_EQ(r.signature.features.size(), 1u);
     EXPECT_EQ(r.signature.features[0].weight, 1.0);
@@ -435,7 +470,8 @@ TEST(ExtractTest, TorusGivesSignatureWithGenusWarning) {
     for (int j = 0; j < b; ++j) {
       const double u = 2 * M_PI * i / a, v = 2 * M_PI * j / b;
       m.positions.push_back({(2 + 0.6 * std::cos(v)) * std::cos(u),
-                             (2 + 0.6 * std::cos(v)) * std::sin(u), 0.6 * std::sin(v)});
+                             (2 + 0.6 * std::cos(v)) * std::sin(u),
+                             0.6 * std::sin(v)});
     }
   }
   auto id = [&](int i, int j) { return ((i + a) % a) * b + (j + b) % b; };
@@ -448,7 +484,8 @@ TEST(ExtractTest, TorusGivesSignatureWithGenusWarning) {
   const ExtractResult r = Extract(m);
   ExpectWellFormed(r);
   bool genus_warning = false;
-  for (const std::string& w : r.warnings) genus_warning |= w.find("genus") != std::string::npos;
+  for (const std::string& w : r.warnings)
+    genus_warning |= w.find("genus") != std::string::npos;
   EXPECT_TRUE(genus_warning);
 }
 
@@ -461,13 +498,15 @@ TEST(ExtractTest, TinyAndFlatMeshesStillAnswer) {
   tri.triangles = {{0, 1, 2}};
   const ExtractResult one = Extract(tri);
   ExpectWellFormed(one);
-  EXPECT_EQ(one.signature.spectrum.size(), 2u);  // 3 vertices: 2 non-zero values
+  EXPECT_EQ(one.signature.spectrum.size(),
+            2u);  // 3 vertices: 2 non-zero values
   EXPECT_FALSE(one.warnings.empty());
 
   Mesh grid;
   const int k = 30;
   for (int y = 0; y < k; ++y) {
-    for (int x = 0; x < k; ++x) grid.positions.push_back({double(x), double(y), 0.0});
+    for (int x = 0; x < k; ++x)
+      grid.positions.push_back({double(x), double(y), 0.0});
   }
   for (int y = 0; y + 1 < k; ++y) {
     for (int x = 0; x + 1 < k; ++x) {
@@ -491,13 +530,16 @@ TEST(ExtractTest, RejectsBadOptionsAndMeshes) {
   const MeshStats st = ComputeMeshStats(m);
   Options bad;
   bad.bands = 0;
-  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
   bad = Options{};
   bad.ring_length_threshold = -1;
-  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
   bad = Options{};
   bad.cycle_search_hops = 1;
-  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(ExtractSignature(m, st, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(ExtractSignature(Mesh{}, MeshStats{}, Options{}).status().code(),
             absl::StatusCode::kInvalidArgument);
   Mesh broken = m;

@@ -15,11 +15,14 @@
 namespace tpr::extract {
 namespace {
 
-double Sum(const std::vector<double>& v) { return std::accumulate(v.begin(), v.end(), 0.0); }
+double Sum(const std::vector<double>& v) {
+  return std::accumulate(v.begin(), v.end(), 0.0);
+}
 
 TEST(AngleDefectsTest, GaussBonnet) {
   // Closed genus 0: 4 pi.
-  for (const Mesh& m : {testing::Icosphere(3), testing::Capsule(1.0, 2.0, 40, 24)}) {
+  for (const Mesh& m :
+       {testing::Icosphere(3), testing::Capsule(1.0, 2.0, 40, 24)}) {
     EXPECT_NEAR(Sum(AngleDefects(m, VertexLinks::Build(m))), 4 * M_PI, 1e-9);
   }
   // An open cylinder (Euler characteristic 0): interior vertices are flat,
@@ -51,19 +54,24 @@ TEST(SurfaceVectorsTest, SphereZonesMatchAnalyticValues) {
   }
   const std::vector<double>& d = solver.Run(pole);
   const int bands = 10;
-  const SurfaceVectors sv =
-      ComputeSurfaceVectors(graph, links, d, AngleDefects(m, links), bands, graph.total_area());
+  const SurfaceVectors sv = ComputeSurfaceVectors(
+      graph, links, d, AngleDefects(m, links), bands, graph.total_area());
   ASSERT_EQ(sv.curvature.size(), 10u);
   const double max_d = *std::max_element(d.begin(), d.end());
   for (int b = 1; b + 1 < bands; ++b) {
     // Zone in polar angle, using the graph's own largest distance as pi.
     const double t0 = M_PI * b / bands, t1 = M_PI * (b + 1) / bands;
-    const double zone = 2 * M_PI * radius * radius * (std::cos(t0) - std::cos(t1));
+    const double zone =
+        2 * M_PI * radius * radius * (std::cos(t0) - std::cos(t1));
     const double zone_curvature = zone / (radius * radius);  // Gauss-Bonnet
     EXPECT_NEAR(sv.curvature[b], zone_curvature, 0.1 * zone_curvature) << b;
-    EXPECT_NEAR(sv.area[b], zone / graph.total_area(), 0.1 * zone / graph.total_area()) << b;
+    EXPECT_NEAR(sv.area[b], zone / graph.total_area(),
+                0.1 * zone / graph.total_area())
+        << b;
     const double thickness = radius * std::sin(0.5 * (t0 + t1));
-    EXPECT_NEAR(sv.distance[b] * std::sqrt(graph.total_area()), thickness, 0.08 * radius) << b;
+    EXPECT_NEAR(sv.distance[b] * std::sqrt(graph.total_area()), thickness,
+                0.08 * radius)
+        << b;
   }
   EXPECT_NEAR(max_d, M_PI * radius, 0.02 * M_PI * radius);
 }
@@ -79,7 +87,8 @@ TEST(SurfaceVectorsTest, InvariantUnderUniformScale) {
     const MeshGraph graph = MeshGraph::Build(*mesh);
     const VertexLinks links = VertexLinks::Build(*mesh);
     DijkstraSolver solver(graph);
-    out[i++] = ComputeSurfaceVectors(graph, links, solver.Run(0), AngleDefects(*mesh, links), 20,
+    out[i++] = ComputeSurfaceVectors(graph, links, solver.Run(0),
+                                     AngleDefects(*mesh, links), 20,
                                      graph.total_area());
   }
   for (int b = 0; b < 20; ++b) {
@@ -93,7 +102,8 @@ TEST(SurfaceVectorsTest, InvariantUnderUniformScale) {
 // segments, one per ball: the area entry is the segment-area-weighted mean
 // of segment areas, half the band's area, not the band's area (5.3).
 TEST(SurfaceVectorsTest, BandsSplitIntoSegmentsByConnectivity) {
-  const Mesh m = testing::Dumbbell(1.0, 1.0, 0.3, 1.5, 120, 24);  // Ring 60 at z = 0.
+  const Mesh m =
+      testing::Dumbbell(1.0, 1.0, 0.3, 1.5, 120, 24);  // Ring 60 at z = 0.
   const MeshGraph graph = MeshGraph::Build(m);
   const VertexLinks links = VertexLinks::Build(m);
   DijkstraSolver solver(graph);
@@ -104,8 +114,8 @@ TEST(SurfaceVectorsTest, BandsSplitIntoSegmentsByConnectivity) {
   ASSERT_FALSE(neck.empty());
   const std::vector<double>& d = solver.Run(neck);
   const int bands = 8;
-  const SurfaceVectors sv =
-      ComputeSurfaceVectors(graph, links, d, AngleDefects(m, links), bands, graph.total_area());
+  const SurfaceVectors sv = ComputeSurfaceVectors(
+      graph, links, d, AngleDefects(m, links), bands, graph.total_area());
   // Oracle: the band's total area by the same binning.
   const double max_d = *std::max_element(d.begin(), d.end());
   std::vector<double> band_area(bands, 0.0);
@@ -122,8 +132,10 @@ TEST(SurfaceVectorsTest, BandsSplitIntoSegmentsByConnectivity) {
 
 TEST(IntegralGeodesicTest, EquationsFourAndFive) {
   // Eq. 4: a ring a quarter of the way from o to w.
-  EXPECT_DOUBLE_EQ(RingIntegralGeodesic(1.0, 3.0, 10.0, 30.0), (1.0 * 30 + 3.0 * 10) / 4.0);
-  EXPECT_DOUBLE_EQ(RingIntegralGeodesic(0.0, 5.0, 10.0, 30.0), 10.0);  // Ring through o.
+  EXPECT_DOUBLE_EQ(RingIntegralGeodesic(1.0, 3.0, 10.0, 30.0),
+                   (1.0 * 30 + 3.0 * 10) / 4.0);
+  EXPECT_DOUBLE_EQ(RingIntegralGeodesic(0.0, 5.0, 10.0, 30.0),
+                   10.0);  // Ring through o.
   EXPECT_DOUBLE_EQ(RingIntegralGeodesic(0.0, 0.0, 10.0, 30.0), 10.0);
   // Eq. 5.
   EXPECT_DOUBLE_EQ(NormalizeIntegralGeodesic(15.0, 10.0, 30.0), 0.25);
@@ -154,8 +166,10 @@ TEST(EffectiveAreasTest, ProtrusionRegionsAndFinalRegion) {
   EXPECT_NEAR(total, graph.total_area(), 1e-9);
   EXPECT_NEAR(w[0], 0.5 * a_top / total, 1e-12);
   EXPECT_NEAR(w[1], 0.5 * a_bot / total, 1e-12);
-  EXPECT_NEAR(w[2], (0.5 * a_top + a_fr * a_top / (a_top + a_bot)) / total, 1e-12);
-  EXPECT_NEAR(w[3], (0.5 * a_bot + a_fr * a_bot / (a_top + a_bot)) / total, 1e-12);
+  EXPECT_NEAR(w[2], (0.5 * a_top + a_fr * a_top / (a_top + a_bot)) / total,
+              1e-12);
+  EXPECT_NEAR(w[3], (0.5 * a_bot + a_fr * a_bot / (a_top + a_bot)) / total,
+              1e-12);
   EXPECT_NEAR(Sum(w), 1.0, 1e-12);
   EXPECT_GT(w[0], w[1]);
 }
@@ -172,14 +186,16 @@ TEST(EffectiveAreasTest, OnlyFinalRegion) {
   ASSERT_TRUE(r.ok());
   std::vector<double> swept(2, 0.0);
   for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-    if (r->owner[v] == 0 || r->owner[v] == 1) swept[r->owner[v]] += graph.vertex_areas()[v];
+    if (r->owner[v] == 0 || r->owner[v] == 1)
+      swept[r->owner[v]] += graph.vertex_areas()[v];
   }
   const std::vector<double> w = EffectiveAreas(graph, *r, 2);
   ASSERT_EQ(w.size(), 2u);
   EXPECT_NEAR(w[0], swept[0] / (swept[0] + swept[1]), 1e-12);
   EXPECT_NEAR(w[1], swept[1] / (swept[0] + swept[1]), 1e-12);
   // No point, no ring: no feature, no weight.
-  absl::StatusOr<RingExtraction> none = ExtractTopologicalRings(graph, {}, {}, {}, high);
+  absl::StatusOr<RingExtraction> none =
+      ExtractTopologicalRings(graph, {}, {}, {}, high);
   ASSERT_TRUE(none.ok());
   EXPECT_TRUE(EffectiveAreas(graph, *none, 0).empty());
 }

@@ -69,10 +69,11 @@ TEST(GeodesicTest, UnitSphereDistancesApproximateGreatCircles) {
     const Mesh mesh = testing::Icosphere(level);
     const ErrorStats plain = MeasureError(mesh, {false}, GreatCircle, 0.3);
     const ErrorStats unfolded = MeasureError(mesh, {true}, GreatCircle, 0.3);
-    std::printf("sphere level %d (%zu vertices): plain mean %.4f max %.4f, "
-                "unfolded mean %.4f max %.4f\n",
-                level, mesh.positions.size(), plain.mean, plain.max,
-                unfolded.mean, unfolded.max);
+    std::printf(
+        "sphere level %d (%zu vertices): plain mean %.4f max %.4f, "
+        "unfolded mean %.4f max %.4f\n",
+        level, mesh.positions.size(), plain.mean, plain.max, unfolded.mean,
+        unfolded.max);
     // Measured (levels 2-5): plain mean 6-8%, max 21-22%; unfolded mean
     // 0.6-1.5%, max 3-5%.
     EXPECT_LT(plain.max, 0.25) << "level " << level;
@@ -100,16 +101,18 @@ TEST(GeodesicTest, TubeDistancesApproximateUnrolledDistance) {
   const double length = 6.0;
   const Mesh mesh = testing::Tube(radius, length, 60, 64);
   auto unrolled = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-    double dtheta = std::abs(std::atan2(a.y(), a.x()) - std::atan2(b.y(), b.x()));
+    double dtheta =
+        std::abs(std::atan2(a.y(), a.x()) - std::atan2(b.y(), b.x()));
     dtheta = std::min(dtheta, 2.0 * kPi - dtheta);
     return std::hypot(radius * dtheta, a.z() - b.z());
   };
   const ErrorStats plain = MeasureError(mesh, {false}, unrolled, 0.5);
   const ErrorStats unfolded = MeasureError(mesh, {true}, unrolled, 0.5);
-  std::printf("tube (%zu vertices): plain mean %.4f max %.4f, unfolded mean "
-              "%.4f max %.4f\n",
-              mesh.positions.size(), plain.mean, plain.max, unfolded.mean,
-              unfolded.max);
+  std::printf(
+      "tube (%zu vertices): plain mean %.4f max %.4f, unfolded mean "
+      "%.4f max %.4f\n",
+      mesh.positions.size(), plain.mean, plain.max, unfolded.mean,
+      unfolded.max);
   // Measured: plain mean 10%, max 18%; unfolded mean 2.3%, max 4.6%.
   EXPECT_LT(plain.max, 0.20);
   EXPECT_LT(plain.mean, 0.12);
@@ -248,7 +251,8 @@ TEST_P(SolverFamilyTest, MultiSourceIsMinOverSingleSourcesWithStartTimes) {
   const std::vector<double> set = solver.Run(sources);
   for (int32_t v = 0; v < n; ++v) {
     double best = kUnreachable;
-    for (size_t i = 0; i < sources.size(); ++i) best = std::min(best, single[i][v]);
+    for (size_t i = 0; i < sources.size(); ++i)
+      best = std::min(best, single[i][v]);
     EXPECT_NEAR(set[v], best, 1e-12);
   }
   for (int32_t s : sources) EXPECT_EQ(set[s], 0.0);
@@ -493,7 +497,8 @@ TEST(GeodesicTest, TwoComponentsLeaveTheOtherUnreached) {
   const Mesh both = testing::Union(small, big);
   const MeshGraph graph = MeshGraph::Build(both);
   ASSERT_EQ(graph.num_components(), 2);
-  EXPECT_EQ(graph.largest_component(), graph.component()[small.positions.size()]);
+  EXPECT_EQ(graph.largest_component(),
+            graph.component()[small.positions.size()]);
   DijkstraSolver solver(graph);
   const std::vector<double>& d = solver.Run(0);
   const int32_t split = static_cast<int32_t>(small.positions.size());

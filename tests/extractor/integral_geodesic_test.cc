@@ -3,17 +3,16 @@
 // and the brute-force search over every vertex.
 #include "extractor/lib/integral_geodesic.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
-
-#include "gtest/gtest.h"
 #include "extractor/lib/source_points.h"
 #include "extractor/synth/synth.h"
+#include "gtest/gtest.h"
 #include "tests/extractor/test_meshes.h"
 
 namespace tpr::extract {
@@ -60,7 +59,9 @@ TEST(IntegralGeodesicTest, OtherComponentsContributeNothing) {
 }
 
 // Symmetric dumbbell: two unit balls joined by a thin neck along z.
-Mesh SymmetricDumbbell() { return testing::Dumbbell(1.0, 1.0, 0.3, 1.6, 70, 24); }
+Mesh SymmetricDumbbell() {
+  return testing::Dumbbell(1.0, 1.0, 0.3, 1.6, 70, 24);
+}
 
 TEST(IntegralGeodesicTest, MinimalAtTheNeckOfASymmetricDumbbell) {
   const Mesh mesh = SymmetricDumbbell();
@@ -70,7 +71,8 @@ TEST(IntegralGeodesicTest, MinimalAtTheNeckOfASymmetricDumbbell) {
   const double half_length = 2.6;
   // The minimum of G lies on the neck, near z = 0, the maximum at a pole.
   EXPECT_LT(std::abs(mesh.positions[brute.vertex].z()), 0.1 * half_length);
-  EXPECT_GT(std::abs(mesh.positions[brute.g_max_vertex].z()), 0.95 * half_length);
+  EXPECT_GT(std::abs(mesh.positions[brute.g_max_vertex].z()),
+            0.95 * half_length);
   // G grows monotonically (up to discretization) with |z| along the shape:
   // compare the best vertex of each band of |z|.
   std::vector<double> band_min(5, kUnreachable);
@@ -90,7 +92,8 @@ struct Case {
 std::vector<Case> SearchCases() {
   std::vector<Case> cases;
   cases.push_back({"symmetric dumbbell", SymmetricDumbbell()});
-  cases.push_back({"uneven dumbbell", testing::Dumbbell(1.0, 0.6, 0.25, 1.4, 70, 24)});
+  cases.push_back(
+      {"uneven dumbbell", testing::Dumbbell(1.0, 0.6, 0.25, 1.4, 70, 24)});
   cases.push_back({"capsule", testing::Capsule(0.4, 3.0, 60, 20)});
   cases.push_back({"sphere", testing::Icosphere(3)});
   cases.push_back({"tube", testing::Tube(0.7, 3.0, 30, 20)});
@@ -104,12 +107,12 @@ TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForce) {
     const SurfaceCentre brute = BruteForceSurfaceCentre(graph, solver);
     const SurfaceCentre fast = FindSurfaceCentre(graph, solver, {});
     const int32_t n = graph.num_vertices();
-    std::printf("%-20s n=%5d  brute min %.5f max %.5f | search min %.5f "
-                "(+%.3f%%) max %.5f (-%.3f%%) sweeps %d levels %d\n",
-                c.name.c_str(), n, brute.g_min, brute.g_max, fast.g_min,
-                100.0 * (fast.g_min / brute.g_min - 1.0), fast.g_max,
-                100.0 * (1.0 - fast.g_max / brute.g_max), fast.sweeps,
-                fast.levels);
+    std::printf(
+        "%-20s n=%5d  brute min %.5f max %.5f | search min %.5f "
+        "(+%.3f%%) max %.5f (-%.3f%%) sweeps %d levels %d\n",
+        c.name.c_str(), n, brute.g_min, brute.g_max, fast.g_min,
+        100.0 * (fast.g_min / brute.g_min - 1.0), fast.g_max,
+        100.0 * (1.0 - fast.g_max / brute.g_max), fast.sweeps, fast.levels);
     ASSERT_GE(fast.vertex, 0) << c.name;
     // The reported G is the exact G of the reported vertex.
     EXPECT_NEAR(fast.g_min, IntegralGeodesic(solver, fast.vertex),
@@ -122,12 +125,13 @@ TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForce) {
     // psi of Table 4 is about 20; far fewer sweeps than vertices.
     EXPECT_LE(fast.sweeps, 40) << c.name;
     EXPECT_LT(fast.sweeps * 20, n) << c.name;
-    EXPECT_EQ(fast.evaluated_vertices.size(),
-              static_cast<size_t>(fast.sweeps)) << c.name;
+    EXPECT_EQ(fast.evaluated_vertices.size(), static_cast<size_t>(fast.sweeps))
+        << c.name;
   }
 }
 
-TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForceOnArticulatedShapes) {
+TEST(SurfaceCentreTest,
+     HierarchicalSearchMatchesBruteForceOnArticulatedShapes) {
   // Generated creatures (tpr_synth) in several poses: many protrusions and a
   // flat G landscape in the torso. The octopus is the hard case: its first
   // farthest-point centres are all arm tips.
@@ -147,10 +151,11 @@ TEST(SurfaceCentreTest, HierarchicalSearchMatchesBruteForceOnArticulatedShapes) 
       const double range = brute.g_max - brute.g_min;
       const double min_error = (fast.g_min - brute.g_min) / range;
       const double max_error = (brute.g_max - fast.g_max) / range;
-      std::printf("%-18s pose %d n=%5d  min G error %.3f%%, max G error "
-                  "%.3f%% of the range, sweeps %d (search %d)\n",
-                  name, pose, graph.num_vertices(), 100.0 * min_error,
-                  100.0 * max_error, s->sweeps, fast.sweeps);
+      std::printf(
+          "%-18s pose %d n=%5d  min G error %.3f%%, max G error "
+          "%.3f%% of the range, sweeps %d (search %d)\n",
+          name, pose, graph.num_vertices(), 100.0 * min_error,
+          100.0 * max_error, s->sweeps, fast.sweeps);
       EXPECT_GE(min_error, -1e-12);
       // Measured over 10 classes x 6 poses: worst 0.9% at 1200 vertices,
       // 1.2% at 3000 (integral_geodesic.h).
@@ -180,7 +185,8 @@ TEST(SourcePointsTest, InvariantUnderRigidMotionAndScale) {
   DijkstraSolver solver(graph);
   DijkstraSolver moved_solver(moved_graph);
   absl::StatusOr<SourcePoints> a = SelectSourcePoints(graph, solver, {});
-  absl::StatusOr<SourcePoints> b = SelectSourcePoints(moved_graph, moved_solver, {});
+  absl::StatusOr<SourcePoints> b =
+      SelectSourcePoints(moved_graph, moved_solver, {});
   ASSERT_TRUE(a.ok() && b.ok());
   // G has the units of length^3: area times distance.
   const double cube = scale * scale * scale;
@@ -196,10 +202,12 @@ TEST(SourcePointsTest, InvariantUnderRigidMotionAndScale) {
   const double range = a->surface_centre.g_max - a->surface_centre.g_min;
   EXPECT_NEAR(b->surface_centre.g_min / cube, a->surface_centre.g_min,
               0.015 * range);
-  std::printf("centre %d vs %d, min G differs by %.3f%% of the range\n",
-              a->centre, b->centre,
-              100.0 * std::abs(b->surface_centre.g_min / cube -
-                               a->surface_centre.g_min) / range);
+  std::printf(
+      "centre %d vs %d, min G differs by %.3f%% of the range\n", a->centre,
+      b->centre,
+      100.0 *
+          std::abs(b->surface_centre.g_min / cube - a->surface_centre.g_min) /
+          range);
 }
 
 TEST(SurfaceCentreTest, StaysOnTheLargestComponent) {
@@ -249,7 +257,8 @@ TEST(SourcePointsTest, DoubleSweepFindsTheTipsOfACapsule) {
   EXPECT_NEAR(std::abs(zb), tip, 0.05 * tip);
   EXPECT_LT(za * zb, 0.0);
   // Their distance is about length + pi * radius (over the caps).
-  EXPECT_NEAR(s->g_far_ab, length + kPi * radius, 0.05 * (length + kPi * radius));
+  EXPECT_NEAR(s->g_far_ab, length + kPi * radius,
+              0.05 * (length + kPi * radius));
   // The centre is midway.
   EXPECT_LT(std::abs(mesh.positions[s->centre].z()), 0.1 * tip);
   EXPECT_EQ(s->sweeps, 2 + s->surface_centre.sweeps);

@@ -4,14 +4,13 @@
 // manifold checks, Heron areas), and the same soup cleaned in another order.
 #include "extractor/lib/mesh_clean.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <map>
 #include <set>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "extractor/lib/disjoint_sets.h"
@@ -54,9 +53,9 @@ TEST(ValidatePolygonSoupTest, AcceptsAValidSoupAndNamesEachFault) {
 }
 
 TEST(FanTriangulateTest, SplitsEachPolygonFromItsFirstCorner) {
-  PolygonSoup soup = Soup({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
-                           {-1, 1, 0}},
-                          {{0, 1, 2, 3, 4}, {0, 1, 2}});
+  PolygonSoup soup =
+      Soup({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {-1, 1, 0}},
+           {{0, 1, 2, 3, 4}, {0, 1, 2}});
   const Triangles t = FanTriangulate(soup);
   const Triangles expected = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 1, 2}};
   EXPECT_EQ(t, expected);
@@ -72,8 +71,8 @@ TEST(DropDegenerateTrianglesTest, DropsRepeatedIdsAndCollinearKeepsOrder) {
 }
 
 TEST(DropDuplicateTrianglesTest, MatchesASetOfSortedTriples) {
-  Triangles t = {{0, 1, 2}, {2, 1, 0}, {1, 2, 0}, {0, 1, 3}, {3, 1, 0},
-                 {4, 5, 6}};
+  Triangles t = {{0, 1, 2}, {2, 1, 0}, {1, 2, 0},
+                 {0, 1, 3}, {3, 1, 0}, {4, 5, 6}};
   std::set<std::array<int32_t, 3>> seen;
   Triangles oracle;
   for (auto tri : t) {
@@ -109,7 +108,7 @@ TEST(OrientConsistentlyTest, FlipsMinorityAndTurnsClosedSurfacesOutward) {
   const auto p = TetraPositions();
   Triangles t;
   for (const auto& f : kTetra) t.push_back({f[0], f[2], f[1]});  // inward
-  t[2] = {0, 3, 2};  // one outward
+  t[2] = {0, 3, 2};                                              // one outward
   absl::StatusOr<int64_t> flipped = OrientConsistently(p, &t);
   ASSERT_TRUE(flipped.ok()) << flipped.status();
   EXPECT_EQ(*flipped, 3);
@@ -124,8 +123,8 @@ TEST(OrientConsistentlyTest, FlipsMinorityAndTurnsClosedSurfacesOutward) {
 }
 
 TEST(CompactVerticesTest, RemovesUnreferencedKeepingOrder) {
-  std::vector<Eigen::Vector3d> p = {{0, 0, 0}, {9, 9, 9}, {1, 0, 0},
-                                    {0, 1, 0}, {8, 8, 8}};
+  std::vector<Eigen::Vector3d> p = {
+      {0, 0, 0}, {9, 9, 9}, {1, 0, 0}, {0, 1, 0}, {8, 8, 8}};
   Triangles t = {{0, 2, 3}};
   EXPECT_EQ(CompactVertices(&p, &t), 2);
   ASSERT_EQ(p.size(), 3u);
@@ -135,9 +134,9 @@ TEST(CompactVerticesTest, RemovesUnreferencedKeepingOrder) {
 }
 
 TEST(CleanPolygonSoupTest, RunsTheStepsInOrderWithWarnings) {
-  PolygonSoup soup = Soup(
-      {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {5, 5, 5}},
-      {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {3, 2, 1}, {0, 0, 1}});
+  PolygonSoup soup =
+      Soup({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {5, 5, 5}},
+           {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {3, 2, 1}, {0, 0, 1}});
   absl::StatusOr<LoadedMesh> m = CleanPolygonSoup(std::move(soup), {});
   ASSERT_TRUE(m.ok()) << m.status();
   EXPECT_EQ(m->stats.faces, 4);
@@ -146,9 +145,10 @@ TEST(CleanPolygonSoupTest, RunsTheStepsInOrderWithWarnings) {
   EXPECT_EQ(m->stats.dropped_duplicate_faces, 1);
   EXPECT_EQ(m->stats.unreferenced_vertices, 1);
   EXPECT_EQ(m->stats.genus, 0);
-  EXPECT_THAT(m->warnings, ::testing::ElementsAre(
-                               HasSubstr("1 degenerate"), HasSubstr("1 duplicate"),
-                               HasSubstr("removed 1 vertices")));
+  EXPECT_THAT(m->warnings,
+              ::testing::ElementsAre(HasSubstr("1 degenerate"),
+                                     HasSubstr("1 duplicate"),
+                                     HasSubstr("removed 1 vertices")));
 }
 
 TEST(DisjointSetsTest, UnionPicksSmallestLinkPicksGivenRoot) {

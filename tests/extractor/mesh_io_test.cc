@@ -1,9 +1,11 @@
 // Tests for mesh intake (extractor/lib/mesh_io.h) and ComputeMeshStats.
 // Oracles: analytic counts, areas and genera of hand-made solids; a brute
 // force area sum; the same mesh read from every format and built in code.
-// The corpus in tests/data/meshes is written by tests/data/meshes/make_meshes.py.
+// The corpus in tests/data/meshes is written by
+// tests/data/meshes/make_meshes.py.
 #include "extractor/lib/mesh_io.h"
 
+#include <Eigen/Geometry>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -17,8 +19,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "extractor/lib/mesh.h"
@@ -148,11 +148,13 @@ TEST(MeshIoTest, AllCubeFormatsGiveTheSameSurface) {
     absl::StatusOr<LoadedMesh> m = LoadMeshFromFile(kDir + "good/" + f, {});
     ASSERT_TRUE(m.ok()) << f << ": " << m.status();
     std::set<std::array<double, 3>> corners;
-    for (const auto& p : m->mesh.positions) corners.insert({p.x(), p.y(), p.z()});
+    for (const auto& p : m->mesh.positions)
+      corners.insert({p.x(), p.y(), p.z()});
     std::set<std::array<double, 3>> expected;
     for (int z = 0; z < 2; ++z)
       for (int y = 0; y < 2; ++y)
-        for (int x = 0; x < 2; ++x) expected.insert({1.0 * x, 1.0 * y, 1.0 * z});
+        for (int x = 0; x < 2; ++x)
+          expected.insert({1.0 * x, 1.0 * y, 1.0 * z});
     EXPECT_EQ(corners, expected) << f;
     EXPECT_NEAR(SignedVolume(m->mesh), 1.0, 1e-9) << f;
   }
@@ -171,7 +173,8 @@ TEST(MeshIoTest, DropsDegenerateAndDuplicateFacesAndUnusedVertices) {
   EXPECT_NEAR(m->stats.area, kTetraArea, 1e-9);
   EXPECT_THAT(m->warnings, ::testing::Contains(HasSubstr("2 degenerate")));
   EXPECT_THAT(m->warnings, ::testing::Contains(HasSubstr("1 duplicate")));
-  EXPECT_THAT(m->warnings, ::testing::Contains(HasSubstr("removed 2 vertices")));
+  EXPECT_THAT(m->warnings,
+              ::testing::Contains(HasSubstr("removed 2 vertices")));
 }
 
 TEST(MeshIoTest, StlDegenerateFacetDroppedByWeldingIsCounted) {
@@ -180,7 +183,8 @@ TEST(MeshIoTest, StlDegenerateFacetDroppedByWeldingIsCounted) {
   std::string bytes = ReadBytes(kDir + "good/tetrahedron_ascii.stl");
   const std::string extra =
       "solid extra\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n"
-      "   vertex 0 0 0\n   vertex 1 0 0\n  endloop\n endfacet\nendsolid extra\n";
+      "   vertex 0 0 0\n   vertex 1 0 0\n  endloop\n endfacet\nendsolid "
+      "extra\n";
   absl::StatusOr<LoadedMesh> m =
       LoadMeshFromBuffer(bytes + extra, MeshFormat::kStl, "", {});
   ASSERT_TRUE(m.ok()) << m.status();
@@ -199,8 +203,8 @@ TEST(MeshIoTest, ReorientsAFlippedFace) {
 
 TEST(MeshIoTest, InsideOutClosedMeshIsTurnedOutward) {
   std::vector<Eigen::Vector3d> v = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  std::vector<std::vector<int32_t>> f = {{0, 1, 2}, {0, 3, 1}, {0, 2, 3},
-                                         {1, 3, 2}};  // all inward
+  std::vector<std::vector<int32_t>> f = {
+      {0, 1, 2}, {0, 3, 1}, {0, 2, 3}, {1, 3, 2}};  // all inward
   absl::StatusOr<LoadedMesh> m = BuildMesh(v, f, {});
   ASSERT_TRUE(m.ok()) << m.status();
   EXPECT_GT(SignedVolume(m->mesh), 0);
@@ -430,7 +434,8 @@ TEST_P(BadFileTest, FailsWithExactCodeAndMessage) {
   const BadCase& c = GetParam();
   auto from_file = LoadMeshFromFile(kDir + "bad/" + c.file, {});
   EXPECT_EQ(from_file.status().code(), c.code) << from_file.status();
-  EXPECT_THAT(std::string(from_file.status().message()), HasSubstr(c.substring));
+  EXPECT_THAT(std::string(from_file.status().message()),
+              HasSubstr(c.substring));
   // The same bytes as a buffer, format from the name, fail the same way.
   auto from_buffer = LoadMeshFromBuffer(ReadBytes(kDir + "bad/" + c.file),
                                         MeshFormat::kUnknown, c.file, {});
@@ -440,15 +445,18 @@ TEST_P(BadFileTest, FailsWithExactCodeAndMessage) {
 INSTANTIATE_TEST_SUITE_P(
     Corpus, BadFileTest,
     ::testing::Values(
-        BadCase{"truncated.off", absl::StatusCode::kInvalidArgument,
-                "OFF: truncated: header declares 4 faces, the file ends after 2"},
-        BadCase{"wrong_counts.off", absl::StatusCode::kInvalidArgument,
-                "OFF: truncated: header declares 4 faces, the file ends after 3"},
+        BadCase{
+            "truncated.off", absl::StatusCode::kInvalidArgument,
+            "OFF: truncated: header declares 4 faces, the file ends after 2"},
+        BadCase{
+            "wrong_counts.off", absl::StatusCode::kInvalidArgument,
+            "OFF: truncated: header declares 4 faces, the file ends after 3"},
         BadCase{"nan.off", absl::StatusCode::kInvalidArgument,
                 "OFF line 5: vertex 2 has a non-finite coordinate 'nan'"},
-        BadCase{"index_out_of_range.obj", absl::StatusCode::kInvalidArgument,
-                "OBJ line 9: face 3 references vertex 9 (1-based); the file has "
-                "4 vertices"},
+        BadCase{
+            "index_out_of_range.obj", absl::StatusCode::kInvalidArgument,
+            "OBJ line 9: face 3 references vertex 9 (1-based); the file has "
+            "4 vertices"},
         BadCase{"empty.off", absl::StatusCode::kInvalidArgument,
                 "OFF: the file is empty"},
         BadCase{"no_faces.off", absl::StatusCode::kInvalidArgument,
@@ -473,8 +481,9 @@ INSTANTIATE_TEST_SUITE_P(
                 "PLY: truncated in face"},
         BadCase{"truncated_ascii.stl", absl::StatusCode::kInvalidArgument,
                 "STL (ASCII): truncated inside triangle 1"},
-        BadCase{"nan_binary.stl", absl::StatusCode::kInvalidArgument,
-                "STL (binary): triangle 0 corner 1 has a non-finite coordinate"}),
+        BadCase{
+            "nan_binary.stl", absl::StatusCode::kInvalidArgument,
+            "STL (binary): triangle 0 corner 1 has a non-finite coordinate"}),
     [](const ::testing::TestParamInfo<BadCase>& info) {
       std::string name = info.param.file;
       for (char& c : name) {
@@ -489,8 +498,8 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(MeshIoTest, MutatedFilesNeverCrashOrDisagree) {
   std::mt19937 rng(20070601);
   const std::vector<std::string> files = {
-      "tetrahedron.off",    "cube_quads.obj",        "hex_prism_ngons.obj",
-      "cube_ascii.ply",     "cube_binary_le.ply",    "cube_binary_be.ply",
+      "tetrahedron.off",       "cube_quads.obj",     "hex_prism_ngons.obj",
+      "cube_ascii.ply",        "cube_binary_le.ply", "cube_binary_be.ply",
       "tetrahedron_ascii.stl", "cube_binary.stl"};
   int failures = 0, loads = 0;
   for (const std::string& f : files) {

@@ -3,6 +3,7 @@
 // cases repaired into meshes that an independent check below finds edge-
 // and vertex-manifold and consistently oriented, with counts worked out by
 // hand; and every dev mesh in ../shared read without error.
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -13,8 +14,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "extractor/lib/mesh.h"
@@ -62,7 +61,8 @@ std::string ManifoldFault(const Mesh& mesh) {
     }
     int ends = 0;
     for (const auto& [u, n] : adj) {
-      if (n.size() > 2) return "vertex " + std::to_string(v) + ": link branches";
+      if (n.size() > 2)
+        return "vertex " + std::to_string(v) + ": link branches";
       if (n.size() == 1) ++ends;
     }
     // Connected?
@@ -116,7 +116,8 @@ struct Case {
 };
 
 void Cube(const Eigen::Vector3d& o, int32_t base,
-          std::vector<Eigen::Vector3d>* v, std::vector<std::vector<int32_t>>* f) {
+          std::vector<Eigen::Vector3d>* v,
+          std::vector<std::vector<int32_t>>* f) {
   for (int z = 0; z < 2; ++z)
     for (int y = 0; y < 2; ++y)
       for (int x = 0; x < 2; ++x) v->push_back(o + Eigen::Vector3d(x, y, z));
@@ -140,13 +141,27 @@ std::vector<Case> Cases() {
   cases.push_back({"bowtie",
                    {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}},
                    {{0, 1, 2}, {0, 3, 4}},
-                   6, 2, 2, 6, 0, 0, 1, 0});
+                   6,
+                   2,
+                   2,
+                   6,
+                   0,
+                   0,
+                   1,
+                   0});
   // Three triangles on edge (0, 1): the edge is cut; both ends fall into
   // three fans each (2 + 2 copies). Three separate triangles.
   cases.push_back({"three_on_one_edge",
                    {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}},
                    {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}},
-                   9, 3, 3, 9, 0, 1, 2, 0});
+                   9,
+                   3,
+                   3,
+                   9,
+                   0,
+                   1,
+                   2,
+                   0});
   // A fin standing on an edge of a closed tetrahedron: the fin comes off
   // (ends 0 and 1 split once each); the tetrahedron stays closed.
   {
@@ -163,8 +178,8 @@ std::vector<Case> Cases() {
     // Weld cube B's copies of the shared edge's ends onto cube A's.
     for (auto& t : c.f) {
       for (auto& i : t) {
-        if (i == 8) i = 3;        // (1,1,0)
-        if (i == 8 + 4) i = 7;    // (1,1,1)
+        if (i == 8) i = 3;      // (1,1,0)
+        if (i == 8 + 4) i = 7;  // (1,1,1)
       }
     }
     cases.push_back(c);
@@ -212,26 +227,31 @@ TEST(RepairNonManifoldTest, ConstructedCasesBecomeManifoldWithTheRightCounts) {
     EXPECT_EQ(m->stats.non_manifold_edges, c.non_manifold_edges);
     EXPECT_EQ(m->stats.non_manifold_vertices, c.non_manifold_vertices);
     EXPECT_EQ(m->stats.orientation_cuts, c.orientation_cuts);
-    EXPECT_THAT(m->warnings,
-                Contains(HasSubstr("repaired non-manifold input by splitting")));
-    EXPECT_THAT(m->warnings,
-                Contains(HasSubstr(std::to_string(c.non_manifold_edges) +
-                                   " edges shared by 3 or more triangles, " +
-                                   std::to_string(c.non_manifold_vertices) +
-                                   " vertices whose triangles form 2 or more")));
+    EXPECT_THAT(
+        m->warnings,
+        Contains(HasSubstr("repaired non-manifold input by splitting")));
+    EXPECT_THAT(
+        m->warnings,
+        Contains(HasSubstr(std::to_string(c.non_manifold_edges) +
+                           " edges shared by 3 or more triangles, " +
+                           std::to_string(c.non_manifold_vertices) +
+                           " vertices whose triangles form 2 or more")));
     // No triangle lost, and each output triangle is an input triangle at
     // the same positions (up to orientation).
     std::multiset<std::array<double, 9>> in, out;
-    auto key = [](const std::vector<Eigen::Vector3d>& p, std::array<int32_t, 3> t) {
+    auto key = [](const std::vector<Eigen::Vector3d>& p,
+                  std::array<int32_t, 3> t) {
       std::array<std::array<double, 3>, 3> c3;
-      for (int k = 0; k < 3; ++k) c3[k] = {p[t[k]].x(), p[t[k]].y(), p[t[k]].z()};
+      for (int k = 0; k < 3; ++k)
+        c3[k] = {p[t[k]].x(), p[t[k]].y(), p[t[k]].z()};
       std::sort(c3.begin(), c3.end());
       std::array<double, 9> k9;
       for (int k = 0; k < 9; ++k) k9[k] = c3[k / 3][k % 3];
       return k9;
     };
     for (const auto& t : input.triangles) in.insert(key(c.v, t));
-    for (const auto& t : m->mesh.triangles) out.insert(key(m->mesh.positions, t));
+    for (const auto& t : m->mesh.triangles)
+      out.insert(key(m->mesh.positions, t));
     EXPECT_EQ(in, out);
   }
 }

@@ -130,7 +130,8 @@ TEST(MeshWriterTest, RoundTripsThroughIntake) {
        {MeshWriteFormat::kOff, MeshWriteFormat::kPlyAscii,
         MeshWriteFormat::kPlyBinary}) {
     for (bool colours : {false, true}) {
-      if (format == MeshWriteFormat::kOff && colours) continue;  // COFF: see below
+      if (format == MeshWriteFormat::kOff && colours)
+        continue;  // COFF: see below
       MeshWriteOptions options;
       options.format = format;
       if (colours) options.vertex_colors.assign(4, Rgb{10, 20, 30});
@@ -139,8 +140,8 @@ TEST(MeshWriterTest, RoundTripsThroughIntake) {
       absl::StatusOr<LoadedMesh> loaded = LoadMeshFromBuffer(
           *out, MeshFormat::kUnknown,
           format == MeshWriteFormat::kOff ? "t.off" : "t.ply", IntakeOptions{});
-      ASSERT_TRUE(loaded.ok()) << static_cast<int>(format) << " "
-                               << loaded.status();
+      ASSERT_TRUE(loaded.ok())
+          << static_cast<int>(format) << " " << loaded.status();
       ASSERT_EQ(loaded->mesh.positions.size(), 4u);
       ASSERT_EQ(loaded->mesh.triangles.size(), 4u);
       EXPECT_EQ(loaded->stats.boundary_edges, 0);
@@ -211,16 +212,22 @@ TEST(MeshWriterTest, WritesFilesAndReportsUnwritablePaths) {
   // Not retryable (UNAVAILABLE would be), and the message names the path
   // and the reason.
   EXPECT_EQ(missing.code(), absl::StatusCode::kNotFound);
-  EXPECT_THAT(std::string(missing.message()), ::testing::HasSubstr("no_such_dir/t.off"));
-  EXPECT_THAT(std::string(missing.message()), ::testing::HasSubstr("No such file or directory"));
-  const absl::Status is_dir = WriteMeshToFile(Tetrahedron(), options, dir.string());
+  EXPECT_THAT(std::string(missing.message()),
+              ::testing::HasSubstr("no_such_dir/t.off"));
+  EXPECT_THAT(std::string(missing.message()),
+              ::testing::HasSubstr("No such file or directory"));
+  const absl::Status is_dir =
+      WriteMeshToFile(Tetrahedron(), options, dir.string());
   EXPECT_EQ(is_dir.code(), absl::StatusCode::kFailedPrecondition) << is_dir;
-  EXPECT_THAT(std::string(is_dir.message()), ::testing::HasSubstr("Is a directory"));
+  EXPECT_THAT(std::string(is_dir.message()),
+              ::testing::HasSubstr("Is a directory"));
   // /dev/full fails every write with ENOSPC: a full disk.
   if (std::filesystem::exists("/dev/full")) {
-    const absl::Status full = WriteMeshToFile(Tetrahedron(), options, "/dev/full");
+    const absl::Status full =
+        WriteMeshToFile(Tetrahedron(), options, "/dev/full");
     EXPECT_EQ(full.code(), absl::StatusCode::kResourceExhausted) << full;
-    EXPECT_THAT(std::string(full.message()), ::testing::HasSubstr("No space left"));
+    EXPECT_THAT(std::string(full.message()),
+                ::testing::HasSubstr("No space left"));
   }
   std::filesystem::remove_all(dir);
 }

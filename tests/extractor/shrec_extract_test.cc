@@ -18,7 +18,8 @@ namespace tpr::extract {
 namespace {
 
 TEST(ShrecExtractTest, EveryMeshExtractsOrFailsClearly) {
-  const std::string dir = std::string(TPR_SHARED_DIR) + "/data/shrec07-watertight";
+  const std::string dir =
+      std::string(TPR_SHARED_DIR) + "/data/shrec07-watertight";
   std::ifstream manifest(dir + "/MANIFEST.txt");
   if (!manifest) GTEST_SKIP() << "no " << dir << "/MANIFEST.txt";
   struct Tally {
@@ -33,16 +34,20 @@ TEST(ShrecExtractTest, EveryMeshExtractsOrFailsClearly) {
     std::string path, cls;
     if (!(in >> path >> cls)) continue;
     ++total;
-    absl::StatusOr<LoadedMesh> mesh = LoadMeshFromFile(dir + "/" + path, IntakeOptions{});
+    absl::StatusOr<LoadedMesh> mesh =
+        LoadMeshFromFile(dir + "/" + path, IntakeOptions{});
     if (!mesh.ok()) {
       // Intake refuses with a clear INVALID_ARGUMENT (e.g. non-manifold).
-      EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument) << path;
+      EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument)
+          << path;
       EXPECT_FALSE(mesh.status().message().empty());
       ++failed;
-      std::printf("intake %s: %s\n", path.c_str(), std::string(mesh.status().message()).c_str());
+      std::printf("intake %s: %s\n", path.c_str(),
+                  std::string(mesh.status().message()).c_str());
       continue;
     }
-    absl::StatusOr<ExtractResult> r = ExtractSignature(mesh->mesh, mesh->stats, Options{});
+    absl::StatusOr<ExtractResult> r =
+        ExtractSignature(mesh->mesh, mesh->stats, Options{});
     ASSERT_TRUE(r.ok()) << path << ": " << r.status();
     Tally& t = per_class[cls];
     ++t.meshes;
@@ -59,12 +64,13 @@ TEST(ShrecExtractTest, EveryMeshExtractsOrFailsClearly) {
     t.warned += !r->warnings.empty();
     for (const StageTiming& s : r->timings) t.ms += s.milliseconds;
   }
-  std::printf("%-12s %6s %8s %8s %7s %9s\n", "class", "meshes", "points", "rings", "warned",
-              "ms/mesh");
+  std::printf("%-12s %6s %8s %8s %7s %9s\n", "class", "meshes", "points",
+              "rings", "warned", "ms/mesh");
   for (const auto& [cls, t] : per_class) {
     std::printf("%-12s %6d %8.2f %8.2f %7d %9.1f\n", cls.c_str(), t.meshes,
-                static_cast<double>(t.points) / t.meshes, static_cast<double>(t.rings) / t.meshes,
-                t.warned, t.ms / t.meshes);
+                static_cast<double>(t.points) / t.meshes,
+                static_cast<double>(t.rings) / t.meshes, t.warned,
+                t.ms / t.meshes);
   }
   std::printf("total %d, refused by intake %d\n", total, failed);
   EXPECT_GT(total, 0);

@@ -7,14 +7,13 @@
 // the tolerance measured and stated).
 #include "extractor/lib/spectrum.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <utility>
 #include <string>
+#include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "extractor/synth/synth.h"
 #include "gtest/gtest.h"
@@ -43,7 +42,8 @@ std::vector<double> RectangleSpectrum(double a, double b, int n) {
   for (int m = 0; m < 40; ++m) {
     for (int k = 0; k < 40; ++k) {
       if (m == 0 && k == 0) continue;
-      all.push_back(kPi * kPi * (m * m / (a * a) + k * k / (b * b)) * a * b / (4.0 * kPi));
+      all.push_back(kPi * kPi * (m * m / (a * a) + k * k / (b * b)) * a * b /
+                    (4.0 * kPi));
     }
   }
   std::sort(all.begin(), all.end());
@@ -51,7 +51,8 @@ std::vector<double> RectangleSpectrum(double a, double b, int n) {
   return all;
 }
 
-double MaxRelativeError(const std::vector<double>& got, const std::vector<double>& want) {
+double MaxRelativeError(const std::vector<double>& got,
+                        const std::vector<double>& want) {
   EXPECT_EQ(got.size(), want.size());
   double worst = 0.0;
   for (size_t i = 0; i < std::min(got.size(), want.size()); ++i) {
@@ -63,12 +64,14 @@ double MaxRelativeError(const std::vector<double>& got, const std::vector<double
 Mesh Biped(int vertices, int pose = 0) {
   synth::ShapeOptions options;
   options.target_vertices = vertices;
-  absl::StatusOr<Mesh> mesh = synth::GenerateShape("biped_adult", pose, options);
+  absl::StatusOr<Mesh> mesh =
+      synth::GenerateShape("biped_adult", pose, options);
   EXPECT_TRUE(mesh.ok()) << mesh.status();
   return mesh.ok() ? *mesh : Mesh{};
 }
 
-std::vector<double> Eigenvalues(const Mesh& mesh, const SpectrumOptions& options) {
+std::vector<double> Eigenvalues(const Mesh& mesh,
+                                const SpectrumOptions& options) {
   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(mesh, options);
   EXPECT_TRUE(s.ok()) << s.status();
   return s.ok() ? s->eigenvalues : std::vector<double>{};
@@ -84,7 +87,8 @@ Mesh Similarity(const Mesh& mesh, double scale) {
        Eigen::AngleAxisd(-1.9, Eigen::Vector3d::UnitZ()))
           .toRotationMatrix();
   Mesh out = mesh;
-  for (Eigen::Vector3d& p : out.positions) p = scale * (r * p) + Eigen::Vector3d(3.0, -7.5, 0.25);
+  for (Eigen::Vector3d& p : out.positions)
+    p = scale * (r * p) + Eigen::Vector3d(3.0, -7.5, 0.25);
   return out;
 }
 
@@ -100,10 +104,12 @@ TEST(SpectrumTest, UnitSphereMatchesAnalyticAndConverges) {
   const double tolerance[] = {0.07, 0.017, 0.0045};
   double previous = 1.0;
   for (int level : {3, 4, 5}) {
-    const std::vector<double> got = Eigenvalues(testing::Icosphere(level), options);
+    const std::vector<double> got =
+        Eigenvalues(testing::Icosphere(level), options);
     const double error = MaxRelativeError(got, SphereSpectrum(48));
     EXPECT_LT(error, tolerance[level - 3]) << "level " << level;
-    EXPECT_LT(error, previous / 3.5) << "level " << level << " does not converge as h^2";
+    EXPECT_LT(error, previous / 3.5)
+        << "level " << level << " does not converge as h^2";
     previous = error;
   }
 }
@@ -134,10 +140,10 @@ TEST(SpectrumTest, RectangleMatchesNeumannAnalytic) {
   options.eigenvalues = 30;
   options.max_vertices = 0;
   const std::vector<double> want = RectangleSpectrum(1.0, 1.5, 30);
-  const double coarse =
-      MaxRelativeError(Eigenvalues(testing::Rectangle(1.0, 1.5, 40, 60), options), want);
-  const double fine =
-      MaxRelativeError(Eigenvalues(testing::Rectangle(1.0, 1.5, 80, 120), options), want);
+  const double coarse = MaxRelativeError(
+      Eigenvalues(testing::Rectangle(1.0, 1.5, 40, 60), options), want);
+  const double fine = MaxRelativeError(
+      Eigenvalues(testing::Rectangle(1.0, 1.5, 80, 120), options), want);
   EXPECT_LT(coarse, 0.02);
   EXPECT_LT(fine, 0.005);
   EXPECT_LT(fine, coarse / 3.0);
@@ -149,7 +155,8 @@ TEST(SpectrumTest, InvariantUnderRigidMotionAndScale) {
   const Mesh mesh = Biped(2000, /*pose=*/3);
   const std::vector<double> a = Eigenvalues(mesh, SpectrumOptions{});
   for (double scale : {1.0, 0.013, 37.0}) {
-    const std::vector<double> b = Eigenvalues(Similarity(mesh, scale), SpectrumOptions{});
+    const std::vector<double> b =
+        Eigenvalues(Similarity(mesh, scale), SpectrumOptions{});
     EXPECT_LT(MaxRelativeError(b, a), 1e-7) << "scale " << scale;
   }
 }
@@ -173,12 +180,14 @@ TEST(SpectrumTest, StableUnderSimplification) {
   SpectrumOptions whole;
   whole.max_vertices = 0;
   const std::vector<double> reference = Eigenvalues(full, whole);
-  absl::StatusOr<Spectrum> simplified = LaplaceBeltramiSpectrum(full, SpectrumOptions{});
+  absl::StatusOr<Spectrum> simplified =
+      LaplaceBeltramiSpectrum(full, SpectrumOptions{});
   ASSERT_TRUE(simplified.ok()) << simplified.status();
   EXPECT_EQ(simplified->vertices, SpectrumOptions{}.max_vertices);
   double mean = 0.0;
   for (size_t i = 0; i < reference.size(); ++i) {
-    mean += std::abs(simplified->eigenvalues[i] - reference[i]) / reference[i] / reference.size();
+    mean += std::abs(simplified->eigenvalues[i] - reference[i]) / reference[i] /
+            reference.size();
   }
   const double worst = MaxRelativeError(simplified->eigenvalues, reference);
   EXPECT_LT(worst, 0.05);
@@ -189,17 +198,20 @@ TEST(SpectrumTest, StableUnderSimplification) {
 // analytic spectrum within 2.5% (measured; the 2562-vertex icosphere
 // itself is at 1.5%).
 TEST(SpectrumTest, SimplifiedSphereStaysNearAnalytic) {
-  absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(testing::Icosphere(5), SpectrumOptions{});
+  absl::StatusOr<Spectrum> s =
+      LaplaceBeltramiSpectrum(testing::Icosphere(5), SpectrumOptions{});
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_LE(s->vertices, 3000);
-  const double error = MaxRelativeError(Head(s->eigenvalues, 48), SphereSpectrum(48));
+  const double error =
+      MaxRelativeError(Head(s->eigenvalues, 48), SphereSpectrum(48));
   EXPECT_LT(error, 0.03);
 }
 
 // Two unit spheres: two zero eigenvalues skipped, then each sphere's
 // spectrum twice over, scaled by the total area 8 pi: 4 (x6), 12 (x10).
 TEST(SpectrumTest, SkipsOneZeroPerComponent) {
-  const Mesh two = testing::Union(testing::Icosphere(4), Similarity(testing::Icosphere(4), 1.0));
+  const Mesh two = testing::Union(testing::Icosphere(4),
+                                  Similarity(testing::Icosphere(4), 1.0));
   SpectrumOptions options;
   options.eigenvalues = 16;
   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(two, options);
@@ -218,8 +230,10 @@ TEST(SpectrumTest, TooFewVerticesIsInvalidArgumentUnlessAllowed) {
   options.eigenvalues = 12;
   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(ico, options);
   ASSERT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(s.status().message().find("12 vertices"), std::string::npos) << s.status();
-  EXPECT_NE(s.status().message().find("at most 11"), std::string::npos) << s.status();
+  EXPECT_NE(s.status().message().find("12 vertices"), std::string::npos)
+      << s.status();
+  EXPECT_NE(s.status().message().find("at most 11"), std::string::npos)
+      << s.status();
   options.allow_fewer = true;
   s = LaplaceBeltramiSpectrum(ico, options);
   ASSERT_TRUE(s.ok()) << s.status();
@@ -229,10 +243,11 @@ TEST(SpectrumTest, TooFewVerticesIsInvalidArgumentUnlessAllowed) {
   SpectrumOptions iterative;
   iterative.eigenvalues = 1282;
   iterative.max_vertices = 0;
-  s = LaplaceBeltramiSpectrum(testing::Union(testing::Icosphere(3), testing::Icosphere(3)),
-                              iterative);
+  s = LaplaceBeltramiSpectrum(
+      testing::Union(testing::Icosphere(3), testing::Icosphere(3)), iterative);
   ASSERT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(s.status().message().find("at most 1281"), std::string::npos) << s.status();
+  EXPECT_NE(s.status().message().find("at most 1281"), std::string::npos)
+      << s.status();
 }
 
 // The dense solver is the iterative one's oracle on the same mesh.
@@ -241,7 +256,9 @@ TEST(SpectrumTest, DenseAndIterativeAgree) {
     SpectrumOptions dense, iterative;
     dense.dense_max_vertices = 5000;
     iterative.dense_max_vertices = 0;
-    EXPECT_LT(MaxRelativeError(Eigenvalues(mesh, iterative), Eigenvalues(mesh, dense)), 1e-8);
+    EXPECT_LT(MaxRelativeError(Eigenvalues(mesh, iterative),
+                               Eigenvalues(mesh, dense)),
+              1e-8);
   }
 }
 
@@ -278,7 +295,8 @@ TEST(SpectrumTest, NonConvergenceIsInternal) {
   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(Biped(2000), options);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.status().code(), absl::StatusCode::kInternal);
-  EXPECT_NE(s.status().message().find("did not converge"), std::string::npos) << s.status();
+  EXPECT_NE(s.status().message().find("did not converge"), std::string::npos)
+      << s.status();
 }
 
 // SimplifyMesh reaches its target on a closed mesh and keeps it closed
@@ -294,7 +312,8 @@ TEST(SpectrumTest, SimplifyMeshReachesTargetAndStaysClosed) {
     }
   }
   for (const auto& [edge, count] : edges) ASSERT_EQ(count, 2);
-  EXPECT_EQ(static_cast<int64_t>(m->positions.size()) - static_cast<int64_t>(edges.size()) +
+  EXPECT_EQ(static_cast<int64_t>(m->positions.size()) -
+                static_cast<int64_t>(edges.size()) +
                 static_cast<int64_t>(m->triangles.size()),
             2);
 }

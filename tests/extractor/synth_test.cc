@@ -6,6 +6,7 @@
 // genus.
 #include "extractor/synth/synth.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -15,8 +16,6 @@
 #include <tuple>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "extractor/lib/mesh_io.h"
 #include "extractor/lib/mesh_writer.h"
@@ -33,8 +32,8 @@ struct Topology {
   int64_t unreferenced = 0;
   int64_t components = 0;
   int64_t euler = 0;
-  double min_area_ratio = 1e300;    // min over triangles of area / mean edge^2
-  double volume = 0.0;              // signed; > 0 when outward oriented
+  double min_area_ratio = 1e300;  // min over triangles of area / mean edge^2
+  double volume = 0.0;            // signed; > 0 when outward oriented
 };
 
 Topology Analyse(const Mesh& mesh) {
@@ -140,7 +139,8 @@ double DirectedHausdorff(const Mesh& a, const Mesh& b) {
   double worst = 0.0;
   for (const auto& p : a.positions) {
     double best = 1e300;
-    for (const auto& q : b.positions) best = std::min(best, (p - q).squaredNorm());
+    for (const auto& q : b.positions)
+      best = std::min(best, (p - q).squaredNorm());
     worst = std::max(worst, best);
   }
   return std::sqrt(worst);
@@ -152,8 +152,7 @@ TEST(SynthTest, AtLeastEightDistinctClassesIncludingSimilarPairs) {
   EXPECT_EQ(std::set<std::string>(names.begin(), names.end()).size(),
             names.size());
   // Similar-skeleton pairs share the bone tree and differ in proportions.
-  for (const auto& [a, b] :
-       std::vector<std::pair<std::string, std::string>>{
+  for (const auto& [a, b] : std::vector<std::pair<std::string, std::string>>{
            {"biped_adult", "biped_child"},
            {"quadruped_slender", "quadruped_stocky"}}) {
     ShapeOptions rest;
@@ -165,9 +164,8 @@ TEST(SynthTest, AtLeastEightDistinctClassesIncludingSimilarPairs) {
     bool proportions_differ = false;
     for (size_t i = 0; i < sa->bones.size(); ++i) {
       EXPECT_EQ(sa->bones[i].parent, sb->bones[i].parent);
-      proportions_differ |=
-          std::abs(sa->bones[i].start_radius - sb->bones[i].start_radius) >
-          0.01;
+      proportions_differ |= std::abs(sa->bones[i].start_radius -
+                                     sb->bones[i].start_radius) > 0.01;
     }
     EXPECT_TRUE(proportions_differ) << a << " vs " << b;
     EXPECT_EQ(TipCount(*sa), TipCount(*sb));
@@ -184,10 +182,9 @@ TEST_P(SynthClassTest, ClosedManifoldGenusZeroNearTarget) {
     options.target_vertices = target;
     options.seed = 7;
     absl::StatusOr<Mesh> mesh = GenerateShape(name, pose, options);
-    ASSERT_TRUE(mesh.ok()) << name << " pose " << pose << ": "
-                           << mesh.status();
-    const std::string what = name + " pose " + std::to_string(pose) + " @" +
-                             std::to_string(target);
+    ASSERT_TRUE(mesh.ok()) << name << " pose " << pose << ": " << mesh.status();
+    const std::string what =
+        name + " pose " + std::to_string(pose) + " @" + std::to_string(target);
     ExpectClosedGenusZero(*mesh, what);
     EXPECT_NEAR(static_cast<double>(mesh->positions.size()), target,
                 0.2 * target)
@@ -274,10 +271,11 @@ TEST(SynthTest, IdentityBodiesAreClosedManifoldGenusZero) {
       options.target_vertices = body % 2 == 0 ? 3000 : 1000;
       absl::StatusOr<Mesh> mesh = GenerateIdentity(body, pose, options);
       ASSERT_TRUE(mesh.ok()) << body << " " << pose << ": " << mesh.status();
-      const std::string what = IdentityBodyName(body) + " pose " + std::to_string(pose);
+      const std::string what =
+          IdentityBodyName(body) + " pose " + std::to_string(pose);
       ExpectClosedGenusZero(*mesh, what);
-      EXPECT_NEAR(static_cast<double>(mesh->positions.size()), options.target_vertices,
-                  0.2 * options.target_vertices)
+      EXPECT_NEAR(static_cast<double>(mesh->positions.size()),
+                  options.target_vertices, 0.2 * options.target_vertices)
           << what;
     }
   }
@@ -308,11 +306,15 @@ TEST(SynthTest, IdentityBodiesShareTheSkeletonButDiffer) {
       for (size_t i = 0; i < bodies[a].bones.size(); ++i) {
         const Bone& x = bodies[a].bones[i];
         const Bone& y = bodies[b].bones[i];
-        const double lx = (x.end - x.start).norm(), ly = (y.end - y.start).norm();
-        if (lx > 0 && ly > 0) largest = std::max(largest, std::abs(std::log(lx / ly)));
-        largest = std::max(largest, std::abs(std::log(x.start_radius / y.start_radius)));
+        const double lx = (x.end - x.start).norm(),
+                     ly = (y.end - y.start).norm();
+        if (lx > 0 && ly > 0)
+          largest = std::max(largest, std::abs(std::log(lx / ly)));
+        largest = std::max(largest,
+                           std::abs(std::log(x.start_radius / y.start_radius)));
       }
-      EXPECT_GT(largest, 0.08) << IdentityBodyName(a) << " vs " << IdentityBodyName(b);
+      EXPECT_GT(largest, 0.08)
+          << IdentityBodyName(a) << " vs " << IdentityBodyName(b);
     }
   }
   // The proportions are what the header says: factors within their ranges.
@@ -356,7 +358,8 @@ TEST(SynthTest, IdentityPosesDifferAndAreDeterministic) {
     EXPECT_EQ(x.start_radius, y.start_radius);
   }
   EXPECT_GT(moved, 0.05 * extent);
-  EXPECT_GT(std::max(DirectedHausdorff(*a, *b), DirectedHausdorff(*b, *a)), 0.05 * extent);
+  EXPECT_GT(std::max(DirectedHausdorff(*a, *b), DirectedHausdorff(*b, *a)),
+            0.05 * extent);
   ShapeOptions other = options;
   other.seed = 6;
   absl::StatusOr<BodyProportions> p5 = IdentityProportions(3, options);
@@ -424,7 +427,8 @@ int CountFarPatches(const Mesh& mesh, const Eigen::Vector3d& centre,
                     double reach) {
   const size_t n = mesh.positions.size();
   std::vector<char> far(n);
-  for (size_t v = 0; v < n; ++v) far[v] = (mesh.positions[v] - centre).norm() > reach;
+  for (size_t v = 0; v < n; ++v)
+    far[v] = (mesh.positions[v] - centre).norm() > reach;
   std::vector<std::vector<int32_t>> adjacency(n);
   for (const auto& t : mesh.triangles) {
     for (int e = 0; e < 3; ++e) adjacency[t[e]].push_back(t[(e + 1) % 3]);
@@ -468,7 +472,8 @@ TEST(SynthTest, StarHasOneTipPerArm) {
     EXPECT_EQ(CountFarPatches(*mesh, centre, 2.0 * ball), arms) << arms;
     // The farthest vertex lies on an arm tip, not on the ball.
     double farthest = 0.0;
-    for (const auto& p : mesh->positions) farthest = std::max(farthest, (p - centre).norm());
+    for (const auto& p : mesh->positions)
+      farthest = std::max(farthest, (p - centre).norm());
     EXPECT_GT(farthest, 3.0 * ball) << arms;
   }
 }
@@ -484,10 +489,12 @@ TEST(SynthTest, ReloadsThroughIntakeWithIdenticalCounts) {
          std::vector<std::pair<extract::MeshWriteFormat, extract::MeshFormat>>{
              {extract::MeshWriteFormat::kOff, extract::MeshFormat::kOff},
              {extract::MeshWriteFormat::kPlyAscii, extract::MeshFormat::kPly},
-             {extract::MeshWriteFormat::kPlyBinary, extract::MeshFormat::kPly}}) {
+             {extract::MeshWriteFormat::kPlyBinary,
+              extract::MeshFormat::kPly}}) {
       extract::MeshWriteOptions write;
       write.format = format;
-      absl::StatusOr<std::string> bytes = extract::WriteMeshToString(*mesh, write);
+      absl::StatusOr<std::string> bytes =
+          extract::WriteMeshToString(*mesh, write);
       ASSERT_TRUE(bytes.ok());
       absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
           *bytes, in_format, "shape", extract::IntakeOptions{});
@@ -551,8 +558,8 @@ TEST(SynthTest, SkeletonClosingALoopIsInternalNotAHandle) {
   // A square of bones whose last bone touches the first: the blended surface
   // is a torus, which the generator must refuse rather than return.
   Skeleton ring;
-  const Eigen::Vector3d corners[5] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0},
-                                      {0, 1, 0}, {0, 0.05, 0}};
+  const Eigen::Vector3d corners[5] = {
+      {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0.05, 0}};
   for (int i = 0; i < 4; ++i) {
     Bone bone;
     bone.parent = i - 1;
@@ -580,7 +587,8 @@ TEST(SynthTest, SingleBallIsASphere) {
   // Enclosed volume close to 4/3 pi r^3 (the inscribed polyhedron is a bit
   // smaller).
   const double volume = Analyse(*mesh).volume;
-  EXPECT_NEAR(volume, 4.0 / 3.0 * M_PI * 0.125, 0.01 * 4.0 / 3.0 * M_PI * 0.125);
+  EXPECT_NEAR(volume, 4.0 / 3.0 * M_PI * 0.125,
+              0.01 * 4.0 / 3.0 * M_PI * 0.125);
 }
 
 }  // namespace

@@ -29,9 +29,9 @@ using ::tpr::extract::Mesh;
 inline Mesh Icosphere(int level, double radius = 1.0) {
   Mesh m;
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  const double base[12][3] = {{-1, t, 0}, {1, t, 0},  {-1, -t, 0}, {1, -t, 0},
-                              {0, -1, t}, {0, 1, t},  {0, -1, -t}, {0, 1, -t},
-                              {t, 0, -1}, {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  const double base[12][3] = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                              {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                              {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
   for (const auto& b : base) {
     m.positions.push_back(Eigen::Vector3d(b[0], b[1], b[2]).normalized());
   }
@@ -99,7 +99,8 @@ inline Mesh Revolution(const std::function<Eigen::Vector2d(double)>& profile,
     if (j == 0) {
       samples[r] = pts[0];
     } else {
-      const double w = (target - acc[j - 1]) / std::max(1e-300, acc[j] - acc[j - 1]);
+      const double w =
+          (target - acc[j - 1]) / std::max(1e-300, acc[j] - acc[j - 1]);
       samples[r] = pts[j - 1] + w * (pts[j] - pts[j - 1]);
     }
   }
@@ -129,9 +130,11 @@ inline Mesh Revolution(const std::function<Eigen::Vector2d(double)>& profile,
     for (int k = 0; k < around; ++k) {
       const int k1 = (k + 1) % around;
       if (top_pole) {
-        m.triangles.push_back({pole[r], ring_start[r + 1] + k1, ring_start[r + 1] + k});
+        m.triangles.push_back(
+            {pole[r], ring_start[r + 1] + k1, ring_start[r + 1] + k});
       } else if (bottom_pole) {
-        m.triangles.push_back({ring_start[r] + k, ring_start[r] + k1, pole[r + 1]});
+        m.triangles.push_back(
+            {ring_start[r] + k, ring_start[r] + k1, pole[r + 1]});
       } else {
         const int32_t a = ring_start[r] + k;
         const int32_t b = ring_start[r] + k1;
@@ -217,12 +220,16 @@ inline Mesh Tube(double radius, double length, int rings, int around) {
 inline Mesh Rectangle(double a, double b, int nx, int ny) {
   Mesh m;
   for (int j = 0; j <= ny; ++j) {
-    for (int i = 0; i <= nx; ++i) m.positions.emplace_back(a * i / nx, b * j / ny, 0.0);
+    for (int i = 0; i <= nx; ++i)
+      m.positions.emplace_back(a * i / nx, b * j / ny, 0.0);
   }
-  auto id = [nx](int i, int j) { return static_cast<int32_t>(j * (nx + 1) + i); };
+  auto id = [nx](int i, int j) {
+    return static_cast<int32_t>(j * (nx + 1) + i);
+  };
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
-      const int32_t p = id(i, j), q = id(i + 1, j), r = id(i + 1, j + 1), s = id(i, j + 1);
+      const int32_t p = id(i, j), q = id(i + 1, j), r = id(i + 1, j + 1),
+                    s = id(i, j + 1);
       if ((i + j) % 2 == 0) {
         m.triangles.push_back({p, q, r});
         m.triangles.push_back({p, r, s});

@@ -27,7 +27,8 @@ class CapsuleSets : public ::testing::Test {
   int32_t Nearest(const Eigen::Vector3d& x) const {
     int32_t best = 0;
     for (int32_t v = 0; v < graph_.num_vertices(); ++v) {
-      if ((mesh_.positions[v] - x).norm() < (mesh_.positions[best] - x).norm()) best = v;
+      if ((mesh_.positions[v] - x).norm() < (mesh_.positions[best] - x).norm())
+        best = v;
     }
     return best;
   }
@@ -72,7 +73,8 @@ TEST_F(CapsuleSets, RadiusStopsTheSearchAtTheNearestSaddle) {
   sets[0].maxima = {top};
   sets[1].maxima = {beyond};
   sets[2].maxima = {beyond};
-  const std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph_, solver_, sets);
+  const std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph_, solver_, sets);
   // The top is seen by one source only within its radius: rejected. The
   // maximum beyond the saddle has two sources: accepted.
   ASSERT_EQ(points.size(), 1u);
@@ -85,7 +87,8 @@ TEST_F(CapsuleSets, NoSaddleMeansTheWholeSurfaceIsOneRegion) {
   sets[0].maxima = {0};
   sets[1].maxima = {graph_.num_vertices() - 1};
   sets[2].maxima = {};
-  const std::vector<TopologicalPoint> points = SelectTopologicalPoints(graph_, solver_, sets);
+  const std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph_, solver_, sets);
   ASSERT_EQ(points.size(), 1u);
   EXPECT_EQ(points[0].votes, 2);
   EXPECT_EQ(points[0].radius, kUnreachable);
@@ -109,13 +112,16 @@ TEST(TopologicalPointsTest, StarGivesOnePointPerArm) {
   const int32_t a = sp->far_a, b = sp->far_b, c = sp->centre;
   std::vector<CriticalPoints> sets;
   for (int32_t s : {a, b, c}) {
-    absl::StatusOr<CriticalPoints> cp = AnalyzeCriticalPoints(graph, links, s, {});
+    absl::StatusOr<CriticalPoints> cp =
+        AnalyzeCriticalPoints(graph, links, s, {});
     ASSERT_TRUE(cp.ok());
     sets.push_back(*cp);
   }
-  const std::vector<TopologicalPoint> p1 = SelectTopologicalPoints(graph, solver, sets);
+  const std::vector<TopologicalPoint> p1 =
+      SelectTopologicalPoints(graph, solver, sets);
   std::reverse(sets.begin(), sets.end());
-  const std::vector<TopologicalPoint> p2 = SelectTopologicalPoints(graph, solver, sets);
+  const std::vector<TopologicalPoint> p2 =
+      SelectTopologicalPoints(graph, solver, sets);
   EXPECT_EQ(p1.size(), 6u);
   ASSERT_EQ(p1.size(), p2.size());
   for (size_t i = 0; i < p1.size(); ++i) {
@@ -128,8 +134,8 @@ TEST(TopologicalPointsTest, StarGivesOnePointPerArm) {
 // m, the saddle is the highest "lowest point" over all paths from m to a
 // vertex above m (a widest-path search), and the persistence is
 // field(m) minus it.
-double PersistenceByWidestPath(const MeshGraph& graph, const std::vector<double>& field,
-                               int32_t m) {
+double PersistenceByWidestPath(const MeshGraph& graph,
+                               const std::vector<double>& field, int32_t m) {
   std::vector<double> best(graph.num_vertices(), -1e300);
   std::priority_queue<std::pair<double, int32_t>> heap;
   best[m] = field[m];
@@ -168,7 +174,8 @@ TEST(MaximumPersistenceTest, MatchesWidestPathOracle) {
       for (int32_t w : graph.neighbors(v)) is_max &= field[w] < field[v];
       if (!is_max) continue;
       ++maxima;
-      EXPECT_NEAR(persistence[v], PersistenceByWidestPath(graph, field, v), 1e-12)
+      EXPECT_NEAR(persistence[v], PersistenceByWidestPath(graph, field, v),
+                  1e-12)
           << name << " vertex " << v;
     }
     EXPECT_GE(maxima, 3) << name;

@@ -16,7 +16,8 @@ namespace {
 
 TEST(RingStartTimesTest, EquationOne) {
   // MAX g_o * (MAX G - G(m)) / (MAX G - MIN G).
-  const std::vector<double> s = RingStartTimes({10.0, 6.0, 8.0, 12.0}, 2.0, 10.0, 4.0);
+  const std::vector<double> s =
+      RingStartTimes({10.0, 6.0, 8.0, 12.0}, 2.0, 10.0, 4.0);
   ASSERT_EQ(s.size(), 4u);
   EXPECT_DOUBLE_EQ(s[0], 0.0);
   EXPECT_DOUBLE_EQ(s[1], 2.0);
@@ -42,12 +43,14 @@ TEST(TopologicalRingsTest, CapsuleFrontsMeetInTheMiddle) {
   const double expected = M_PI / 2 + 2.0;
   for (int f : {0, 1}) {
     EXPECT_EQ(r->fronts[f].parent, 2);
-    EXPECT_NEAR(r->fronts[f].death, expected, 0.1);  // First contact: a ring step early.
+    EXPECT_NEAR(r->fronts[f].death, expected,
+                0.1);  // First contact: a ring step early.
     EXPECT_NEAR(r->fronts[f].length, expected, 0.1);
     EXPECT_TRUE(r->fronts[f].is_ring);
     ASSERT_FALSE(r->fronts[f].ring_vertices.empty());
     // The front is a band a few ring steps (0.06) wide around the middle.
-    for (int32_t v : r->fronts[f].ring_vertices) EXPECT_NEAR(m.positions[v].z(), 0.0, 0.25);
+    for (int32_t v : r->fronts[f].ring_vertices)
+      EXPECT_NEAR(m.positions[v].z(), 0.0, 0.25);
   }
   EXPECT_EQ(r->fronts[2].children, (std::vector<int32_t>{0, 1}));
   EXPECT_EQ(r->fronts[2].points, (std::vector<int32_t>{0, 1}));
@@ -62,7 +65,8 @@ TEST(TopologicalRingsTest, CapsuleFrontsMeetInTheMiddle) {
   double total = 0.0;
   for (const Region& reg : r->regions) total += reg.area;
   EXPECT_NEAR(total, graph.total_area(), 1e-9 * graph.total_area());
-  EXPECT_NEAR(r->regions[1].area, r->regions[2].area, 0.05 * graph.total_area());
+  EXPECT_NEAR(r->regions[1].area, r->regions[2].area,
+              0.05 * graph.total_area());
   EXPECT_LT(r->regions[0].area, 0.05 * graph.total_area());
 }
 
@@ -78,10 +82,12 @@ TEST(TopologicalRingsTest, StartTimesShiftTheMeeting) {
   EXPECT_NEAR(r->fronts[0].death, M_PI / 2 + 2.5, 0.05);
   EXPECT_NEAR(r->fronts[0].length, M_PI / 2 + 2.5, 0.05);
   EXPECT_NEAR(r->fronts[1].length, M_PI / 2 + 1.5, 0.05);
-  for (int32_t v : r->fronts[0].ring_vertices) EXPECT_NEAR(m.positions[v].z(), -0.5, 0.25);
+  for (int32_t v : r->fronts[0].ring_vertices)
+    EXPECT_NEAR(m.positions[v].z(), -0.5, 0.25);
 }
 
-TEST(TopologicalRingsTest, ThresholdDropsShortFrontsAndPointsWithoutStartAreAbsorbed) {
+TEST(TopologicalRingsTest,
+     ThresholdDropsShortFrontsAndPointsWithoutStartAreAbsorbed) {
   const Mesh m = testing::Capsule(1.0, 4.0, 120, 32);
   const MeshGraph graph = MeshGraph::Build(m);
   const int32_t top = 0, bottom = graph.num_vertices() - 1;
@@ -98,9 +104,11 @@ TEST(TopologicalRingsTest, ThresholdDropsShortFrontsAndPointsWithoutStartAreAbso
   // fronts reach it first, so it never starts and sweeps nothing.
   int32_t middle = 0;
   for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-    if (std::abs(m.positions[v].z()) < std::abs(m.positions[middle].z())) middle = v;
+    if (std::abs(m.positions[v].z()) < std::abs(m.positions[middle].z()))
+      middle = v;
   }
-  r = ExtractTopologicalRings(graph, {top, bottom, middle}, {0.0, 0.0, 10.0}, {}, RingOptions{});
+  r = ExtractTopologicalRings(graph, {top, bottom, middle}, {0.0, 0.0, 10.0},
+                              {}, RingOptions{});
   ASSERT_TRUE(r.ok());
   EXPECT_FALSE(r->fronts[2].started);
   EXPECT_TRUE(r->fronts[0].started && r->fronts[1].started);
@@ -122,7 +130,9 @@ TEST(TopologicalRingsTest, StarArmsGiveOneRingEachAndSaddleShortcutStopsEarly) {
     if (b.name.find("outer") == std::string::npos) continue;
     int32_t best = 0;
     for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-      if ((m->positions[v] - b.end).norm() < (m->positions[best] - b.end).norm()) best = v;
+      if ((m->positions[v] - b.end).norm() <
+          (m->positions[best] - b.end).norm())
+        best = v;
     }
     tips.push_back(best);
   }
@@ -152,7 +162,8 @@ TEST(TopologicalRingsTest, StarArmsGiveOneRingEachAndSaddleShortcutStopsEarly) {
   }
   std::vector<int32_t> saddle = {0};
   for (int32_t v = 0; v < graph.num_vertices(); ++v) {
-    if ((m->positions[v] - mid).norm() < (m->positions[saddle[0]] - mid).norm()) saddle[0] = v;
+    if ((m->positions[v] - mid).norm() < (m->positions[saddle[0]] - mid).norm())
+      saddle[0] = v;
   }
   options.stop_at_centre_saddles = true;
   absl::StatusOr<RingExtraction> early = ExtractTopologicalRings(
@@ -161,7 +172,8 @@ TEST(TopologicalRingsTest, StarArmsGiveOneRingEachAndSaddleShortcutStopsEarly) {
   EXPECT_TRUE(early->stopped_by_saddles);
   EXPECT_NEAR(early->final_level, early->level[saddle[0]], 1e-12);
   EXPECT_LT(early->final_level, r->final_level);
-  for (const Front& f : early->fronts) EXPECT_EQ(f.parent, -1);  // No merge yet.
+  for (const Front& f : early->fronts)
+    EXPECT_EQ(f.parent, -1);  // No merge yet.
 }
 
 TEST(TopologicalRingsTest, RejectsBadArguments) {
@@ -173,10 +185,12 @@ TEST(TopologicalRingsTest, RejectsBadArguments) {
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(ExtractTopologicalRings(graph, {0}, {NAN}, {}, {}).status().code(),
             absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ExtractTopologicalRings(graph, {0}, {0.0}, {100000}, {}).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      ExtractTopologicalRings(graph, {0}, {0.0}, {100000}, {}).status().code(),
+      absl::StatusCode::kInvalidArgument);
   // No point: everything is FR.
-  absl::StatusOr<RingExtraction> none = ExtractTopologicalRings(graph, {}, {}, {}, {});
+  absl::StatusOr<RingExtraction> none =
+      ExtractTopologicalRings(graph, {}, {}, {}, {});
   ASSERT_TRUE(none.ok());
   for (int32_t reg : none->vertex_region) EXPECT_EQ(reg, 0);
 }

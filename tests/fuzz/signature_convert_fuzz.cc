@@ -46,9 +46,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   absl::StatusOr<tpr::index::Signature> converted =
       tpr::indexer::ToIndexSignature(wire);
   if (!converted.ok()) {
-    tpr::fuzz::CheckRefusal(converted.status(), {absl::StatusCode::kInvalidArgument,
-                                                 absl::StatusCode::kResourceExhausted,
-                                                 absl::StatusCode::kFailedPrecondition});
+    tpr::fuzz::CheckRefusal(converted.status(),
+                            {absl::StatusCode::kInvalidArgument,
+                             absl::StatusCode::kResourceExhausted,
+                             absl::StatusCode::kFailedPrecondition});
     return 0;
   }
   const tpr::index::GroundDistanceOptions ground;

@@ -3,11 +3,11 @@
 // page token, and the List page merge against a sorted-list oracle.
 #include "indexer/gateway/shard_map.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <random>
 #include <set>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 
@@ -46,7 +46,8 @@ TEST(ParseShardMapTest, ReadsShardsInOrder) {
   ASSERT_TRUE(map.ok()) << map.status();
   ASSERT_EQ(map->shards.size(), 3u);
   EXPECT_EQ(map->shards[0].primary, "127.0.0.1:7100");
-  EXPECT_EQ(map->shards[0].replicas, std::vector<std::string>{"127.0.0.1:7101"});
+  EXPECT_EQ(map->shards[0].replicas,
+            std::vector<std::string>{"127.0.0.1:7101"});
   EXPECT_EQ(map->shards[1].primary, "host-b:7110");
   EXPECT_TRUE(map->shards[1].replicas.empty());
   EXPECT_EQ(map->shards[2].replicas.size(), 2u);
@@ -90,10 +91,13 @@ TEST(ListTokenTest, RoundTripsAnyIdBytes) {
 
 TEST(ListTokenTest, RejectsForeignTokens) {
   EXPECT_EQ(DecodeListToken("", 4)->size(), 4u);
-  absl::Status other_count = DecodeListToken(EncodeListToken(std::vector<ListPosition>(2)), 3).status();
+  absl::Status other_count =
+      DecodeListToken(EncodeListToken(std::vector<ListPosition>(2)), 3)
+          .status();
   EXPECT_TRUE(absl::IsInvalidArgument(other_count));
   EXPECT_NE(other_count.message().find("2 shards"), std::string::npos);
-  EXPECT_TRUE(absl::IsInvalidArgument(DecodeListToken("m00012", 3).status()));  // an indexer's
+  EXPECT_TRUE(absl::IsInvalidArgument(
+      DecodeListToken("m00012", 3).status()));  // an indexer's
   EXPECT_TRUE(absl::IsInvalidArgument(DecodeListToken("!!!", 3).status()));
 }
 
@@ -132,11 +136,13 @@ TEST(MergeListPagesTest, PagesEqualTheSortedSetWithoutGapsOrRepeats) {
       for (size_t s = 0; s < pages.size(); ++s) {
         if (positions[s].done) continue;
         const std::vector<std::string>& ids = held[s];
-        auto it = positions[s].after.empty()
-                      ? ids.begin()
-                      : std::upper_bound(ids.begin(), ids.end(), positions[s].after);
+        auto it =
+            positions[s].after.empty()
+                ? ids.begin()
+                : std::upper_bound(ids.begin(), ids.end(), positions[s].after);
         std::string last_scanned;
-        for (size_t scanned = 0; it != ids.end() && scanned < page_size; ++it, ++scanned) {
+        for (size_t scanned = 0; it != ids.end() && scanned < page_size;
+             ++it, ++scanned) {
           if (!vanishing.count(*it)) pages[s].ids.push_back(*it);
           last_scanned = *it;
         }
@@ -145,7 +151,8 @@ TEST(MergeListPagesTest, PagesEqualTheSortedSetWithoutGapsOrRepeats) {
       ListMerge merge = MergeListPages(positions, pages, page_size);
       ASSERT_LE(merge.taken.size(), page_size);
       for (const auto& [s, i] : merge.taken) {
-        listed.push_back(pages[static_cast<size_t>(s)].ids[static_cast<size_t>(i)]);
+        listed.push_back(
+            pages[static_cast<size_t>(s)].ids[static_cast<size_t>(i)]);
       }
       finished = merge.last;
       absl::StatusOr<std::vector<ListPosition>> next =
@@ -154,7 +161,8 @@ TEST(MergeListPagesTest, PagesEqualTheSortedSetWithoutGapsOrRepeats) {
       positions = *next;
     }
     EXPECT_TRUE(finished);
-    EXPECT_EQ(listed, std::vector<std::string>(expected.begin(), expected.end()))
+    EXPECT_EQ(listed,
+              std::vector<std::string>(expected.begin(), expected.end()))
         << "trial " << trial << " shards " << shards << " page " << page_size;
   }
 }

@@ -5,12 +5,12 @@
 // with different band counts (rows are zero-padded) and for absent slots.
 #include "indexer/lib/centroid_table.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
@@ -39,15 +39,11 @@ std::vector<PreparedSignature> Draw(int bands, int count, uint64_t seed) {
   return out;
 }
 
-bool SameBits(double a, double b) {
-  return std::memcmp(&a, &b, sizeof a) == 0;
-}
+bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
 TEST(CentroidTableTest, EmptyTable) {
-  const CentroidTable t =
-      CentroidTable::Build(0, [](uint32_t) -> const PreparedSignature* {
-        return nullptr;
-      });
+  const CentroidTable t = CentroidTable::Build(
+      0, [](uint32_t) -> const PreparedSignature* { return nullptr; });
   EXPECT_EQ(t.size(), 0u);
 }
 
@@ -89,12 +85,15 @@ TEST(CentroidTableTest, NeverAboveEmdLowerBoundAndWithinFloatRounding) {
         double r = std::ldexp(std::abs(c[0]), -24);
         for (int block = 0; block < 3; ++block) {
           double largest = 0.0;
-          for (int d = 0; d < ib; ++d) largest = std::max(largest, std::abs(c[1 + block * ib + d]));
-          r += std::sqrt(static_cast<double>(ib)) * 0.5 * largest / 32767.0 * (1.0 + 1e-6);
+          for (int d = 0; d < ib; ++d)
+            largest = std::max(largest, std::abs(c[1 + block * ib + d]));
+          r += std::sqrt(static_cast<double>(ib)) * 0.5 * largest / 32767.0 *
+               (1.0 + 1e-6);
         }
         const double slack = 2.0 * r * (1.0 + 1e-9) + 1e-14 * want;
         EXPECT_LE(got, want) << "slot " << i << " query bands " << bands;
-        EXPECT_GE(got, want - slack) << "slot " << i << " query bands " << bands;
+        EXPECT_GE(got, want - slack)
+            << "slot " << i << " query bands " << bands;
         EXPECT_LE(got, Emd(q, items[i])) << "slot " << i;
         EXPECT_GT(want, 0.0);  // distinct random signatures: a real bound
         largest_gap = std::max(largest_gap, (want - got) / want);
@@ -114,7 +113,8 @@ TEST(CentroidTableTest, AnItemIsAtBoundZeroFromItself) {
   // value that would prune an exact match.
   std::vector<PreparedSignature> items = Draw(20, 12, 3);
   const CentroidTable table = CentroidTable::Build(
-      items.size(), [&](uint32_t i) -> const PreparedSignature* { return &items[i]; });
+      items.size(),
+      [&](uint32_t i) -> const PreparedSignature* { return &items[i]; });
   for (uint32_t i = 0; i < items.size(); ++i) {
     const std::vector<double> c = Centroid(items[i]);
     EXPECT_EQ(table.LowerBound(c.data(), items[i].bands(), i), 0.0) << i;

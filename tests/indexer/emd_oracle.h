@@ -73,7 +73,8 @@ class LemonEmd {
   // DistanceWithCosts returns the EMD of a's and b's masses under the given
   // ground distances (a.size() x b.size(), row-major), e.g. Eq. 7 in double
   // from the raw signatures (eq7_oracle.h).
-  double DistanceWithCosts(const PreparedSignature& a, const PreparedSignature& b,
+  double DistanceWithCosts(const PreparedSignature& a,
+                           const PreparedSignature& b,
                            const std::vector<double>& costs) {
     Setup(a.size(), b.size());
     costs_ = costs;
@@ -81,8 +82,7 @@ class LemonEmd {
   }
 
  private:
-  static std::vector<int64_t> Scale(const PreparedSignature& s,
-                                    int64_t total) {
+  static std::vector<int64_t> Scale(const PreparedSignature& s, int64_t total) {
     constexpr double kUnit = 1099511627776.0;  // 2^40
     std::vector<int64_t> q(static_cast<size_t>(s.size()));
     int64_t sum = 0;

@@ -13,11 +13,10 @@
 
 #include "gtest/gtest.h"
 #include "indexer/lib/ground_distance.h"
+#include "tests/allocation_counter.h"
 #include "tests/indexer/emd_oracle.h"
 #include "tests/indexer/eq7_oracle.h"
-#include "tests/allocation_counter.h"
 #include "tests/indexer/signature_testing.h"
-
 
 namespace tpr::index {
 namespace {
@@ -202,14 +201,16 @@ TEST(EmdTest, Float32StorageErrorWithinBound) {
     const PreparedSignature b = Prep(sb);
     std::vector<double> costs;
     for (const Feature& x : sa.features) {
-      for (const Feature& y : sb.features) costs.push_back(DirectEq7(x, y, ground));
+      for (const Feature& y : sb.features)
+        costs.push_back(DirectEq7(x, y, ground));
     }
     const double exact64 = lemon.DistanceWithCosts(a, b, costs);
     ASSERT_GE(exact64, 0.0);
     const double slack = Float32EmdSlack(sa, sb, ground);
     const double ours = solver.Distance(a, b);
     // LEMON's integer scaling adds about 1e-12 of the largest cost.
-    ASSERT_NEAR(ours, exact64, slack + 1e-9 * std::max(exact64, 1e-3)) << "pair " << t;
+    ASSERT_NEAR(ours, exact64, slack + 1e-9 * std::max(exact64, 1e-3))
+        << "pair " << t;
     worst_ratio = std::max(worst_ratio, std::abs(ours - exact64) / slack);
   }
   RecordProperty("worst_error_over_bound", std::to_string(worst_ratio));

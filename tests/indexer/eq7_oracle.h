@@ -21,21 +21,24 @@ inline double DirectEq7(const Feature& x, const Feature& y,
     const size_t n = std::max(p.size(), q.size());
     double s = 0.0;
     for (size_t i = 0; i < n; ++i) {
-      const double d = (i < p.size() ? p[i] : 0.0) - (i < q.size() ? q[i] : 0.0);
+      const double d =
+          (i < p.size() ? p[i] : 0.0) - (i < q.size() ? q[i] : 0.0);
       s += d * d;
     }
     return std::sqrt(s);
   };
   return o.w1 * std::abs(x.integral_geodesic - y.integral_geodesic) +
          o.w2 * o.k_scale * l2(x.curvature, y.curvature) +
-         o.w3 * o.a_scale * l2(x.area, y.area) + o.w4 * o.h_scale * l2(x.distance, y.distance);
+         o.w3 * o.a_scale * l2(x.area, y.area) +
+         o.w4 * o.h_scale * l2(x.distance, y.distance);
 }
 
 // Float32Slack returns the documented bound (ground_distance.h) on how far
 // a ground distance between x and y on PreparedSignature's float32
 // coordinates may lie from DirectEq7(x, y): 2^-24 (N(phi(x)) + N(phi(y))),
 // N(phi(x)) being the distance of x to the zero feature.
-inline double Float32Slack(const Feature& x, const Feature& y, const GroundDistanceOptions& o) {
+inline double Float32Slack(const Feature& x, const Feature& y,
+                           const GroundDistanceOptions& o) {
   const Feature zero;
   return std::ldexp(DirectEq7(x, zero, o) + DirectEq7(y, zero, o), -24);
 }

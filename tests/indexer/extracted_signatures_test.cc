@@ -106,21 +106,24 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
     for (size_t j = 0; j < n; ++j) {
       std::vector<double> costs;
       for (const Feature& x : set[q].features) {
-        for (const Feature& y : set[j].features) costs.push_back(DirectEq7(x, y, ground));
+        for (const Feature& y : set[j].features)
+          costs.push_back(DirectEq7(x, y, ground));
       }
       d64[j] = lemon.DistanceWithCosts(prepared[q], prepared[j], costs);
       d32[j] = Emd(prepared[q], prepared[j]);
       const double tolerance = d32[j] * 1e-12 + 1e-15;
       EXPECT_LE(EmdLowerBound(prepared[q], prepared[j]), d32[j] + tolerance);
-      EXPECT_LE(RelaxedTransportBound(prepared[q], prepared[j]), d32[j] + tolerance);
+      EXPECT_LE(RelaxedTransportBound(prepared[q], prepared[j]),
+                d32[j] + tolerance);
       ++tally.bounds_checked;
       // The float32 bound plus LEMON's integer rounding (about 1e-12 of
       // the largest cost) and the solver's own tolerance.
-      slack[j] = Float32EmdSlack(set[q], set[j], ground) + 1e-9 * std::max(d64[j], 1e-3);
+      slack[j] = Float32EmdSlack(set[q], set[j], ground) +
+                 1e-9 * std::max(d64[j], 1e-3);
       EXPECT_NEAR(d32[j], d64[j], slack[j]) << "query " << q << " model " << j;
-      tally.worst_error_over_bound =
-          std::max(tally.worst_error_over_bound,
-                   std::abs(d32[j] - d64[j]) / Float32EmdSlack(set[q], set[j], ground));
+      tally.worst_error_over_bound = std::max(
+          tally.worst_error_over_bound,
+          std::abs(d32[j] - d64[j]) / Float32EmdSlack(set[q], set[j], ground));
     }
     std::vector<size_t> by64(n);
     std::iota(by64.begin(), by64.end(), size_t{0});
@@ -133,7 +136,8 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
         const size_t y = by64[b];
         if (d64[y] - d64[x] > slack[x] + slack[y]) {
           ++tally.pairs_checked;
-          EXPECT_LT(d32[x], d32[y]) << "query " << q << ": models " << x << ", " << y;
+          EXPECT_LT(d32[x], d32[y])
+              << "query " << q << ": models " << x << ", " << y;
         }
       }
     }
@@ -142,21 +146,24 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
       return d32[a] != d32[b] ? d32[a] < d32[b] : a < b;
     });
     const size_t top = std::min<size_t>(10, n);
-    tally.identical_top10 += std::equal(by32.begin(), by32.begin() + top, by64.begin());
+    tally.identical_top10 +=
+        std::equal(by32.begin(), by32.begin() + top, by64.begin());
     ++tally.queries;
   }
   return tally;
 }
 
 void Report(const char* name, size_t models, const Tally& t) {
-  std::printf("%s: %zu models, %d queries, %lld lower-bound pairs, %lld ordered pairs "
-              "checked, top-10 identical in %d/%d, worst |EMD32 - EMD64| / bound %.3f\n",
-              name, models, t.queries, static_cast<long long>(t.bounds_checked),
-              static_cast<long long>(t.pairs_checked),
-              t.identical_top10, t.queries, t.worst_error_over_bound);
-  ::testing::Test::RecordProperty(std::string(name) + "_identical_top10",
-                                  std::to_string(t.identical_top10) + "/" +
-                                      std::to_string(t.queries));
+  std::printf(
+      "%s: %zu models, %d queries, %lld lower-bound pairs, %lld ordered pairs "
+      "checked, top-10 identical in %d/%d, worst |EMD32 - EMD64| / bound "
+      "%.3f\n",
+      name, models, t.queries, static_cast<long long>(t.bounds_checked),
+      static_cast<long long>(t.pairs_checked), t.identical_top10, t.queries,
+      t.worst_error_over_bound);
+  ::testing::Test::RecordProperty(
+      std::string(name) + "_identical_top10",
+      std::to_string(t.identical_top10) + "/" + std::to_string(t.queries));
 }
 
 TEST(ExtractedSignaturesTest, GeneratedShapes) {
@@ -166,10 +173,11 @@ TEST(ExtractedSignaturesTest, GeneratedShapes) {
   shape.target_vertices = 1500;
   for (const std::string& cls : synth::ClassNames()) {
     for (int pose = 0; pose < 4; ++pose) {
-      absl::StatusOr<extract::Mesh> mesh = synth::GenerateShape(cls, pose, shape);
+      absl::StatusOr<extract::Mesh> mesh =
+          synth::GenerateShape(cls, pose, shape);
       ASSERT_TRUE(mesh.ok()) << mesh.status();
-      absl::StatusOr<extract::ExtractResult> r =
-          extract::ExtractSignature(*mesh, extract::ComputeMeshStats(*mesh), NoSpectrum());
+      absl::StatusOr<extract::ExtractResult> r = extract::ExtractSignature(
+          *mesh, extract::ComputeMeshStats(*mesh), NoSpectrum());
       ASSERT_TRUE(r.ok()) << r.status();
       set.push_back(eval::ToIndexSignature(r->signature));
     }
@@ -180,9 +188,10 @@ TEST(ExtractedSignaturesTest, GeneratedShapes) {
 }
 
 TEST(ExtractedSignaturesTest, Shrec11Simplified) {
-  const std::vector<std::string> paths =
-      ManifestPaths(std::string(TPR_SHARED_DIR) + "/data/shrec11-simplified", 1);
-  if (paths.empty()) GTEST_SKIP() << "SHREC'11 simplified not found under " << TPR_SHARED_DIR;
+  const std::vector<std::string> paths = ManifestPaths(
+      std::string(TPR_SHARED_DIR) + "/data/shrec11-simplified", 1);
+  if (paths.empty())
+    GTEST_SKIP() << "SHREC'11 simplified not found under " << TPR_SHARED_DIR;
   const std::vector<Signature> set = ExtractFiles(paths);
   ASSERT_GE(set.size(), paths.size() * 9 / 10);
   const Tally t = CheckSet(set, 40);
@@ -191,9 +200,10 @@ TEST(ExtractedSignaturesTest, Shrec11Simplified) {
 }
 
 TEST(ExtractedSignaturesTest, Shrec07WatertightEveryFourth) {
-  const std::vector<std::string> paths =
-      ManifestPaths(std::string(TPR_SHARED_DIR) + "/data/shrec07-watertight", 4);
-  if (paths.empty()) GTEST_SKIP() << "SHREC'07 watertight not found under " << TPR_SHARED_DIR;
+  const std::vector<std::string> paths = ManifestPaths(
+      std::string(TPR_SHARED_DIR) + "/data/shrec07-watertight", 4);
+  if (paths.empty())
+    GTEST_SKIP() << "SHREC'07 watertight not found under " << TPR_SHARED_DIR;
   const std::vector<Signature> set = ExtractFiles(paths);
   ASSERT_GE(set.size(), paths.size() * 9 / 10);
   const Tally t = CheckSet(set, 40);

@@ -138,8 +138,9 @@ TEST(GroundDistanceTest, MatchesEquation7ComputedDirectly) {
     for (int i = 0; i < a.size(); ++i) {
       for (int j = 0; j < b.size(); ++j) {
         const double expected = DirectEq7(sa.features[i], sb.features[j], o);
-        EXPECT_NEAR(GroundDistance(a, i, b, j), expected,
-                    Float32Slack(sa.features[i], sb.features[j], o) + 1e-12 * expected);
+        EXPECT_NEAR(
+            GroundDistance(a, i, b, j), expected,
+            Float32Slack(sa.features[i], sb.features[j], o) + 1e-12 * expected);
       }
     }
   }
@@ -150,10 +151,10 @@ TEST(GroundDistanceTest, MatrixKernelMatchesScalarAndIsSymmetric) {
   std::mt19937_64 rng(4);
   std::uniform_int_distribution<int> size(1, kMaxFeatures);
   for (int t = 0; t < 40; ++t) {
-    const PreparedSignature a = Prep(
-        t % 2 ? gen.Next() : gen.Random(size(rng)), GroundDistanceOptions{});
-    const PreparedSignature b = Prep(
-        t % 3 ? gen.Next() : gen.Random(size(rng)), GroundDistanceOptions{});
+    const PreparedSignature a = Prep(t % 2 ? gen.Next() : gen.Random(size(rng)),
+                                     GroundDistanceOptions{});
+    const PreparedSignature b = Prep(t % 3 ? gen.Next() : gen.Random(size(rng)),
+                                     GroundDistanceOptions{});
     std::vector<double> ab(static_cast<size_t>(a.size()) * b.stride());
     std::vector<double> ba(static_cast<size_t>(b.size()) * a.stride());
     GroundDistanceMatrix(a, b, ab.data(), b.stride());
@@ -183,8 +184,10 @@ TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
     bool ran = false;
     for (int na = 1; na <= 17; na += 4) {
       for (int nb = 1; nb <= 17; ++nb) {
-        const PreparedSignature a = Prep(gen.Random(na), GroundDistanceOptions{});
-        const PreparedSignature b = Prep(gen.Random(nb), GroundDistanceOptions{});
+        const PreparedSignature a =
+            Prep(gen.Random(na), GroundDistanceOptions{});
+        const PreparedSignature b =
+            Prep(gen.Random(nb), GroundDistanceOptions{});
         std::vector<double> m(static_cast<size_t>(na) * b.stride(), -1.0);
         const bool supported = internal::KernelSupported(kernel);
         ASSERT_EQ(internal::GroundDistanceMatrixWithKernel(
@@ -195,12 +198,13 @@ TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
         ran = true;
         for (int i = 0; i < na; ++i) {
           for (int j = 0; j < nb; ++j) {
-            EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride() + j], GroundDistance(a, i, b, j),
-                        1e-14)
+            EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride() + j],
+                        GroundDistance(a, i, b, j), 1e-14)
                 << "kernel " << kernel << " " << na << " x " << nb;
           }
           for (int j = nb; j < b.stride(); ++j) {
-            EXPECT_TRUE(std::isfinite(m[static_cast<size_t>(i) * b.stride() + j]));
+            EXPECT_TRUE(
+                std::isfinite(m[static_cast<size_t>(i) * b.stride() + j]));
           }
         }
       }
@@ -259,7 +263,8 @@ TEST(GroundDistanceTest, DifferentBandCountsComparedWithZeroPadding) {
   GroundDistanceMatrix(a, b, m.data(), b.stride());
   for (int i = 0; i < a.size(); ++i) {
     const double expected = DirectEq7(sa.features[i], sb.features[0], o);
-    const double slack = Float32Slack(sa.features[i], sb.features[0], o) + 1e-14;
+    const double slack =
+        Float32Slack(sa.features[i], sb.features[0], o) + 1e-14;
     EXPECT_NEAR(GroundDistance(a, i, b, 0), expected, slack);
     EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride()], expected, slack);
   }
@@ -271,8 +276,10 @@ TEST(GroundDistanceTest, ValuesBeyondFloat32RangeRejected) {
   absl::StatusOr<PreparedSignature> p = Prepare(s, GroundDistanceOptions{});
   ASSERT_FALSE(p.ok());
   EXPECT_EQ(p.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(p.status().message().find("feature 1"), std::string::npos) << p.status();
-  EXPECT_NE(p.status().message().find("float32"), std::string::npos) << p.status();
+  EXPECT_NE(p.status().message().find("feature 1"), std::string::npos)
+      << p.status();
+  EXPECT_NE(p.status().message().find("float32"), std::string::npos)
+      << p.status();
 }
 
 TEST(GroundDistanceTest, IsAMetricOnFeatures) {

@@ -5,6 +5,8 @@
 // on degenerate ones full of ties, and on signatures extracted from
 // generated shapes; the spectral embedding against hand-computed values;
 // the lower bounds the search relies on.
+#include "indexer/lib/metric.h"
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -18,7 +20,6 @@
 #include "gtest/gtest.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
-#include "indexer/lib/metric.h"
 #include "indexer/lib/spectral.h"
 #include "tests/indexer/signature_testing.h"
 
@@ -30,7 +31,8 @@ constexpr double kTolerance = 1e-9;
 // Options with the spectral term on (weight w, transform t, the first 50
 // values: explicit, so the hand-computed oracles do not follow the
 // defaults).
-GroundDistanceOptions WithSpectral(double w, SpectralTransform t = SpectralTransform::kLog) {
+GroundDistanceOptions WithSpectral(
+    double w, SpectralTransform t = SpectralTransform::kLog) {
   GroundDistanceOptions o;
   o.spectral.weight = w;
   o.spectral.transform = t;
@@ -38,7 +40,8 @@ GroundDistanceOptions WithSpectral(double w, SpectralTransform t = SpectralTrans
   return o;
 }
 
-PreparedSignature Prep(const Signature& s, const GroundDistanceOptions& o = {}) {
+PreparedSignature Prep(const Signature& s,
+                       const GroundDistanceOptions& o = {}) {
   absl::StatusOr<PreparedSignature> p = Prepare(s, o);
   EXPECT_TRUE(p.ok()) << p.status();
   return *std::move(p);
@@ -48,7 +51,8 @@ PreparedSignature Prep(const Signature& s, const GroundDistanceOptions& o = {}) 
 // on the grid {0, 1}, every fourth mass zero, and (when spectrum > 0) a
 // spectrum of that length drawn from {1, 2}: ties and exact zeros
 // everywhere.
-std::vector<Signature> Degenerate(uint64_t seed, int count, int max_features, int spectrum) {
+std::vector<Signature> Degenerate(uint64_t seed, int count, int max_features,
+                                  int spectrum) {
   std::mt19937_64 rng(seed);
   std::uniform_int_distribution<int> level(0, 1);
   std::uniform_int_distribution<int> size(1, max_features);
@@ -135,7 +139,8 @@ TEST(MetricTest, EmdIsAMetricOnGeneratedSignatures) {
 
 TEST(MetricTest, CombinedIsAMetricOnGeneratedSignaturesWithSpectra) {
   for (SpectralTransform t :
-       {SpectralTransform::kRaw, SpectralTransform::kByIndex, SpectralTransform::kLog}) {
+       {SpectralTransform::kRaw, SpectralTransform::kByIndex,
+        SpectralTransform::kLog}) {
     testing::SignatureGeneratorOptions o;
     o.seed = 91;
     o.classes = 6;
@@ -167,7 +172,8 @@ TEST(MetricTest, CombinedIsAMetricOnDegenerateSignaturesAndSpectra) {
   GroundDistanceOptions o = WithSpectral(0.5, SpectralTransform::kByIndex);
   o.spectral.eigenvalues = 3;
   std::vector<PreparedSignature> sigs;
-  for (const Signature& s : Degenerate(15, 80, 6, 3)) sigs.push_back(Prep(s, o));
+  for (const Signature& s : Degenerate(15, 80, 6, 3))
+    sigs.push_back(Prep(s, o));
   EXPECT_EQ(CheckMetric(sigs, 5000, 16), 5000);
 }
 
@@ -207,13 +213,15 @@ TEST(MetricTest, DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper) {
   for (int n = 0; n < 20; ++n) {
     const Signature x = gen.Next(), y = gen.Next();
     // Weight 0: exactly the EMD of Eq. 7, bit for bit.
-    const PreparedSignature a0 = Prep(x, WithSpectral(0.0)), b0 = Prep(y, WithSpectral(0.0));
+    const PreparedSignature a0 = Prep(x, WithSpectral(0.0)),
+                            b0 = Prep(y, WithSpectral(0.0));
     EXPECT_EQ(a0.spectral_size(), 0);
     EXPECT_EQ(Distance(a0, b0), Emd(a0, b0));
     EXPECT_EQ(DistanceLowerBound(a0, b0), EmdLowerBound(a0, b0));
     // Weight w: the EMD (unchanged by the spectral options) plus w times
     // the hand-computed spectral term.
-    const PreparedSignature a = Prep(x, WithSpectral(0.8)), b = Prep(y, WithSpectral(0.8));
+    const PreparedSignature a = Prep(x, WithSpectral(0.8)),
+                            b = Prep(y, WithSpectral(0.8));
     double s = 0.0;
     for (int i = 0; i < 50; ++i) {
       const double d = std::log(x.spectrum[i]) - std::log(y.spectrum[i]);
@@ -223,13 +231,16 @@ TEST(MetricTest, DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper) {
     // The stored embeddings are float32 (ground_distance.h): each value
     // moves by at most 2^-24 of itself, so the term by at most
     // 2^-24 (||E(x)|| + ||E(y)||).
-    const std::vector<double> ex = SpectralEmbedding(x.spectrum, WithSpectral(0.8).spectral);
-    const std::vector<double> ey = SpectralEmbedding(y.spectrum, WithSpectral(0.8).spectral);
+    const std::vector<double> ex =
+        SpectralEmbedding(x.spectrum, WithSpectral(0.8).spectral);
+    const std::vector<double> ey =
+        SpectralEmbedding(y.spectrum, WithSpectral(0.8).spectral);
     const std::vector<double> zero(ex.size(), 0.0);
     const double rounding =
         std::ldexp(SpectralDistance(ex.data(), zero.data(), ex.size()) +
                        SpectralDistance(ey.data(), zero.data(), ey.size()),
-                   -24) + 1e-12;
+                   -24) +
+        1e-12;
     EXPECT_NEAR(SpectralDistance(a, b), spectral, rounding);
     EXPECT_NEAR(Distance(a, b), Emd(a0, b0) + spectral, rounding);
     // The bounds the search uses: S <= EmdLowerBound + S <= d.
@@ -250,7 +261,8 @@ TEST(MetricTest, SpectralTermSeparatesOnlyWhatTheEmdConfuses) {
   y.spectrum[3] *= 1.5;
   std::sort(y.spectrum.begin(), y.spectrum.end());
   GroundDistanceOptions o = WithSpectral(1.0);
-  EXPECT_EQ(Distance(Prep(x, WithSpectral(0.0)), Prep(y, WithSpectral(0.0))), 0.0);
+  EXPECT_EQ(Distance(Prep(x, WithSpectral(0.0)), Prep(y, WithSpectral(0.0))),
+            0.0);
   EXPECT_GT(Distance(Prep(x, o), Prep(y, o)), 0.0);
   Signature z = x;
   z.spectrum.push_back(1e6);  // past n = 8

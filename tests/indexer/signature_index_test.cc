@@ -36,10 +36,9 @@ class Oracle {
   void Remove(const std::string& id) { live_.erase(id); }
   size_t size() const { return live_.size(); }
 
-  std::vector<Neighbor> Search(const Signature& query, size_t k,
-                               double radius = 0.0,
-                               const std::function<bool(const std::string&)>&
-                                   filter = nullptr) const {
+  std::vector<Neighbor> Search(
+      const Signature& query, size_t k, double radius = 0.0,
+      const std::function<bool(const std::string&)>& filter = nullptr) const {
     const PreparedSignature q = *Prepare(query, ground_);
     std::vector<Neighbor> all;
     for (const auto& [id, p] : live_) {
@@ -83,8 +82,9 @@ IndexOptions ManualOptions() {
 }
 
 // Drain returns every neighbour a search yields, in order.
-std::vector<Neighbor> Drain(const SignatureIndex& index, const Signature& query, double radius,
-                            std::function<bool(const std::string&)> filter = nullptr) {
+std::vector<Neighbor> Drain(
+    const SignatureIndex& index, const Signature& query, double radius,
+    std::function<bool(const std::string&)> filter = nullptr) {
   absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
       index.Search(query, radius, std::move(filter));
   EXPECT_TRUE(cursor.ok()) << cursor.status();
@@ -368,7 +368,8 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
   // rankings and radius searches equal the oracle, tree and buffer, with
   // ties: copies of one signature (distance 0) and signatures equal but
   // for their spectra (distance = the spectral term alone).
-  for (SpectralTransform t : {SpectralTransform::kByIndex, SpectralTransform::kLog}) {
+  for (SpectralTransform t :
+       {SpectralTransform::kByIndex, SpectralTransform::kLog}) {
     SignatureGeneratorOptions gopt;
     gopt.seed = 21;
     gopt.classes = 10;
@@ -381,10 +382,12 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
     Oracle oracle(options.ground);
     std::vector<Signature> stored;
     for (int i = 0; i < 240; ++i) {
-      Signature s = i % 6 == 5   ? stored[static_cast<size_t>(i - 5)]  // a copy
-                    : i % 12 == 4 ? stored[static_cast<size_t>(i - 1)]  // see below
-                                  : gen.Next();
-      if (i % 12 == 4) s.spectrum.back() *= 1.3;  // same features, other spectrum
+      Signature s = i % 6 == 5 ? stored[static_cast<size_t>(i - 5)]  // a copy
+                    : i % 12 == 4
+                        ? stored[static_cast<size_t>(i - 1)]  // see below
+                        : gen.Next();
+      if (i % 12 == 4)
+        s.spectrum.back() *= 1.3;  // same features, other spectrum
       stored.push_back(s);
       ASSERT_TRUE(index.Upsert(Id(i), s).ok());
       oracle.Upsert(Id(i), s);
@@ -396,13 +399,16 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
       oracle.Upsert(Id(i), s);
     }
     std::vector<Signature> queries = Queries(&gen, 24);
-    for (int i = 0; i < 12; ++i) queries.push_back(stored[static_cast<size_t>(i * 17)]);
+    for (int i = 0; i < 12; ++i)
+      queries.push_back(stored[static_cast<size_t>(i * 17)]);
     CheckKnn(index, oracle, queries, SpectralTransformName(t));
     for (size_t q = 0; q < queries.size(); q += 3) {
       const std::vector<Neighbor> all = oracle.Search(queries[q], 10000);
-      ExpectSame(Drain(index, queries[q], 0.0), all, "ranked " + std::to_string(q));
+      ExpectSame(Drain(index, queries[q], 0.0), all,
+                 "ranked " + std::to_string(q));
       const double radius = all[15].distance;
-      ExpectSame(Drain(index, queries[q], radius), oracle.Search(queries[q], 10000, radius),
+      ExpectSame(Drain(index, queries[q], radius),
+                 oracle.Search(queries[q], 10000, radius),
                  "radius " + std::to_string(q));
     }
   }
@@ -417,7 +423,8 @@ TEST(SignatureIndexTest, PrunesOnClusteredData) {
   SignatureGenerator gen(gopt);
   IndexOptions options = ManualOptions();
   SignatureIndex index(options);
-  for (int i = 0; i < 600; ++i) ASSERT_TRUE(index.Upsert(Id(i), gen.Next()).ok());
+  for (int i = 0; i < 600; ++i)
+    ASSERT_TRUE(index.Upsert(Id(i), gen.Next()).ok());
   index.Rebuild();
   int64_t emds = 0;
   for (int q = 0; q < 50; ++q) {
@@ -454,7 +461,8 @@ TEST(SignatureIndexTest, UpsertBatchEqualsUpsertsAndIsAtomic) {
   batch.clear();
   batch.emplace_back(Id(600), gen.Next());
   batch.emplace_back(Id(601), Signature{});
-  EXPECT_EQ(index.UpsertBatch(batch).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(index.UpsertBatch(batch).code(),
+            absl::StatusCode::kInvalidArgument);
   EXPECT_FALSE(index.Contains(Id(600)));
   EXPECT_EQ(index.size(), oracle.size());
 }
@@ -465,8 +473,10 @@ TEST(SignatureIndexTest, MalformedInputIsInvalidArgument) {
   ASSERT_TRUE(index.Upsert("good", gen.Next()).ok());
   Signature bad = gen.Next();
   bad.features[0].weight = -1.0;
-  EXPECT_EQ(index.Upsert("bad", bad).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(index.Upsert("", gen.Next()).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(index.Upsert("bad", bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(index.Upsert("", gen.Next()).code(),
+            absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(index.Upsert("empty", Signature{}).code(),
             absl::StatusCode::kInvalidArgument);
   EXPECT_FALSE(index.Contains("bad"));
@@ -538,7 +548,8 @@ TEST(SignatureIndexTest, SerializeAndLoadRoundTrip) {
 
   // Same items: everything in the tree, nothing buffered, same results and
   // the same work.
-  std::vector<std::pair<std::string, Signature>> items(live.begin(), live.end());
+  std::vector<std::pair<std::string, Signature>> items(live.begin(),
+                                                       live.end());
   absl::StatusOr<std::unique_ptr<SignatureIndex>> loaded =
       SignatureIndex::Load(bytes, items, ManualOptions());
   ASSERT_TRUE(loaded.ok()) << loaded.status();
@@ -609,7 +620,8 @@ TEST(SignatureIndexTest, CorruptBytesAreErrors) {
   };
   for (size_t len = 0; len < bytes.size(); len += 1 + len / 16) {
     EXPECT_TRUE(is_error(
-        SignatureIndex::Load(bytes.substr(0, len), items, ManualOptions()).status()))
+        SignatureIndex::Load(bytes.substr(0, len), items, ManualOptions())
+            .status()))
         << len;
   }
   std::mt19937_64 rng(29);
@@ -617,11 +629,13 @@ TEST(SignatureIndexTest, CorruptBytesAreErrors) {
     std::string bad = bytes;
     const size_t pos = rng() % bad.size();
     bad[pos] = static_cast<char>(bad[pos] ^ (1 + rng() % 255));
-    EXPECT_TRUE(is_error(SignatureIndex::Load(bad, items, ManualOptions()).status()))
+    EXPECT_TRUE(
+        is_error(SignatureIndex::Load(bad, items, ManualOptions()).status()))
         << pos;
   }
-  EXPECT_EQ(SignatureIndex::Load("garbage", items, ManualOptions()).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      SignatureIndex::Load("garbage", items, ManualOptions()).status().code(),
+      absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

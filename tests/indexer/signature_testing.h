@@ -53,7 +53,9 @@ struct SignatureGeneratorOptions {
 class SignatureGenerator {
  public:
   explicit SignatureGenerator(const SignatureGeneratorOptions& options)
-      : options_(options), rng_(options.seed), spectrum_rng_(options.seed ^ 0x5eed5eedULL) {
+      : options_(options),
+        rng_(options.seed),
+        spectrum_rng_(options.seed ^ 0x5eed5eedULL) {
     for (int c = 0; c < options_.classes; ++c) {
       prototypes_.push_back(Prototype(options_.features));
     }
@@ -84,7 +86,8 @@ class SignatureGenerator {
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     for (Feature& f : s.features) {
       f.weight *= std::exp(noise(rng_));
-      f.integral_geodesic = std::clamp(f.integral_geodesic + noise(rng_) * 0.5, 0.0, 1.0);
+      f.integral_geodesic =
+          std::clamp(f.integral_geodesic + noise(rng_) * 0.5, 0.0, 1.0);
       for (double& x : f.curvature) x *= 1.0 + noise(rng_);
       for (double& x : f.area) x *= std::exp(noise(rng_));
       for (double& x : f.distance) x *= std::exp(noise(rng_));
@@ -92,15 +95,17 @@ class SignatureGenerator {
     }
     if (!s.spectrum.empty()) {
       // Eigenvalues move a little with pose and meshing; keep them sorted.
-      std::normal_distribution<double> spectral_noise(0.0, 0.2 * options_.jitter);
+      std::normal_distribution<double> spectral_noise(0.0,
+                                                      0.2 * options_.jitter);
       for (double& x : s.spectrum) x *= std::exp(spectral_noise(spectrum_rng_));
       std::sort(s.spectrum.begin(), s.spectrum.end());
     }
     if (s.features.size() > 1 && unit(rng_) < options_.feature_change) {
       // Drop the lightest feature: a small protrusion not detected.
-      auto it = std::min_element(
-          s.features.begin(), s.features.end(),
-          [](const Feature& x, const Feature& y) { return x.weight < y.weight; });
+      auto it = std::min_element(s.features.begin(), s.features.end(),
+                                 [](const Feature& x, const Feature& y) {
+                                   return x.weight < y.weight;
+                                 });
       s.features.erase(it);
     }
     if (unit(rng_) < options_.feature_change) {
@@ -109,7 +114,8 @@ class SignatureGenerator {
       Feature& f = s.features[pick(rng_)];
       f.weight *= 0.5;
       Feature twin = f;
-      twin.integral_geodesic = std::clamp(twin.integral_geodesic + 0.02, 0.0, 1.0);
+      twin.integral_geodesic =
+          std::clamp(twin.integral_geodesic + 0.02, 0.0, 1.0);
       s.features.push_back(twin);
     }
     NormalizeWeights(&s);

@@ -72,7 +72,8 @@ std::vector<Point> TieHeavy(size_t n, size_t dim, uint64_t seed) {
     Point p(dim);
     for (double& x : p) x = static_cast<double>(rng() % 4);
     const size_t copies = 1 + rng() % 3;
-    for (size_t c = 0; c < copies && points.size() < n; ++c) points.push_back(p);
+    for (size_t c = 0; c < copies && points.size() < n; ++c)
+      points.push_back(p);
   }
   return points;
 }
@@ -152,7 +153,8 @@ void CheckKnnAgainstBruteForce(const std::vector<Point>& points, Metric metric,
     };
     const std::vector<ItemNeighbor> got = tree.Knn(counted, k, &stats);
     const std::vector<ItemNeighbor> want = oracle.Knn(spec, k);
-    ExpectSame(got, want, "query " + std::to_string(q) + " k " + std::to_string(k));
+    ExpectSame(got, want,
+               "query " + std::to_string(q) + " k " + std::to_string(k));
     EXPECT_EQ(stats.emd_computations, calls);
     EXPECT_LE(stats.emd_computations, static_cast<int64_t>(points.size()));
   }
@@ -164,7 +166,8 @@ TEST(VpTreeTest, MatchesBruteForceOnUniformData) {
 }
 
 TEST(VpTreeTest, MatchesBruteForceOnClusteredData) {
-  CheckKnnAgainstBruteForce(Clustered(3000, 10, 20, 0.02, 21), L1, 1000, DeepTree(), 22);
+  CheckKnnAgainstBruteForce(Clustered(3000, 10, 20, 0.02, 21), L1, 1000,
+                            DeepTree(), 22);
 }
 
 TEST(VpTreeTest, MatchesBruteForceWithTiesAndDuplicates) {
@@ -205,9 +208,11 @@ TEST(VpTreeTest, RankedSearchYieldsTheWholeBruteForceOrder) {
   const VpTree tree = BuildTree(points, L2);
   const BruteForceIndex oracle(points.size());
   for (const Point& query : Queries(points, 20, 62)) {
-    std::unique_ptr<NeighborCursor> cursor = tree.Search(Spec(points, query, L2));
+    std::unique_ptr<NeighborCursor> cursor =
+        tree.Search(Spec(points, query, L2));
     std::vector<ItemNeighbor> got;
-    while (std::optional<ItemNeighbor> next = cursor->Next()) got.push_back(*next);
+    while (std::optional<ItemNeighbor> next = cursor->Next())
+      got.push_back(*next);
     EXPECT_FALSE(cursor->Next().has_value());
     ExpectSame(got, oracle.Range(Spec(points, query, L2)), "ranked");
     EXPECT_EQ(cursor->stats().emd_computations,
@@ -370,7 +375,8 @@ TEST(VpTreeTest, SerializationRoundTripKeepsResults) {
   const BruteForceIndex oracle(points.size());
   for (const Point& query : Queries(points, 500, 122)) {
     SearchStats a, b;
-    const std::vector<ItemNeighbor> got = loaded->Knn(Spec(points, query, L2), 7, &a);
+    const std::vector<ItemNeighbor> got =
+        loaded->Knn(Spec(points, query, L2), 7, &a);
     ExpectSame(got, oracle.Knn(Spec(points, query, L2), 7), "reloaded");
     tree.Knn(Spec(points, query, L2), 7, &b);
     EXPECT_EQ(a.emd_computations, b.emd_computations);
@@ -417,7 +423,8 @@ uint64_t Fnv(const std::string& s, size_t n) {
 
 void Reseal(std::string* bytes) {
   const uint64_t h = Fnv(*bytes, bytes->size() - 8);
-  for (int i = 0; i < 8; ++i) (*bytes)[bytes->size() - 8 + i] = static_cast<char>(h >> (8 * i));
+  for (int i = 0; i < 8; ++i)
+    (*bytes)[bytes->size() - 8 + i] = static_cast<char>(h >> (8 * i));
 }
 
 TEST(VpTreeTest, CorruptBytesAreErrorsNotCrashes) {

@@ -18,6 +18,7 @@
 //   itself and answers as its primary does;
 // - backup of every shard (`tpr backup`) and restore into empty directories
 //   (`tpr restore`): a gateway over the restored shards answers as before.
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -28,8 +29,6 @@
 #include <regex>
 #include <set>
 #include <thread>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "indexer/gateway/shard_map.h"
@@ -53,14 +52,16 @@ using ::tpr::testing::TempDir;
 constexpr int kShards = 3;
 
 std::string FindHaproxy() {
-  for (const char* path : {"/usr/sbin/haproxy", "/usr/bin/haproxy", "/usr/local/sbin/haproxy"}) {
+  for (const char* path :
+       {"/usr/sbin/haproxy", "/usr/bin/haproxy", "/usr/local/sbin/haproxy"}) {
     if (access(path, X_OK) == 0) return path;
   }
   return "";
 }
 
 std::unique_ptr<v1::Indexer::Stub> Stub(const std::string& address) {
-  return v1::Indexer::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  return v1::Indexer::NewStub(
+      grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
 }
 
 // haproxy in the foreground (-db), started and stopped by PID.
@@ -77,7 +78,8 @@ class Haproxy {
         dup2(fileno(log), STDERR_FILENO);
         dup2(fileno(log), STDOUT_FILENO);
       }
-      execl(binary.c_str(), binary.c_str(), "-db", "-f", config.c_str(), nullptr);
+      execl(binary.c_str(), binary.c_str(), "-db", "-f", config.c_str(),
+            nullptr);
       _exit(127);
     }
     return absl::OkStatus();
@@ -107,7 +109,8 @@ class ClusterTest : public ::testing::Test {
  protected:
   void SetUp() override {
     haproxy_binary_ = FindHaproxy();
-    if (haproxy_binary_.empty()) GTEST_SKIP() << "haproxy is not installed (scripts/setup)";
+    if (haproxy_binary_.empty())
+      GTEST_SKIP() << "haproxy is not installed (scripts/setup)";
     ASSERT_FALSE(dir_.path().empty());
     std::string servers;
     for (int i = 0; i < 2; ++i) {
@@ -120,15 +123,23 @@ class ClusterTest : public ::testing::Test {
     }
     front_port_ = FreePort();
     std::ofstream(Path("haproxy.cfg"))
-        << "global\n  maxconn 256\ndefaults\n  mode http\n  timeout connect 2s\n"
-        << "  timeout client 60s\n  timeout server 60s\n  retries 2\n  option redispatch 1\n"
-        << "frontend f\n  bind 127.0.0.1:" << front_port_ << " proto h2\n  default_backend e\n"
+        << "global\n  maxconn 256\ndefaults\n  mode http\n  timeout connect "
+           "2s\n"
+        << "  timeout client 60s\n  timeout server 60s\n  retries 2\n  option "
+           "redispatch 1\n"
+        << "frontend f\n  bind 127.0.0.1:" << front_port_
+        << " proto h2\n  default_backend e\n"
         << "backend e\n  balance roundrobin\n  option httpchk\n"
-        << "  http-check send meth POST uri /grpc.health.v1.Health/Check ver HTTP/2 hdr "
+        << "  http-check send meth POST uri /grpc.health.v1.Health/Check ver "
+           "HTTP/2 hdr "
            "content-type application/grpc hdr te trailers\n"
-        << "  http-check expect status 200\n  default-server inter 500ms fall 2 rise 1\n"
+        << "  http-check expect status 200\n  default-server inter 500ms fall "
+           "2 rise 1\n"
         << servers;
-    ASSERT_TRUE(haproxy_.Start(haproxy_binary_, Path("haproxy.cfg"), Path("haproxy.log")).ok());
+    ASSERT_TRUE(
+        haproxy_
+            .Start(haproxy_binary_, Path("haproxy.cfg"), Path("haproxy.log"))
+            .ok());
     std::vector<std::string> shard_flags;
     for (int s = 0; s < kShards; ++s) {
       ASSERT_TRUE(StartShard(s, "127.0.0.1:0").ok());
@@ -139,9 +150,13 @@ class ClusterTest : public ::testing::Test {
     shard_flags[1] += "," + follower_.address();
     shard_flags.push_back("--health-interval-ms");
     shard_flags.push_back("200");
-    ASSERT_TRUE(gateway_.Start(BinaryPath("tpr-gateway"), shard_flags, Path("gateway.log")).ok());
+    ASSERT_TRUE(
+        gateway_
+            .Start(BinaryPath("tpr-gateway"), shard_flags, Path("gateway.log"))
+            .ok());
     ASSERT_TRUE(reference_
-                    .Start(BinaryPath("tpr-indexer"), {"--data-dir", Path("reference")},
+                    .Start(BinaryPath("tpr-indexer"),
+                           {"--data-dir", Path("reference")},
                            Path("reference.log"))
                     .ok());
     gateway_stub_ = Stub(gateway_.address());
@@ -156,18 +171,19 @@ class ClusterTest : public ::testing::Test {
 
   // The follower of shard 0 (tpr-indexer --follow).
   absl::Status StartFollower(const std::string& listen) {
-    return follower_.Start(BinaryPath("tpr-indexer"),
-                           {"--data-dir", Path("follower0"), "--follow", shards_[0].address()},
-                           Path("follower0.log"), listen);
+    return follower_.Start(
+        BinaryPath("tpr-indexer"),
+        {"--data-dir", Path("follower0"), "--follow", shards_[0].address()},
+        Path("follower0.log"), listen);
   }
 
   // Waits (bounded) until the follower has applied everything shard 0 has
   // and reports SERVING; false on timeout.
   bool WaitForFollower() {
-    auto primary = v1::IndexerAdmin::NewStub(
-        grpc::CreateChannel(shards_[0].address(), grpc::InsecureChannelCredentials()));
-    auto follower = v1::IndexerAdmin::NewStub(
-        grpc::CreateChannel(follower_.address(), grpc::InsecureChannelCredentials()));
+    auto primary = v1::IndexerAdmin::NewStub(grpc::CreateChannel(
+        shards_[0].address(), grpc::InsecureChannelCredentials()));
+    auto follower = v1::IndexerAdmin::NewStub(grpc::CreateChannel(
+        follower_.address(), grpc::InsecureChannelCredentials()));
     for (int i = 0; i < 1500; ++i) {
       grpc::ClientContext c1, c2;
       v1::ReplicationStatusResponse p, f;
@@ -191,19 +207,24 @@ class ClusterTest : public ::testing::Test {
     FILE* pipe = popen(command.c_str(), "r");
     if (pipe == nullptr) return {-1, ""};
     char buffer[4096];
-    for (size_t n; (n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0;) out.append(buffer, n);
+    for (size_t n; (n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0;)
+      out.append(buffer, n);
     const int status = pclose(pipe);
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
   }
 
-  std::string Path(const std::string& name) const { return dir_.path() + "/" + name; }
+  std::string Path(const std::string& name) const {
+    return dir_.path() + "/" + name;
+  }
 
   // Upserts `models` in batches of `batch` through `stub`; returns how many
   // were acknowledged (all models of batches answered OK).
-  static grpc::Status Batch(v1::Indexer::Stub* stub, const std::vector<v1::UpsertRequest>& requests,
+  static grpc::Status Batch(v1::Indexer::Stub* stub,
+                            const std::vector<v1::UpsertRequest>& requests,
                             v1::BatchUpsertResponse* response) {
     grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::seconds(60));
     auto writer = stub->BatchUpsert(&context, response);
     for (const v1::UpsertRequest& r : requests) {
       if (!writer->Write(r)) break;
@@ -217,7 +238,8 @@ class ClusterTest : public ::testing::Test {
     SearchResult got = RunSearch(gateway_stub_.get(), request);
     ASSERT_TRUE(want.status.ok()) << want.status.error_message();
     ASSERT_TRUE(got.status.ok()) << got.status.error_message();
-    ASSERT_EQ(got.neighbors.size(), want.neighbors.size()) << request.ShortDebugString();
+    ASSERT_EQ(got.neighbors.size(), want.neighbors.size())
+        << request.ShortDebugString();
     for (size_t i = 0; i < want.neighbors.size(); ++i) {
       EXPECT_EQ(got.neighbors[i].id(), want.neighbors[i].id()) << i;
       EXPECT_EQ(got.neighbors[i].distance(), want.neighbors[i].distance()) << i;
@@ -251,7 +273,8 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
   ASSERT_TRUE(extractor.ok()) << extractor.status();
   std::vector<v1::UpsertRequest> requests;
   for (const testing::GeneratedFile& f : *files) {
-    absl::StatusOr<v1::ExtractResponse> r = extractor->ExtractFile(Path("meshes/" + f.relative_path));
+    absl::StatusOr<v1::ExtractResponse> r =
+        extractor->ExtractFile(Path("meshes/" + f.relative_path));
     ASSERT_TRUE(r.ok()) << f.relative_path << ": " << r.status();
     v1::UpsertRequest request;
     request.mutable_model()->set_id(f.relative_path);
@@ -286,12 +309,14 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
     v1::Model model;
     ASSERT_TRUE(gateway_stub_->Get(&context, get, &model).ok());
     std::ifstream in(shards_[gateway::ShardOf("m00007", kShards)].log_path());
-    const std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string log((std::istreambuf_iterator<char>(in)),
+                          std::istreambuf_iterator<char>());
     EXPECT_NE(log.find("scale-gw-req-7"), std::string::npos) << log;
   }
   const int n = static_cast<int>(requests.size());
   auto run_all = [&] {
-    for (const char* id : {"m00000", "m00004-y", "m00133", "m00399", "biped_adult/pose_1.off"}) {
+    for (const char* id :
+         {"m00000", "m00004-y", "m00133", "m00399", "biped_adult/pose_1.off"}) {
       for (int k : {1, 10, n + 5}) {
         for (bool exclude_self : {false, true}) {
           for (const char* label : {"", "class5", "biped_child"}) {
@@ -305,7 +330,8 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
         }
       }
     }
-    for (const v1::UpsertRequest& query : {requests[0], requests[3], requests[20]}) {
+    for (const v1::UpsertRequest& query :
+         {requests[0], requests[3], requests[20]}) {
       SearchResult tenth = RunSearch(reference_stub_.get(), [&] {
         v1::SearchRequest r;
         *r.mutable_signature() = query.model().signature();
@@ -322,8 +348,10 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
   };
   run_all();
   // Deletes through the gateway and in the reference, then everything again.
-  for (const char* id : {"m00000", "m00004", "m00004-x", "quadruped_slender/pose_0.off", "m00200"}) {
-    for (v1::Indexer::Stub* stub : {reference_stub_.get(), gateway_stub_.get()}) {
+  for (const char* id : {"m00000", "m00004", "m00004-x",
+                         "quadruped_slender/pose_0.off", "m00200"}) {
+    for (v1::Indexer::Stub* stub :
+         {reference_stub_.get(), gateway_stub_.get()}) {
       grpc::ClientContext context;
       v1::DeleteRequest request;
       request.set_id(id);
@@ -335,7 +363,8 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
   v1::SearchRequest deleted;
   deleted.set_id("m00000");
   deleted.set_k(3);
-  EXPECT_EQ(RunSearch(gateway_stub_.get(), deleted).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(RunSearch(gateway_stub_.get(), deleted).status.error_code(),
+            grpc::StatusCode::NOT_FOUND);
   for (const char* id : {"m00004-y", "m00133", "biped_adult/pose_1.off"}) {
     v1::SearchRequest request;
     request.set_id(id);
@@ -351,17 +380,19 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
 // shards and once against the single indexer, reports the same metrics
 // (every number of the JSON report but the timings and the output folder).
 TEST_F(ClusterTest, TprEvalThroughTheGatewayReportsAsOneIndexer) {
-  const std::string synth = absl::StrCat(BinaryPath("tpr-synth"), " --out ", Path("set"),
-                                         " --classes 3 --poses 3 --vertices 1200 --seed 5",
-                                         " --jobs 2 > /dev/null 2>&1");
+  const std::string synth =
+      absl::StrCat(BinaryPath("tpr-synth"), " --out ", Path("set"),
+                   " --classes 3 --poses 3 --vertices 1200 --seed 5",
+                   " --jobs 2 > /dev/null 2>&1");
   ASSERT_EQ(std::system(synth.c_str()), 0) << synth;
   auto eval = [&](const std::string& indexer, const std::string& out) {
-    auto [code, json] = Tpr(absl::StrCat("--json --extractor 127.0.0.1:", front_port_,
-                                         " --indexer ", indexer, " eval --jobs 2 --out ",
-                                         Path(out), " ", Path("set")));
+    auto [code, json] = Tpr(absl::StrCat(
+        "--json --extractor 127.0.0.1:", front_port_, " --indexer ", indexer,
+        " eval --jobs 2 --out ", Path(out), " ", Path("set")));
     EXPECT_EQ(code, 0) << json << tpr::testing::ReadText(Path("tpr.err"));
     // What may differ: where the pictures went and how long it took.
-    for (const char* pattern : {"\"out\":\"[^\"]*\",?", "\"(extract|query)_seconds\":[0-9.e+-]+,?"}) {
+    for (const char* pattern :
+         {"\"out\":\"[^\"]*\",?", "\"(extract|query)_seconds\":[0-9.e+-]+,?"}) {
       json = std::regex_replace(json, std::regex(pattern), "");
     }
     return json;
@@ -373,8 +404,9 @@ TEST_F(ClusterTest, TprEvalThroughTheGatewayReportsAsOneIndexer) {
   // against 1). The single indexer gets the very models stored (an
   // extraction run twice may differ in the last bits of a distance), so
   // both evals use them as they are instead of extracting again.
-  auto [added, add_out] = Tpr(absl::StrCat("--extractor 127.0.0.1:", front_port_, " --indexer ",
-                                           gateway_.address(), " add ", Path("set")));
+  auto [added, add_out] =
+      Tpr(absl::StrCat("--extractor 127.0.0.1:", front_port_, " --indexer ",
+                       gateway_.address(), " add ", Path("set")));
   ASSERT_EQ(added, 0) << add_out << tpr::testing::ReadText(Path("tpr.err"));
   ASSERT_TRUE(WaitForFollower());
   const std::string through_gateway = eval(gateway_.address(), "out-gateway");
@@ -385,23 +417,29 @@ TEST_F(ClusterTest, TprEvalThroughTheGatewayReportsAsOneIndexer) {
     v1::GetRequest get;
     get.set_id(id);
     v1::UpsertRequest put;
-    ASSERT_TRUE(gateway_stub_->Get(&get_context, get, put.mutable_model()).ok()) << id;
+    ASSERT_TRUE(gateway_stub_->Get(&get_context, get, put.mutable_model()).ok())
+        << id;
     put.set_overwrite(true);
     v1::UpsertResponse ignored;
-    ASSERT_TRUE(reference_stub_->Upsert(&put_context, put, &ignored).ok()) << id;
+    ASSERT_TRUE(reference_stub_->Upsert(&put_context, put, &ignored).ok())
+        << id;
   }
   ASSERT_EQ(copied, 9);
   std::string one_indexer = eval(reference_.address(), "out-single");
   const std::string& through = through_gateway;
-  EXPECT_NE(through_gateway.find("\"added\":0"), std::string::npos) << through_gateway;
-  EXPECT_NE(through_gateway.find("\"models\":9"), std::string::npos) << through_gateway;
-  EXPECT_NE(through_gateway.find("\"per_class\""), std::string::npos) << through_gateway;
+  EXPECT_NE(through_gateway.find("\"added\":0"), std::string::npos)
+      << through_gateway;
+  EXPECT_NE(through_gateway.find("\"models\":9"), std::string::npos)
+      << through_gateway;
+  EXPECT_NE(through_gateway.find("\"per_class\""), std::string::npos)
+      << through_gateway;
   EXPECT_EQ(through, one_indexer);
 }
 
 TEST_F(ClusterTest, AKilledShardFailsQueriesNeverShortensThem) {
   std::vector<v1::UpsertRequest> requests;
-  for (const TestModel& m : MakeModels(90, 3, 4)) requests.push_back(ToRequest(m));
+  for (const TestModel& m : MakeModels(90, 3, 4))
+    requests.push_back(ToRequest(m));
   v1::BatchUpsertResponse response;
   grpc::Status ingested = Batch(gateway_stub_.get(), requests, &response);
   ASSERT_TRUE(ingested.ok()) << ingested.error_message();
@@ -415,7 +453,8 @@ TEST_F(ClusterTest, AKilledShardFailsQueriesNeverShortensThem) {
     EXPECT_EQ(got.status.error_code(), grpc::StatusCode::UNAVAILABLE);
     EXPECT_NE(got.status.error_message().find("shard 2"), std::string::npos)
         << got.status.error_message();
-    EXPECT_LT(got.neighbors.size(), 50u);  // what came before the error is not an answer
+    EXPECT_LT(got.neighbors.size(),
+              50u);  // what came before the error is not an answer
     std::this_thread::sleep_for(std::chrono::milliseconds(600));
   }
 }
@@ -435,7 +474,8 @@ TEST_F(ClusterTest, KillNineOfAPrimaryDuringIngestLosesNoAcknowledgedWrite) {
       }
       v1::BatchUpsertResponse response;
       if (Batch(stub.get(), requests, &response).ok()) {
-        for (size_t i = start; i < start + requests.size(); ++i) acknowledged[i] = true;
+        for (size_t i = start; i < start + requests.size(); ++i)
+          acknowledged[i] = true;
       } else {
         ++failures;
       }
@@ -464,12 +504,14 @@ TEST_F(ClusterTest, KillNineOfAPrimaryDuringIngestLosesNoAcknowledgedWrite) {
     if (!acknowledged[i]) continue;
     ++acked;
     grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::seconds(10));
     v1::GetRequest get;
     get.set_id(models[i].id);
     v1::Model model;
     grpc::Status status = gateway_stub_->Get(&context, get, &model);
-    EXPECT_TRUE(status.ok()) << models[i].id << " was acknowledged: " << status.error_message();
+    EXPECT_TRUE(status.ok())
+        << models[i].id << " was acknowledged: " << status.error_message();
   }
   EXPECT_GT(acked, 12 * static_cast<int>(kBatch) - 1);
   // The restarted shard takes writes again.
@@ -492,14 +534,16 @@ TEST_F(ClusterTest, KillNineOfAPrimaryDuringIngestLosesNoAcknowledgedWrite) {
 
 TEST_F(ClusterTest, SigtermDrainsEveryService) {
   std::vector<v1::UpsertRequest> requests;
-  for (const TestModel& m : MakeModels(600, 6, 9)) requests.push_back(ToRequest(m));
+  for (const TestModel& m : MakeModels(600, 6, 9))
+    requests.push_back(ToRequest(m));
   v1::BatchUpsertResponse response;
   grpc::Status ingested = Batch(gateway_stub_.get(), requests, &response);
   ASSERT_TRUE(ingested.ok()) << ingested.error_message();
   // A search through the gateway in flight when the gateway gets SIGTERM:
   // it runs to its end.
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(60));
   v1::SearchRequest request;
   request.set_id("m00001");
   request.set_k(600);
@@ -521,7 +565,8 @@ TEST_F(ClusterTest, SigtermDrainsEveryService) {
   for (int s = 0; s < kShards; ++s) {
     EXPECT_EQ(shards_[s].Stop(SIGTERM), 0) << "shard " << s;
     std::ifstream in(shards_[s].log_path());
-    std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string log((std::istreambuf_iterator<char>(in)),
+                    std::istreambuf_iterator<char>());
     EXPECT_NE(log.find("data directory closed"), std::string::npos) << log;
   }
   EXPECT_EQ(follower_.Stop(SIGTERM), 0) << "follower";
@@ -533,7 +578,8 @@ TEST_F(ClusterTest, SigtermDrainsEveryService) {
 
 // Every answer of `stub` to `queries` (by id, k 10 and k 40 with a label),
 // serialized byte for byte.
-std::vector<std::string> Answers(v1::Indexer::Stub* stub, const std::vector<std::string>& ids) {
+std::vector<std::string> Answers(v1::Indexer::Stub* stub,
+                                 const std::vector<std::string>& ids) {
   std::vector<std::string> out;
   for (const std::string& id : ids) {
     for (int k : {10, 40}) {
@@ -542,8 +588,10 @@ std::vector<std::string> Answers(v1::Indexer::Stub* stub, const std::vector<std:
       request.set_k(k);
       if (k == 40) request.set_label("class1");
       SearchResult r = RunSearch(stub, request);
-      std::string answer = r.status.ok() ? "" : absl::StrCat("error ", r.status.error_code());
-      for (const v1::Neighbor& n : r.neighbors) answer += n.SerializeAsString() + "|";
+      std::string answer =
+          r.status.ok() ? "" : absl::StrCat("error ", r.status.error_code());
+      for (const v1::Neighbor& n : r.neighbors)
+        answer += n.SerializeAsString() + "|";
       out.push_back(answer);
     }
   }
@@ -571,7 +619,8 @@ TEST_F(ClusterTest, KillNineOfAFollowerCatchesUpByItself) {
   ASSERT_TRUE(StartFollower(absl::StrCat("127.0.0.1:", port)).ok());
   ASSERT_TRUE(WaitForFollower());
   std::ifstream in(follower_.log_path());
-  const std::string log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string log((std::istreambuf_iterator<char>(in)),
+                        std::istreambuf_iterator<char>());
   EXPECT_EQ(log.find("copied a checkpoint"), std::string::npos)
       << "it should resume from its own store, not copy again: " << log;
   auto primary = Stub(shards_[0].address());
@@ -584,16 +633,19 @@ TEST_F(ClusterTest, KillNineOfAFollowerCatchesUpByItself) {
   EXPECT_GT(p.models(), 200);
   std::vector<std::string> ids;
   for (int i = 0; i < 900; i += 97) {
-    if (gateway::ShardOf(models[i].id, kShards) == 0) ids.push_back(models[i].id);
+    if (gateway::ShardOf(models[i].id, kShards) == 0)
+      ids.push_back(models[i].id);
   }
   ASSERT_FALSE(ids.empty());
   EXPECT_EQ(Answers(follower.get(), ids), Answers(primary.get(), ids));
   // Read-only: a write to the follower names its primary.
   grpc::ClientContext c3;
   v1::UpsertResponse ignored;
-  grpc::Status refused = follower->Upsert(&c3, ToRequest(models[0], true), &ignored);
+  grpc::Status refused =
+      follower->Upsert(&c3, ToRequest(models[0], true), &ignored);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
-  EXPECT_NE(refused.error_message().find(shards_[0].address()), std::string::npos);
+  EXPECT_NE(refused.error_message().find(shards_[0].address()),
+            std::string::npos);
 }
 
 TEST_F(ClusterTest, BackupAndRestoreOfEveryShardAnswerIdentically) {
@@ -612,23 +664,32 @@ TEST_F(ClusterTest, BackupAndRestoreOfEveryShardAnswerIdentically) {
   std::vector<std::string> flags;
   for (int s = 0; s < kShards; ++s) {
     const std::string set = Path(absl::StrCat("backup", s));
-    auto [code, out] = Tpr(absl::StrCat("--indexer ", shards_[s].address(), " backup --to ", set));
+    auto [code, out] = Tpr(
+        absl::StrCat("--indexer ", shards_[s].address(), " backup --to ", set));
     ASSERT_EQ(code, 0) << out;
     EXPECT_NE(out.find("verified"), std::string::npos) << out;
     const std::string into = Path(absl::StrCat("restored", s));
-    std::tie(code, out) = Tpr(absl::StrCat("--indexer ", shards_[s].address(),
-                                           " restore --from ", set, " --into ", into));
+    std::tie(code, out) =
+        Tpr(absl::StrCat("--indexer ", shards_[s].address(), " restore --from ",
+                         set, " --into ", into));
     ASSERT_EQ(code, 0) << out;
     // A second restore into the now non-empty directory is refused.
-    EXPECT_EQ(Tpr(absl::StrCat("--indexer ", shards_[s].address(), " restore --from ", set,
-                               " --into ", into)).first, 1);
-    ASSERT_TRUE(restored[s].Start(BinaryPath("tpr-indexer"), {"--data-dir", into},
-                                  Path(absl::StrCat("restored", s, ".log"))).ok());
+    EXPECT_EQ(Tpr(absl::StrCat("--indexer ", shards_[s].address(),
+                               " restore --from ", set, " --into ", into))
+                  .first,
+              1);
+    ASSERT_TRUE(restored[s]
+                    .Start(BinaryPath("tpr-indexer"), {"--data-dir", into},
+                           Path(absl::StrCat("restored", s, ".log")))
+                    .ok());
     flags.push_back("--shard");
     flags.push_back(restored[s].address());
   }
   ServiceProcess gateway;
-  ASSERT_TRUE(gateway.Start(BinaryPath("tpr-gateway"), flags, Path("gateway-restored.log")).ok());
+  ASSERT_TRUE(
+      gateway
+          .Start(BinaryPath("tpr-gateway"), flags, Path("gateway-restored.log"))
+          .ok());
   auto stub = Stub(gateway.address());
   EXPECT_EQ(Answers(stub.get(), ids), before);
   grpc::ClientContext context;

@@ -6,7 +6,13 @@
 // start naming the line; the keys file format and hashing against OpenSSL's
 // command-line tool; a server keeps its keys alive after its options are
 // gone.
+#include "common/auth.h"
+
 #include <fcntl.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/impl/codegen/sync_stream.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <chrono>
@@ -16,13 +22,7 @@
 #include <thread>
 #include <vector>
 
-#include <grpcpp/create_channel.h>
-#include <grpcpp/impl/codegen/sync_stream.h>
-#include <grpcpp/security/credentials.h>
-#include <gtest/gtest.h>
-
 #include "absl/strings/ascii.h"
-#include "common/auth.h"
 #include "common/server_lifecycle.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/ops_testing.h"
@@ -42,16 +42,18 @@ struct Rpc {
 };
 const std::vector<Rpc>& Rpcs() {
   static const auto* const rpcs = new std::vector<Rpc>{
-      {"Search", Role::kRead},      {"Get", Role::kRead},        {"List", Role::kRead},
-      {"Stats", Role::kRead},       {"Extract", Role::kRead},    {"Upsert", Role::kWrite},
-      {"BatchUpsert", Role::kWrite}, {"Delete", Role::kWrite},   {"Health", Role::kNone},
-      {"Reflection", Role::kNone},
+      {"Search", Role::kRead},       {"Get", Role::kRead},
+      {"List", Role::kRead},         {"Stats", Role::kRead},
+      {"Extract", Role::kRead},      {"Upsert", Role::kWrite},
+      {"BatchUpsert", Role::kWrite}, {"Delete", Role::kWrite},
+      {"Health", Role::kNone},       {"Reflection", Role::kNone},
   };
   return *rpcs;
 }
 
 void Authorize(grpc::ClientContext* context, const std::string& header) {
-  context->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  context->set_deadline(std::chrono::system_clock::now() +
+                        std::chrono::seconds(20));
   if (!header.empty()) context->AddMetadata("authorization", header);
 }
 
@@ -82,14 +84,17 @@ grpc::StatusCode Call(const std::string& rpc, const std::string& header,
   }
   if (rpc == "List") {
     tpr::v1::ListResponse response;
-    return index->List(&context, tpr::v1::ListRequest(), &response).error_code();
+    return index->List(&context, tpr::v1::ListRequest(), &response)
+        .error_code();
   }
   if (rpc == "Stats") {
     tpr::v1::StatsResponse response;
-    return index->Stats(&context, tpr::v1::StatsRequest(), &response).error_code();
+    return index->Stats(&context, tpr::v1::StatsRequest(), &response)
+        .error_code();
   }
   if (rpc == "Upsert") {
-    tpr::v1::UpsertRequest request;  // No model: INVALID_ARGUMENT once past auth.
+    tpr::v1::UpsertRequest
+        request;  // No model: INVALID_ARGUMENT once past auth.
     tpr::v1::UpsertResponse response;
     return index->Upsert(&context, request, &response).error_code();
   }
@@ -122,9 +127,11 @@ grpc::StatusCode Call(const std::string& rpc, const std::string& header,
     const grpc::internal::RpcMethod method(
         "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
         grpc::internal::RpcMethod::BIDI_STREAMING);
-    std::unique_ptr<grpc::ClientReaderWriter<grpc::ByteBuffer, grpc::ByteBuffer>> stream(
-        grpc::internal::ClientReaderWriterFactory<grpc::ByteBuffer, grpc::ByteBuffer>::Create(
-            indexer.get(), method, &context));
+    std::unique_ptr<
+        grpc::ClientReaderWriter<grpc::ByteBuffer, grpc::ByteBuffer>>
+        stream(grpc::internal::ClientReaderWriterFactory<
+               grpc::ByteBuffer, grpc::ByteBuffer>::Create(indexer.get(),
+                                                           method, &context));
     const std::string bytes("\x3a\x00", 2);
     grpc::Slice slice(bytes);
     grpc::ByteBuffer request(&slice, 1);
@@ -155,7 +162,8 @@ class AuthTest : public ::testing::Test {
   void WriteKeys(const std::vector<Role>& roles) {
     std::string text = "# test keys\n\n";
     for (Role role : roles) {
-      absl::StrAppend(&text, common::KeyFileLine(keys_[role], role, "test-key"), "\n");
+      absl::StrAppend(&text, common::KeyFileLine(keys_[role], role, "test-key"),
+                      "\n");
     }
     WriteFile(keys_path_, text);
   }
@@ -163,21 +171,24 @@ class AuthTest : public ::testing::Test {
   void StartServers() {
     ASSERT_TRUE(indexer_
                     .Start(BinaryPath("tpr-indexer"),
-                           {"--data-dir", dir_.path() + "/data", "--api-keys", keys_path_},
+                           {"--data-dir", dir_.path() + "/data", "--api-keys",
+                            keys_path_},
                            dir_.path() + "/indexer.log")
                     .ok());
     ASSERT_TRUE(extractor_
-                    .Start(BinaryPath("tpr-extractor"), {"--api-keys", keys_path_},
+                    .Start(BinaryPath("tpr-extractor"),
+                           {"--api-keys", keys_path_},
                            dir_.path() + "/extractor.log")
                     .ok());
-    indexer_channel_ =
-        grpc::CreateChannel(indexer_.address(), grpc::InsecureChannelCredentials());
-    extractor_channel_ =
-        grpc::CreateChannel(extractor_.address(), grpc::InsecureChannelCredentials());
+    indexer_channel_ = grpc::CreateChannel(indexer_.address(),
+                                           grpc::InsecureChannelCredentials());
+    extractor_channel_ = grpc::CreateChannel(
+        extractor_.address(), grpc::InsecureChannelCredentials());
   }
 
   grpc::StatusCode StatsWith(Role role) {
-    return Call("Stats", "Bearer " + keys_[role], indexer_channel_, extractor_channel_);
+    return Call("Stats", "Bearer " + keys_[role], indexer_channel_,
+                extractor_channel_);
   }
 
   // Waits up to 10 s for Stats with `role`'s key to return `want`.
@@ -203,8 +214,8 @@ TEST_F(AuthTest, EveryCallerAgainstEveryRpc) {
   struct Caller {
     std::string name;
     std::string header;
-    Role role;            // kNone: not a valid key.
-    bool authenticated;   // false: expect UNAUTHENTICATED for closed RPCs.
+    Role role;           // kNone: not a valid key.
+    bool authenticated;  // false: expect UNAUTHENTICATED for closed RPCs.
   };
   absl::StatusOr<std::string> stranger = common::NewApiKey();
   ASSERT_TRUE(stranger.ok());
@@ -219,9 +230,10 @@ TEST_F(AuthTest, EveryCallerAgainstEveryRpc) {
   int checked = 0;
   for (const Caller& caller : callers) {
     for (const Rpc& rpc : Rpcs()) {
-      const grpc::StatusCode got = Call(rpc.name, caller.header, indexer_channel_,
-                                        extractor_channel_);
-      std::string where = absl::StrCat(caller.name, " x ", rpc.name, ": code ", got);
+      const grpc::StatusCode got =
+          Call(rpc.name, caller.header, indexer_channel_, extractor_channel_);
+      std::string where =
+          absl::StrCat(caller.name, " x ", rpc.name, ": code ", got);
       if (rpc.needs == Role::kNone) {
         EXPECT_EQ(got, grpc::StatusCode::OK) << where;
       } else if (!caller.authenticated) {
@@ -242,7 +254,8 @@ TEST_F(AuthTest, EveryCallerAgainstEveryRpc) {
   const std::string log = ReadText(indexer_.log_path());
   EXPECT_NE(log.find("PERMISSION_DENIED"), std::string::npos) << log;
   for (const auto& [role, key] : keys_) {
-    EXPECT_EQ(log.find(key.substr(4)), std::string::npos) << "key of " << RoleName(role);
+    EXPECT_EQ(log.find(key.substr(4)), std::string::npos)
+        << "key of " << RoleName(role);
   }
   EXPECT_EQ(log.find(stranger->substr(4)), std::string::npos);
 }
@@ -265,7 +278,8 @@ TEST_F(AuthTest, ReloadsWhenTheFileChangesAndOnSighup) {
   const struct timespec times[2] = {before.st_atim, before.st_mtim};
   ASSERT_EQ(utimensat(AT_FDCWD, keys_path_.c_str(), times, 0), 0);
   std::this_thread::sleep_for(std::chrono::milliseconds(2500));
-  EXPECT_EQ(StatsWith(Role::kAdmin), grpc::StatusCode::UNAUTHENTICATED) << "watcher fooled";
+  EXPECT_EQ(StatsWith(Role::kAdmin), grpc::StatusCode::UNAUTHENTICATED)
+      << "watcher fooled";
   ASSERT_EQ(indexer_.Signal(SIGHUP), 0);
   EXPECT_TRUE(EventuallyStats(Role::kAdmin, grpc::StatusCode::OK));
   EXPECT_EQ(StatsWith(Role::kWrite), grpc::StatusCode::UNAUTHENTICATED);
@@ -275,18 +289,22 @@ TEST_F(AuthTest, ReloadsWhenTheFileChangesAndOnSighup) {
   std::this_thread::sleep_for(std::chrono::milliseconds(2500));
   EXPECT_EQ(StatsWith(Role::kAdmin), grpc::StatusCode::OK);
   ASSERT_EQ(indexer_.Stop(SIGTERM), 0);
-  EXPECT_NE(ReadText(indexer_.log_path()).find("keeping the current keys"), std::string::npos);
+  EXPECT_NE(ReadText(indexer_.log_path()).find("keeping the current keys"),
+            std::string::npos);
 }
 
 TEST_F(AuthTest, BadKeysFileRefusedAtStartNamingTheLine) {
-  WriteFile(keys_path_, "# ok\n" + common::KeyFileLine("tpr_x", Role::kRead, "") +
+  WriteFile(keys_path_, "# ok\n" +
+                            common::KeyFileLine("tpr_x", Role::kRead, "") +
                             "\nsha256:abc reader\n");
-  const ShellResult r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
-                                              dir_.path(), "/data --api-keys ", keys_path_));
+  const ShellResult r =
+      RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
+                            dir_.path(), "/data --api-keys ", keys_path_));
   EXPECT_EQ(r.exit_code, 2) << r.out;
   EXPECT_NE(r.out.find("line 3"), std::string::npos) << r.out;
-  const ShellResult missing = RunShell(absl::StrCat(
-      BinaryPath("tpr-extractor"), " --api-keys ", dir_.path(), "/absent-keys"));
+  const ShellResult missing =
+      RunShell(absl::StrCat(BinaryPath("tpr-extractor"), " --api-keys ",
+                            dir_.path(), "/absent-keys"));
   EXPECT_EQ(missing.exit_code, 2) << missing.out;
   EXPECT_NE(missing.out.find("absent-keys"), std::string::npos) << missing.out;
 }
@@ -297,15 +315,20 @@ TEST_F(AuthTest, TprKeyNewAndTheCommandsKeyFlags) {
   // `tpr key new` appends a line and prints the key once.
   const std::string tpr = BinaryPath("tpr");
   const ShellResult made =
-      RunShell(absl::StrCat("(", tpr, " key new --role write --keys ", keys_path_,
-                            " --name ci 2>/dev/null)"));
+      RunShell(absl::StrCat("(", tpr, " key new --role write --keys ",
+                            keys_path_, " --name ci 2>/dev/null)"));
   ASSERT_EQ(made.exit_code, 0) << made.out;
   const std::string key(absl::StripAsciiWhitespace(made.out));
   ASSERT_EQ(key.size(), 68u) << made.out;
   const std::string file = ReadText(keys_path_);
-  EXPECT_NE(file.find(common::HashApiKey(key) + " write ci"), std::string::npos) << file;
-  EXPECT_EQ(file.find(key), std::string::npos) << "the file holds only the hash";
-  EXPECT_NE(RunShell(absl::StrCat(tpr, " key new --role root --keys ", keys_path_)).exit_code, 0);
+  EXPECT_NE(file.find(common::HashApiKey(key) + " write ci"), std::string::npos)
+      << file;
+  EXPECT_EQ(file.find(key), std::string::npos)
+      << "the file holds only the hash";
+  EXPECT_NE(
+      RunShell(absl::StrCat(tpr, " key new --role root --keys ", keys_path_))
+          .exit_code,
+      0);
 
   const std::string at = absl::StrCat(" --indexer ", indexer_.address(), " ");
   // No key: refused, and the message says how to give one.
@@ -322,9 +345,12 @@ TEST_F(AuthTest, TprKeyNewAndTheCommandsKeyFlags) {
     if (!ok) std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   EXPECT_TRUE(ok) << r.out;
-  EXPECT_NE(r.out.find("/tpr.v1.Indexer/Stats: OK request_id="), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("/tpr.v1.Indexer/Stats: OK request_id="),
+            std::string::npos)
+      << r.out;
   // A read key from the flag cannot delete.
-  r = RunShell(absl::StrCat(tpr, at, "--api-key ", keys_[Role::kRead], " remove some/id"));
+  r = RunShell(absl::StrCat(tpr, at, "--api-key ", keys_[Role::kRead],
+                            " remove some/id"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.out.find("PERMISSION_DENIED"), std::string::npos) << r.out;
   r = RunShell(absl::StrCat(tpr, at, "--api-key ", key, " remove some/id"));
@@ -332,12 +358,15 @@ TEST_F(AuthTest, TprKeyNewAndTheCommandsKeyFlags) {
 
   // The help texts show the security flags: the top level and every
   // subcommand (whose footer lists the global flags).
-  for (const char* help : {" --help", " query --help", " add --help", " remove --help"}) {
+  for (const char* help :
+       {" --help", " query --help", " add --help", " remove --help"}) {
     r = RunShell(tpr + help);
     EXPECT_EQ(r.exit_code, 0) << help;
-    for (const char* flag : {"--api-key", "TPR_API_KEY", "--tls", "--tls-ca", "--tls-cert",
-                             "--tls-key", "--verbose"}) {
-      EXPECT_NE(r.out.find(flag), std::string::npos) << help << " lacks " << flag << "\n" << r.out;
+    for (const char* flag : {"--api-key", "TPR_API_KEY", "--tls", "--tls-ca",
+                             "--tls-cert", "--tls-key", "--verbose"}) {
+      EXPECT_NE(r.out.find(flag), std::string::npos)
+          << help << " lacks " << flag << "\n"
+          << r.out;
     }
   }
 }
@@ -361,14 +390,18 @@ TEST(AuthFormatTest, HashMatchesOpensslAndLinesParse) {
   ASSERT_TRUE(table.ok()) << table.status();
   ASSERT_EQ(table->size(), 1u);
   EXPECT_EQ(table->at(common::HashApiKey(*key)), Role::kWrite);
-  EXPECT_EQ(common::ParseKeyFile(common::KeyFileLine(*key, Role::kRead, "") + "\n" +
-                                 common::KeyFileLine(*key, Role::kAdmin, ""))
-                .status()
-                .message(),
-            "line 2: duplicate key");
-  EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'a') + " root\n").ok());
-  EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'A') + " read\n").ok());
-  EXPECT_FALSE(common::ParseKeyFile("sha256:" + std::string(64, 'a') + "\n").ok());
+  EXPECT_EQ(
+      common::ParseKeyFile(common::KeyFileLine(*key, Role::kRead, "") + "\n" +
+                           common::KeyFileLine(*key, Role::kAdmin, ""))
+          .status()
+          .message(),
+      "line 2: duplicate key");
+  EXPECT_FALSE(
+      common::ParseKeyFile("sha256:" + std::string(64, 'a') + " root\n").ok());
+  EXPECT_FALSE(
+      common::ParseKeyFile("sha256:" + std::string(64, 'A') + " read\n").ok());
+  EXPECT_FALSE(
+      common::ParseKeyFile("sha256:" + std::string(64, 'a') + "\n").ok());
 }
 
 // The auth filter points into the authenticator: a server must keep it
@@ -378,12 +411,14 @@ TEST(AuthLifetimeTest, ServerKeepsItsKeysAliveAfterItsOptionsAreGone) {
   TempDir dir;
   absl::StatusOr<std::string> key = common::NewApiKey();
   ASSERT_TRUE(key.ok());
-  WriteFile(dir.path() + "/keys", common::KeyFileLine(*key, Role::kRead, "") + "\n");
+  WriteFile(dir.path() + "/keys",
+            common::KeyFileLine(*key, Role::kRead, "") + "\n");
   absl::StatusOr<common::StartedServer> started;
   {
     common::ServerOptions options;
     absl::StatusOr<std::shared_ptr<common::ApiKeyAuthenticator>> keys =
-        common::ApiKeyAuthenticator::Open(dir.path() + "/keys", "lifetime-test", 0);
+        common::ApiKeyAuthenticator::Open(dir.path() + "/keys", "lifetime-test",
+                                          0);
     ASSERT_TRUE(keys.ok()) << keys.status();
     options.api_keys = *keys;
     started = common::StartServer(options, {});
@@ -391,12 +426,13 @@ TEST(AuthLifetimeTest, ServerKeepsItsKeysAliveAfterItsOptionsAreGone) {
   }
   auto channel = grpc::CreateChannel(absl::StrCat("127.0.0.1:", started->port),
                                      grpc::InsecureChannelCredentials());
-  for (const std::string& header : {"Bearer " + *key, std::string("Bearer tpr_wrong")}) {
+  for (const std::string& header :
+       {"Bearer " + *key, std::string("Bearer tpr_wrong")}) {
     grpc::ClientContext context;
     context.AddMetadata("authorization", header);
     tpr::v1::StatsResponse stats;
-    const grpc::Status status =
-        tpr::v1::Indexer::NewStub(channel)->Stats(&context, tpr::v1::StatsRequest(), &stats);
+    const grpc::Status status = tpr::v1::Indexer::NewStub(channel)->Stats(
+        &context, tpr::v1::StatsRequest(), &stats);
     // The right key passes the filter (no Indexer service here: UNIMPLEMENTED).
     EXPECT_EQ(status.error_code(), header == "Bearer " + *key
                                        ? grpc::StatusCode::UNIMPLEMENTED

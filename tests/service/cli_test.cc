@@ -3,6 +3,7 @@
 // streams compared with an in-process brute-force EMD ranking of the
 // signatures the indexer returns; re-runs, failures, get/list/stats/remove;
 // SIGTERM during a search stream.
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <stdio.h>
 #include <sys/wait.h>
@@ -14,8 +15,6 @@
 #include <map>
 #include <regex>
 #include <sstream>
-
-#include <gtest/gtest.h>
 
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
@@ -40,10 +39,11 @@ std::vector<std::string> Lines(const std::string& text) {
 }
 
 // Parses one `tpr query --json` line.
-bool ParseNeighbor(const std::string& line, int* rank, std::string* id, std::string* label,
-                   double* distance) {
+bool ParseNeighbor(const std::string& line, int* rank, std::string* id,
+                   std::string* label, double* distance) {
   static const std::regex kLine(
-      R"re(^\{"rank":(\d+),"id":"([^"]*)","label":"([^"]*)","distance":([-+0-9.eE]+)\}$)re");
+      R"re(^\{"rank":(\d+),"id":"([^"]*)","label":"([^"]*)",)re"
+      R"re("distance":([-+0-9.eE]+)\}$)re");
   std::smatch m;
   if (!std::regex_match(line, m, kLine)) return false;
   *rank = std::stoi(m[1]);
@@ -69,7 +69,8 @@ class CliTest : public ::testing::Test {
 
 TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   const std::string set = cluster_.dir() + "/set";
-  absl::StatusOr<std::vector<testing::GeneratedFile>> files = testing::GenerateSet(set, 3, 2, 1500);
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(set, 3, 2, 1500);
   ASSERT_TRUE(files.ok()) << files.status();
   testing::WriteFile(set + "/broken/bad.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n");
 
@@ -110,12 +111,14 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
       int rank;
       std::string got_id, label;
       double distance;
-      ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &distance)) << line;
+      ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &distance))
+          << line;
       EXPECT_EQ(rank, static_cast<int>(streamed.size()) + 1);
       EXPECT_EQ(label, labels[got_id]);
       streamed.push_back({distance, got_id});
     }
-    absl::StatusOr<std::vector<Ranked>> expected = testing::BruteForceRanking(signature, models);
+    absl::StatusOr<std::vector<Ranked>> expected =
+        testing::BruteForceRanking(signature, models);
     ASSERT_TRUE(expected.ok()) << expected.status();
     ASSERT_EQ(streamed.size(), 6u);
     EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << "query " << id;
@@ -124,7 +127,8 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   // Query by mesh file, with a label filter and k.
   const testing::GeneratedFile& f = files->back();
   CommandResult by_mesh =
-      RunTpr(cluster_, "--json query -k 5 --label " + f.label + " " + set + "/" + f.relative_path);
+      RunTpr(cluster_, "--json query -k 5 --label " + f.label + " " + set +
+                           "/" + f.relative_path);
   ASSERT_EQ(by_mesh.exit_code, 0) << by_mesh.err;
   std::vector<std::string> lines = Lines(by_mesh.out);
   ASSERT_EQ(lines.size(), 2u) << by_mesh.out;  // two poses carry that label
@@ -146,11 +150,15 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   EXPECT_EQ(RunTpr(cluster_, "get " + f.relative_path).exit_code, 1);
   EXPECT_EQ(RunTpr(cluster_, "remove " + f.relative_path).exit_code, 1);
   EXPECT_EQ(RunTpr(cluster_, "query --id no/such/id").exit_code, 1);
-  EXPECT_EQ(RunTpr(cluster_, "query -k 0 --id " + files->front().relative_path).exit_code, 1);
-  CommandResult extract = RunTpr(cluster_, "extract " + set + "/" + files->front().relative_path);
+  EXPECT_EQ(RunTpr(cluster_, "query -k 0 --id " + files->front().relative_path)
+                .exit_code,
+            1);
+  CommandResult extract =
+      RunTpr(cluster_, "extract " + set + "/" + files->front().relative_path);
   EXPECT_EQ(extract.exit_code, 0) << extract.err;
   EXPECT_NE(extract.out.find("points"), std::string::npos);
-  EXPECT_EQ(RunTpr(cluster_, "extract " + set + "/broken/bad.off").exit_code, 1);
+  EXPECT_EQ(RunTpr(cluster_, "extract " + set + "/broken/bad.off").exit_code,
+            1);
 }
 
 // Labels from --manifest; then SIGTERM while a search stream is open: the
@@ -167,8 +175,9 @@ TEST_F(CliTest, ManifestLabelsThenSigtermDuringASearchStreamEndsCleanly) {
     absl::StrAppend(&manifest, f.relative_path, " manifest_", f.label, "\n");
   }
   testing::WriteFile(cluster_.dir() + "/MANIFEST.txt", manifest);
-  CommandResult add = RunTpr(cluster_, "add " + cluster_.dir() + "/set --manifest " +
-                                           cluster_.dir() + "/MANIFEST.txt");
+  CommandResult add =
+      RunTpr(cluster_, "add " + cluster_.dir() + "/set --manifest " +
+                           cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(add.exit_code, 0) << add.out << add.err;
   absl::StatusOr<client::IndexerClient> indexer =
       client::IndexerClient::Connect(cluster_.indexer().address());
@@ -192,7 +201,8 @@ TEST_F(CliTest, ManifestLabelsThenSigtermDuringASearchStreamEndsCleanly) {
   stopper.join();
   // Either the stream completed (graceful) or the server cancelled it at the
   // end of its grace period; both are clean ends, and the process exits 0.
-  EXPECT_TRUE(finished.ok() || absl::IsCancelled(finished) || absl::IsUnavailable(finished))
+  EXPECT_TRUE(finished.ok() || absl::IsCancelled(finished) ||
+              absl::IsUnavailable(finished))
       << finished;
   if (finished.ok()) {
     EXPECT_EQ(more, 3);
@@ -210,11 +220,13 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   ASSERT_TRUE(files.ok());
   const std::string mesh = dir.path() + "/set/" + files->front().relative_path;
   const std::string out = dir.path() + "/out.ply";
-  const std::string command = absl::StrCat(testing::BinaryPath("tpr"), " inspect --local --ascii ", mesh,
-                                           " -o ", out, " > /dev/null");
+  const std::string command =
+      absl::StrCat(testing::BinaryPath("tpr"), " inspect --local --ascii ",
+                   mesh, " -o ", out, " > /dev/null");
   ASSERT_EQ(std::system(command.c_str()), 0);
 
-  absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromFile(mesh, {});
+  absl::StatusOr<extract::LoadedMesh> loaded =
+      extract::LoadMeshFromFile(mesh, {});
   ASSERT_TRUE(loaded.ok());
   extract::Options options;
   options.explain = true;
@@ -228,7 +240,8 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   std::string line;
   int64_t vertices = -1;
   while (std::getline(in, line) && line != "end_header") {
-    if (line.rfind("element vertex ", 0) == 0) vertices = std::stoll(line.substr(15));
+    if (line.rfind("element vertex ", 0) == 0)
+      vertices = std::stoll(line.substr(15));
   }
   ASSERT_EQ(vertices, loaded->stats.vertices);
   std::vector<std::array<int, 3>> colours;
@@ -243,12 +256,14 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   const std::array<int, 3> kRed = {220, 20, 20}, kBlack = {20, 20, 20};
   int points = 0, rings = 0;
   for (size_t f = 0; f < r->signature.features.size(); ++f) {
-    const bool is_point = r->signature.features[f].kind == extract::FeatureKind::kPoint;
+    const bool is_point =
+        r->signature.features[f].kind == extract::FeatureKind::kPoint;
     (is_point ? points : rings)++;
     for (int32_t v : r->explanation->feature_vertices[f]) {
       if (is_point) {
         // Rings are drawn after points, so a point on a ring shows black.
-        EXPECT_TRUE(colours[v] == kRed || colours[v] == kBlack) << "point vertex " << v;
+        EXPECT_TRUE(colours[v] == kRed || colours[v] == kBlack)
+            << "point vertex " << v;
       } else {
         EXPECT_EQ(colours[v], kBlack) << "ring vertex " << v;
       }
@@ -256,9 +271,9 @@ TEST(CliInspectTest, WritesTheRegionsPointsAndRingsOfTheLocalExtraction) {
   }
   EXPECT_GT(points, 0);
   // Unmarked vertices carry a region colour: neither red nor black.
-  const int64_t marked = std::count_if(colours.begin(), colours.end(), [&](const auto& c) {
-    return c == kRed || c == kBlack;
-  });
+  const int64_t marked =
+      std::count_if(colours.begin(), colours.end(),
+                    [&](const auto& c) { return c == kRed || c == kBlack; });
   EXPECT_LT(marked, vertices);
 }
 
@@ -269,12 +284,17 @@ TEST_F(CliTest, InspectThroughTheServiceEqualsTheLocalExtraction) {
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
       testing::GenerateSet(cluster_.dir() + "/set", 1, 1, 2000);
   ASSERT_TRUE(files.ok());
-  const std::string mesh = cluster_.dir() + "/set/" + files->front().relative_path;
-  const std::string remote = cluster_.dir() + "/remote.ply", local = cluster_.dir() + "/local.ply";
-  CommandResult r = RunTpr(cluster_, "--json inspect " + mesh + " -o " + remote);
+  const std::string mesh =
+      cluster_.dir() + "/set/" + files->front().relative_path;
+  const std::string remote = cluster_.dir() + "/remote.ply",
+                    local = cluster_.dir() + "/local.ply";
+  CommandResult r =
+      RunTpr(cluster_, "--json inspect " + mesh + " -o " + remote);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("\"local\":false"), std::string::npos) << r.out;
-  ASSERT_EQ(RunTpr(cluster_, "inspect --local " + mesh + " -o " + local).exit_code, 0);
+  ASSERT_EQ(
+      RunTpr(cluster_, "inspect --local " + mesh + " -o " + local).exit_code,
+      0);
   auto read = [](const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     std::stringstream bytes;
@@ -283,9 +303,11 @@ TEST_F(CliTest, InspectThroughTheServiceEqualsTheLocalExtraction) {
   };
   const std::string remote_bytes = read(remote);
   EXPECT_GT(remote_bytes.size(), 1000u);
-  EXPECT_TRUE(remote_bytes == read(local)) << "service and local inspect differ";
-  CommandResult down = RunTpr(
-      cluster_, "--extractor 127.0.0.1:1 --timeout 2 inspect " + mesh + " -o " + remote + ".2");
+  EXPECT_TRUE(remote_bytes == read(local))
+      << "service and local inspect differ";
+  CommandResult down =
+      RunTpr(cluster_, "--extractor 127.0.0.1:1 --timeout 2 inspect " + mesh +
+                           " -o " + remote + ".2");
   EXPECT_EQ(down.exit_code, 1);
   EXPECT_NE(down.err.find("UNAVAILABLE"), std::string::npos) << down.err;
 }
@@ -302,8 +324,8 @@ TEST_F(CliTest, ControlCharactersInIdsAreEscapedInTextOutput) {
   absl::StatusOr<client::IndexerClient> indexer =
       client::IndexerClient::Connect(cluster_.indexer().address());
   ASSERT_TRUE(extractor.ok() && indexer.ok());
-  absl::StatusOr<v1::ExtractResponse> r =
-      extractor->ExtractFile(cluster_.dir() + "/set/" + files->front().relative_path);
+  absl::StatusOr<v1::ExtractResponse> r = extractor->ExtractFile(
+      cluster_.dir() + "/set/" + files->front().relative_path);
   ASSERT_TRUE(r.ok()) << r.status();
   v1::Model model;
   model.set_id("two\nlines\x01");
@@ -325,7 +347,8 @@ TEST_F(CliTest, ControlCharactersInIdsAreEscapedInTextOutput) {
   ASSERT_EQ(query.exit_code, 0) << query.err;
   EXPECT_EQ(Lines(query.out).size(), 2u) << query.out;  // header and one row
   CommandResult json = RunTpr(cluster_, "--json list");
-  EXPECT_NE(json.out.find("\"id\":\"two\\nlines\\u0001\""), std::string::npos) << json.out;
+  EXPECT_NE(json.out.find("\"id\":\"two\\nlines\\u0001\""), std::string::npos)
+      << json.out;
 }
 
 }  // namespace

@@ -4,13 +4,12 @@
 // early stop, error codes, retries while a server comes up, fail-over.
 #include "tpr/client.h"
 
+#include <google/protobuf/util/message_differencer.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 
 #include <map>
 #include <thread>
-
-#include <google/protobuf/util/message_differencer.h>
-#include <gtest/gtest.h>
 
 #include "tests/service/extsvc_test_util.h"
 
@@ -23,14 +22,17 @@ TEST(ChannelTargetTest, MapsAddressListsToResolverTargets) {
   EXPECT_EQ(*ChannelTarget("127.0.0.1:7001"), "ipv4:127.0.0.1:7001");
   EXPECT_EQ(*ChannelTarget("127.0.0.1:7001, 127.0.0.1:7002"),
             "ipv4:127.0.0.1:7001,127.0.0.1:7002");
-  EXPECT_EQ(*ChannelTarget("[::1]:7001,[::1]:7002"), "ipv6:[::1]:7001,[::1]:7002");
+  EXPECT_EQ(*ChannelTarget("[::1]:7001,[::1]:7002"),
+            "ipv6:[::1]:7001,[::1]:7002");
   EXPECT_EQ(*ChannelTarget("localhost:7001"), "dns:///localhost:7001");
-  EXPECT_EQ(*ChannelTarget("dns:///tpr.example:7001"), "dns:///tpr.example:7001");
+  EXPECT_EQ(*ChannelTarget("dns:///tpr.example:7001"),
+            "dns:///tpr.example:7001");
   EXPECT_EQ(*ChannelTarget("unix:/run/tpr.sock"), "unix:/run/tpr.sock");
   EXPECT_TRUE(absl::IsInvalidArgument(ChannelTarget("").status()));
   EXPECT_TRUE(absl::IsInvalidArgument(ChannelTarget("127.0.0.1").status()));
   EXPECT_TRUE(absl::IsInvalidArgument(ChannelTarget("a:1,b:2").status()));
-  EXPECT_TRUE(absl::IsInvalidArgument(ChannelTarget("127.0.0.1:1,[::1]:2").status()));
+  EXPECT_TRUE(
+      absl::IsInvalidArgument(ChannelTarget("127.0.0.1:1,[::1]:2").status()));
 }
 
 class SdkEndToEndTest : public ::testing::Test {
@@ -55,13 +57,15 @@ TEST_F(SdkEndToEndTest, BatchAddThenSearchMatchesBruteForceAndStopsEarly) {
   absl::StatusOr<ExtractorClient> extractor =
       ExtractorClient::Connect(cluster_->extractor_addresses());
   ASSERT_TRUE(extractor.ok()) << extractor.status();
-  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(cluster_->indexer().address());
+  absl::StatusOr<IndexerClient> indexer =
+      IndexerClient::Connect(cluster_->indexer().address());
   ASSERT_TRUE(indexer.ok()) << indexer.status();
 
   std::vector<std::pair<std::string, v1::Signature>> models;
   std::unique_ptr<BatchUpsertWriter> batch = indexer->BatchUpsert();
   for (const testing::GeneratedFile& f : *files) {
-    absl::StatusOr<v1::ExtractResponse> r = extractor->ExtractBytes(f.off, f.relative_path);
+    absl::StatusOr<v1::ExtractResponse> r =
+        extractor->ExtractBytes(f.off, f.relative_path);
     ASSERT_TRUE(r.ok()) << f.relative_path << ": " << r.status();
     v1::Model model;
     model.set_id("sdk/" + f.relative_path);
@@ -77,8 +81,8 @@ TEST_F(SdkEndToEndTest, BatchAddThenSearchMatchesBruteForceAndStopsEarly) {
   // Get returns the signature as extracted.
   absl::StatusOr<v1::Model> got = indexer->Get(models[0].first);
   ASSERT_TRUE(got.ok()) << got.status();
-  EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(got->signature(),
-                                                                 models[0].second));
+  EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(
+      got->signature(), models[0].second));
   EXPECT_GT(got->added_unix_micros(), 0);
 
   for (const auto& [id, signature] : models) {
@@ -90,11 +94,13 @@ TEST_F(SdkEndToEndTest, BatchAddThenSearchMatchesBruteForceAndStopsEarly) {
     std::vector<Ranked> streamed;
     for (v1::Neighbor n; stream->Next(&n);) {
       EXPECT_EQ(n.rank(), static_cast<int>(streamed.size()) + 1);
-      if (n.id().rfind("sdk/", 0) == 0) streamed.push_back({n.distance(), n.id()});
+      if (n.id().rfind("sdk/", 0) == 0)
+        streamed.push_back({n.distance(), n.id()});
     }
     ASSERT_TRUE(stream->Finish().ok());
     ASSERT_NE(stream->Stats(), nullptr);
-    absl::StatusOr<std::vector<Ranked>> expected = testing::BruteForceRanking(signature, models);
+    absl::StatusOr<std::vector<Ranked>> expected =
+        testing::BruteForceRanking(signature, models);
     ASSERT_TRUE(expected.ok()) << expected.status();
     EXPECT_EQ(streamed.size(), models.size());
     EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << "query " << id;
@@ -114,7 +120,8 @@ TEST_F(SdkEndToEndTest, BatchAddThenSearchMatchesBruteForceAndStopsEarly) {
   EXPECT_TRUE(stream->Finish().ok());
 
   // Paged listing sees every model in id order.
-  absl::StatusOr<std::vector<v1::Model>> listed = indexer->ListAll(files->front().label);
+  absl::StatusOr<std::vector<v1::Model>> listed =
+      indexer->ListAll(files->front().label);
   ASSERT_TRUE(listed.ok()) << listed.status();
   EXPECT_EQ(listed->size(), 2u);
   absl::StatusOr<v1::StatsResponse> stats = indexer->Stats();
@@ -123,19 +130,22 @@ TEST_F(SdkEndToEndTest, BatchAddThenSearchMatchesBruteForceAndStopsEarly) {
 }
 
 TEST_F(SdkEndToEndTest, ErrorsCarryTheirCodesAndTheServiceKeepsServing) {
-  absl::StatusOr<IndexerClient> indexer = IndexerClient::Connect(cluster_->indexer().address());
+  absl::StatusOr<IndexerClient> indexer =
+      IndexerClient::Connect(cluster_->indexer().address());
   ASSERT_TRUE(indexer.ok());
   absl::StatusOr<ExtractorClient> extractor =
       ExtractorClient::Connect(cluster_->extractor_addresses());
   ASSERT_TRUE(extractor.ok());
   EXPECT_TRUE(absl::IsNotFound(indexer->Get("no/such/id").status()));
   EXPECT_TRUE(absl::IsNotFound(indexer->Delete("no/such/id")));
-  EXPECT_TRUE(absl::IsNotFound(extractor->ExtractFile("/no/such/mesh.off").status()));
+  EXPECT_TRUE(
+      absl::IsNotFound(extractor->ExtractFile("/no/such/mesh.off").status()));
 
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
       testing::GenerateSet(cluster_->dir() + "/errors", 1, 1, 800);
   ASSERT_TRUE(files.ok());
-  absl::StatusOr<v1::ExtractResponse> r = extractor->ExtractBytes(files->at(0).off, "a.off");
+  absl::StatusOr<v1::ExtractResponse> r =
+      extractor->ExtractBytes(files->at(0).off, "a.off");
   ASSERT_TRUE(r.ok()) << r.status();
   v1::Model model;
   model.set_id("errors/a");
@@ -186,29 +196,33 @@ TEST(SdkRetryTest, RetriesUnavailableUntilTheServerComesUp) {
   call.initial_backoff = absl::Milliseconds(100);
   call.max_backoff = absl::Milliseconds(400);
   call.timeout = absl::Seconds(30);
-  absl::StatusOr<ExtractorClient> client = ExtractorClient::Connect(address, call);
+  absl::StatusOr<ExtractorClient> client =
+      ExtractorClient::Connect(address, call);
   ASSERT_TRUE(client.ok());
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
       testing::GenerateSet(dir.path() + "/set", 1, 1, 600);
   ASSERT_TRUE(files.ok());
-  absl::StatusOr<v1::ExtractResponse> r = client->ExtractBytes(files->at(0).off, "a.off");
+  absl::StatusOr<v1::ExtractResponse> r =
+      client->ExtractBytes(files->at(0).off, "a.off");
   starter.join();
   EXPECT_TRUE(r.ok()) << r.status();
 
   // With retries disabled, a dead address fails fast with UNAVAILABLE.
   CallOptions once;
   once.max_attempts = 1;
-  absl::StatusOr<ExtractorClient> dead =
-      ExtractorClient::Connect(absl::StrCat("127.0.0.1:", testing::FreePort()), once);
+  absl::StatusOr<ExtractorClient> dead = ExtractorClient::Connect(
+      absl::StrCat("127.0.0.1:", testing::FreePort()), once);
   ASSERT_TRUE(dead.ok());
-  EXPECT_TRUE(absl::IsUnavailable(dead->ExtractBytes(files->at(0).off, "a.off").status()));
+  EXPECT_TRUE(absl::IsUnavailable(
+      dead->ExtractBytes(files->at(0).off, "a.off").status()));
 }
 
 // Round robin over two extractors: after one stops, calls keep succeeding.
 TEST(SdkLoadBalancingTest, SurvivesOneOfTwoExtractorsStopping) {
   testing::Cluster cluster;
   ASSERT_TRUE(cluster.Start(/*extractors=*/2).ok());
-  absl::StatusOr<ExtractorClient> client = ExtractorClient::Connect(cluster.extractor_addresses());
+  absl::StatusOr<ExtractorClient> client =
+      ExtractorClient::Connect(cluster.extractor_addresses());
   ASSERT_TRUE(client.ok());
   absl::StatusOr<std::vector<testing::GeneratedFile>> files =
       testing::GenerateSet(cluster.dir() + "/set", 1, 1, 600);
@@ -218,7 +232,8 @@ TEST(SdkLoadBalancingTest, SurvivesOneOfTwoExtractorsStopping) {
   }
   EXPECT_EQ(cluster.extractor(0).Stop(SIGTERM), 0);
   for (int i = 0; i < 4; ++i) {
-    absl::StatusOr<v1::ExtractResponse> r = client->ExtractBytes(files->at(0).off, "a.off");
+    absl::StatusOr<v1::ExtractResponse> r =
+        client->ExtractBytes(files->at(0).off, "a.off");
     EXPECT_TRUE(r.ok()) << r.status();
   }
 }

@@ -3,14 +3,15 @@
 // variables, the precedence flag > environment > file > default, the error
 // for a misspelt key, --print-config (and that its output reads back), and
 // the masking of secrets.
-#include <map>
-#include <string>
+#include "common/config.h"
 
 #include <gtest/gtest.h>
 
+#include <map>
+#include <string>
+
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
-#include "common/config.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/ops_testing.h"
 
@@ -34,7 +35,8 @@ std::map<std::string, std::string> ParseConfig(const std::string& text) {
 
 TEST(ConfigTest, EnvNameIsPrefixPlusUpperSnake) {
   EXPECT_EQ(common::EnvName("TPR_INDEXER_", "max-k"), "TPR_INDEXER_MAX_K");
-  EXPECT_EQ(common::EnvName("TPR_EXTRACTOR_", "max-mesh-bytes"), "TPR_EXTRACTOR_MAX_MESH_BYTES");
+  EXPECT_EQ(common::EnvName("TPR_EXTRACTOR_", "max-mesh-bytes"),
+            "TPR_EXTRACTOR_MAX_MESH_BYTES");
 }
 
 TEST(ConfigTest, IndexerPrecedenceFlagOverEnvOverFileOverDefault) {
@@ -47,14 +49,17 @@ TEST(ConfigTest, IndexerPrecedenceFlagOverEnvOverFileOverDefault) {
             "threads = 3\n"
             "max-concurrent-searches = 7\n"
             "log-format = \"json\"\n");
-  const ShellResult r = RunShell(absl::StrCat(
-      "TPR_INDEXER_MAX_K=77 TPR_INDEXER_THREADS=4 ", BinaryPath("tpr-indexer"),
-      " --data-dir ", dir.path(), "/data --config ", file, " --threads 5 --print-config"));
+  const ShellResult r = RunShell(
+      absl::StrCat("TPR_INDEXER_MAX_K=77 TPR_INDEXER_THREADS=4 ",
+                   BinaryPath("tpr-indexer"), " --data-dir ", dir.path(),
+                   "/data --config ", file, " --threads 5 --print-config"));
   ASSERT_EQ(r.exit_code, 0) << r.out;
   std::map<std::string, std::string> config = ParseConfig(r.out);
-  EXPECT_EQ(config["threads"], "5") << "flag beats environment and file\n" << r.out;
+  EXPECT_EQ(config["threads"], "5") << "flag beats environment and file\n"
+                                    << r.out;
   EXPECT_EQ(config["max-k"], "77") << "environment beats file\n" << r.out;
-  EXPECT_EQ(config["max-concurrent-searches"], "7") << "file beats default\n" << r.out;
+  EXPECT_EQ(config["max-concurrent-searches"], "7") << "file beats default\n"
+                                                    << r.out;
   EXPECT_EQ(config["listen"], "\"127.0.0.1:9123\"") << r.out;
   EXPECT_EQ(config["log-format"], "\"json\"") << r.out;
   EXPECT_EQ(config["shutdown-grace-ms"], "10000") << "default\n" << r.out;
@@ -73,8 +78,8 @@ TEST(ConfigTest, PrintedConfigReadsBackToTheSameConfig) {
   EXPECT_EQ(config["threads"], "3");
   EXPECT_EQ(config["max-vertices"], "12345");
   EXPECT_EQ(config["log-calls"], "false");
-  const ShellResult again =
-      RunShell(absl::StrCat(BinaryPath("tpr-extractor"), " --config ", first, " --print-config"));
+  const ShellResult again = RunShell(absl::StrCat(
+      BinaryPath("tpr-extractor"), " --config ", first, " --print-config"));
   ASSERT_EQ(again.exit_code, 0) << again.out;
   std::map<std::string, std::string> reread = ParseConfig(again.out);
   EXPECT_EQ(reread, config) << again.out;
@@ -84,31 +89,36 @@ TEST(ConfigTest, MisspeltKeyIsAnErrorNamingIt) {
   TempDir dir;
   const std::string file = dir.path() + "/bad.toml";
   WriteFile(file, "max-kk = 5\n");
-  const ShellResult r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
-                                              dir.path(), " --config ", file));
+  const ShellResult r =
+      RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
+                            dir.path(), " --config ", file));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.out.find("max-kk"), std::string::npos) << r.out;
 }
 
 TEST(ConfigTest, MissingFileAndBadValueAreErrors) {
   TempDir dir;
-  ShellResult r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ", dir.path(),
-                                        " --config ", dir.path(), "/absent.toml"));
+  ShellResult r = RunShell(
+      absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ", dir.path(),
+                   " --config ", dir.path(), "/absent.toml"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.out.find("absent.toml"), std::string::npos) << r.out;
-  r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ", dir.path(),
-                            " --log-format xml"));
+  r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
+                            dir.path(), " --log-format xml"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.out.find("log-format"), std::string::npos) << r.out;
-  r = RunShell(absl::StrCat("TPR_INDEXER_MAX_K=many ", BinaryPath("tpr-indexer"), " --data-dir ",
+  r = RunShell(absl::StrCat("TPR_INDEXER_MAX_K=many ",
+                            BinaryPath("tpr-indexer"), " --data-dir ",
                             dir.path(), " --print-config"));
   EXPECT_NE(r.exit_code, 0) << r.out;
 }
 
 TEST(ConfigTest, DeployExamplesLoad) {
-  const std::string deploy = std::string(TPR_TEST_DATA_DIR) + "/../../deploy/config/";
-  ShellResult r = RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --config ", deploy,
-                                        "tpr-indexer.toml --print-config"));
+  const std::string deploy =
+      std::string(TPR_TEST_DATA_DIR) + "/../../deploy/config/";
+  ShellResult r =
+      RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --config ", deploy,
+                            "tpr-indexer.toml --print-config"));
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_EQ(ParseConfig(r.out)["data-dir"], "\"/var/lib/tpr\"") << r.out;
   r = RunShell(absl::StrCat(BinaryPath("tpr-extractor"), " --config ", deploy,
@@ -118,17 +128,20 @@ TEST(ConfigTest, DeployExamplesLoad) {
   r = RunShell(absl::StrCat(BinaryPath("tpr-gateway"), " --config ", deploy,
                             "tpr-gateway.toml --print-config"));
   ASSERT_EQ(r.exit_code, 0) << r.out;
-  EXPECT_EQ(ParseConfig(r.out)["shard-map"], "\"/etc/tpr/shards.txt\"") << r.out;
+  EXPECT_EQ(ParseConfig(r.out)["shard-map"], "\"/etc/tpr/shards.txt\"")
+      << r.out;
   EXPECT_EQ(ParseConfig(r.out)["metrics-listen"], "\"0.0.0.0:9103\"") << r.out;
 }
 
 TEST(ConfigTest, GatewayTakesEnvironmentAndMasksItsShardKey) {
   // The shard key from the environment, masked; a flag beats the
   // environment, which beats the default.
-  const ShellResult r = RunShell(absl::StrCat(
-      "TPR_GATEWAY_SHARD_API_KEY=tpr_verysecret TPR_GATEWAY_HEALTH_INTERVAL_MS=250 "
-      "TPR_GATEWAY_LOG_FORMAT=json ",
-      BinaryPath("tpr-gateway"), " --shard 127.0.0.1:1 --log-format text --print-config"));
+  const ShellResult r = RunShell(
+      absl::StrCat("TPR_GATEWAY_SHARD_API_KEY=tpr_verysecret "
+                   "TPR_GATEWAY_HEALTH_INTERVAL_MS=250 "
+                   "TPR_GATEWAY_LOG_FORMAT=json ",
+                   BinaryPath("tpr-gateway"),
+                   " --shard 127.0.0.1:1 --log-format text --print-config"));
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_EQ(r.out.find("verysecret"), std::string::npos) << r.out;
   std::map<std::string, std::string> config = ParseConfig(r.out);
@@ -143,14 +156,17 @@ TEST(ConfigTest, PrintConfigMasksSecrets) {
   std::string address = "127.0.0.1:1";
   app.add_option("--api-key", key, "a secret");
   app.add_option("--address", address, "not a secret")->capture_default_str();
-  common::ConfigSupport config = common::AddConfigSupport(app, "TPR_TEST_", {"api-key"});
-  const char* argv[] = {"test", "--api-key", "tpr_supersecret", "--print-config"};
+  common::ConfigSupport config =
+      common::AddConfigSupport(app, "TPR_TEST_", {"api-key"});
+  const char* argv[] = {"test", "--api-key", "tpr_supersecret",
+                        "--print-config"};
   ASSERT_NO_THROW(app.parse(4, const_cast<char**>(argv)));
   ASSERT_TRUE(config.print_requested());
   const std::string printed = config.Effective();
   EXPECT_EQ(printed.find("supersecret"), std::string::npos) << printed;
   EXPECT_NE(printed.find("api-key = \"***\""), std::string::npos) << printed;
-  EXPECT_NE(printed.find("address = \"127.0.0.1:1\""), std::string::npos) << printed;
+  EXPECT_NE(printed.find("address = \"127.0.0.1:1\""), std::string::npos)
+      << printed;
 }
 
 }  // namespace

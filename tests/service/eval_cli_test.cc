@@ -6,6 +6,7 @@
 // produce the same signatures and distances as the libraries. Also: the
 // pictures are well-formed SVG, a bad mesh is listed and left out, and a set
 // with nothing to evaluate exits non-zero.
+#include <gtest/gtest.h>
 #include <stdio.h>
 #include <sys/wait.h>
 
@@ -18,8 +19,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "eval/lib/metrics.h"
@@ -48,7 +47,8 @@ std::string ReadText(const std::string& path) {
 
 // The JSON value of `key` in the object that starts at `from` (the first
 // occurrence after it), as a number; NaN when absent or not a number.
-double JsonNumber(const std::string& json, size_t from, const std::string& key) {
+double JsonNumber(const std::string& json, size_t from,
+                  const std::string& key) {
   const std::string needle = "\"" + key + "\":";
   const size_t at = json.find(needle, from);
   if (at == std::string::npos) return std::nan("");
@@ -65,7 +65,8 @@ std::vector<double> JsonPr(const std::string& json, size_t from) {
   if (at == std::string::npos) return pr;
   const size_t close = json.find(']', at);
   std::stringstream list(json.substr(at + 6, close - at - 6));
-  for (std::string item; std::getline(list, item, ',');) pr.push_back(std::stod(item));
+  for (std::string item; std::getline(list, item, ',');)
+    pr.push_back(std::stod(item));
   return pr;
 }
 
@@ -89,23 +90,26 @@ std::vector<LabelledMesh> ReadSynthManifest(const std::string& dir) {
 // default ground distance (as the indexer does), EMD between every pair.
 using Matrix = std::vector<std::vector<double>>;
 
-absl::StatusOr<Matrix> InProcessDistances(const std::vector<LabelledMesh>& meshes) {
+absl::StatusOr<Matrix> InProcessDistances(
+    const std::vector<LabelledMesh>& meshes) {
   std::vector<index::PreparedSignature> prepared;
   for (const LabelledMesh& m : meshes) {
-    absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromFile(m.path, {});
+    absl::StatusOr<extract::LoadedMesh> loaded =
+        extract::LoadMeshFromFile(m.path, {});
     if (!loaded.ok()) return loaded.status();
-    absl::StatusOr<extract::ExtractResult> r =
-        extract::ExtractSignature(loaded->mesh, loaded->stats, extract::Options{});
+    absl::StatusOr<extract::ExtractResult> r = extract::ExtractSignature(
+        loaded->mesh, loaded->stats, extract::Options{});
     if (!r.ok()) return r.status();
-    absl::StatusOr<index::PreparedSignature> p =
-        index::Prepare(eval::ToIndexSignature(r->signature), index::GroundDistanceOptions{});
+    absl::StatusOr<index::PreparedSignature> p = index::Prepare(
+        eval::ToIndexSignature(r->signature), index::GroundDistanceOptions{});
     if (!p.ok()) return p.status();
     prepared.push_back(std::move(*p));
   }
   const size_t n = prepared.size();
   Matrix d(n, std::vector<double>(n, 0.0));
   for (size_t i = 0; i < n; ++i) {
-    for (size_t j = i + 1; j < n; ++j) d[i][j] = d[j][i] = index::Distance(prepared[i], prepared[j]);
+    for (size_t j = i + 1; j < n; ++j)
+      d[i][j] = d[j][i] = index::Distance(prepared[i], prepared[j]);
   }
   return d;
 }
@@ -135,7 +139,8 @@ Oracle Score(const Matrix& d, const std::vector<std::string>& labels) {
       ++(labels[i] == labels[j] ? nw : nb);
     }
   }
-  return {eval::Evaluate(labels, queries), labels, (within / nw) / (between / nb)};
+  return {eval::Evaluate(labels, queries), labels,
+          (within / nw) / (between / nb)};
 }
 
 // Checks that the metrics object of `json` starting at `from` equals `m`.
@@ -151,19 +156,25 @@ void ExpectMetrics(const std::string& json, size_t from, const eval::Metrics& m,
   EXPECT_EQ(JsonNumber(json, from, "queries"), m.queries) << what;
   const std::vector<double> pr = JsonPr(json, from);
   ASSERT_EQ(pr.size(), static_cast<size_t>(eval::kRecallLevels)) << what;
-  for (int r = 0; r < eval::kRecallLevels; ++r) EXPECT_NEAR(pr[r], m.pr[r], kTol) << what;
+  for (int r = 0; r < eval::kRecallLevels; ++r)
+    EXPECT_NEAR(pr[r], m.pr[r], kTol) << what;
 }
 
 // Checks the whole report against the oracle: counts, overall metrics and
 // every class's.
 void ExpectReport(const std::string& json, const Oracle& oracle) {
-  EXPECT_EQ(JsonNumber(json, 0, "models"), static_cast<double>(oracle.labels.size())) << json;
-  EXPECT_EQ(JsonNumber(json, 0, "classes"), static_cast<double>(oracle.scores.per_class.size()))
+  EXPECT_EQ(JsonNumber(json, 0, "models"),
+            static_cast<double>(oracle.labels.size()))
+      << json;
+  EXPECT_EQ(JsonNumber(json, 0, "classes"),
+            static_cast<double>(oracle.scores.per_class.size()))
       << json;
   // Overall fields come before "per_class".
   ASSERT_LT(json.find("\"nn\":"), json.find("\"per_class\"")) << json;
   ExpectMetrics(json, 0, oracle.scores.overall, "overall");
-  EXPECT_NEAR(JsonNumber(json, 0, "within_between"), oracle.within_between, 1e-9) << json;
+  EXPECT_NEAR(JsonNumber(json, 0, "within_between"), oracle.within_between,
+              1e-9)
+      << json;
   ASSERT_EQ(oracle.scores.per_class.size(), 3u);
   for (const auto& [cls, m] : oracle.scores.per_class) {
     const size_t at = json.find("\"" + cls + "\":{");
@@ -178,7 +189,8 @@ void ExpectReport(const std::string& json, const Oracle& oracle) {
 void ExpectSvg(const std::string& path) {
   ASSERT_TRUE(fs::is_regular_file(path)) << path;
   std::string svg = ReadText(path);
-  while (!svg.empty() && std::isspace(static_cast<unsigned char>(svg.back()))) svg.pop_back();
+  while (!svg.empty() && std::isspace(static_cast<unsigned char>(svg.back())))
+    svg.pop_back();
   EXPECT_EQ(svg.rfind("<svg", 0), 0u) << path << ": " << svg.substr(0, 80);
   ASSERT_GE(svg.size(), 6u);
   EXPECT_EQ(svg.substr(svg.size() - 6), "</svg>") << path;
@@ -189,9 +201,10 @@ class EvalCliTest : public ::testing::Test {
   void SetUp() override {
     ASSERT_TRUE(cluster_.Start().ok());
     set_ = cluster_.dir() + "/set";
-    const std::string synth = absl::StrCat(testing::BinaryPath("tpr-synth"), " --out ", set_,
-                                           " --classes 3 --poses 3 --vertices 1500 --seed 7",
-                                           " --jobs 2 > /dev/null 2>&1");
+    const std::string synth =
+        absl::StrCat(testing::BinaryPath("tpr-synth"), " --out ", set_,
+                     " --classes 3 --poses 3 --vertices 1500 --seed 7",
+                     " --jobs 2 > /dev/null 2>&1");
     ASSERT_EQ(std::system(synth.c_str()), 0) << synth;
     meshes_ = ReadSynthManifest(set_);
     ASSERT_EQ(meshes_.size(), 9u);
@@ -211,11 +224,13 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
 
   // A bad mesh inside a class folder: listed with its reason, left out.
   const std::string first_class = oracle->labels.front();
-  testing::WriteFile(set_ + "/" + first_class + "/bad.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n");
+  testing::WriteFile(set_ + "/" + first_class + "/bad.off",
+                     "OFF\n3 1 0\n0 0 0\n1 0 0\n");
 
   // Folder of class subfolders.
   const std::string out = cluster_.dir() + "/out";
-  CommandResult folder = RunTpr(cluster_, "--json eval --jobs 3 --out " + out + " " + set_);
+  CommandResult folder =
+      RunTpr(cluster_, "--json eval --jobs 3 --out " + out + " " + set_);
   ASSERT_EQ(folder.exit_code, 0) << folder.out << folder.err;
   SCOPED_TRACE(folder.out);
   ExpectReport(folder.out, *oracle);
@@ -239,21 +254,24 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
   std::string manifest;
   std::vector<std::string> mixed_labels;
   std::map<std::string, int> class_index;
-  for (const LabelledMesh& m : meshes_) class_index.emplace(m.label, class_index.size());
+  for (const LabelledMesh& m : meshes_)
+    class_index.emplace(m.label, class_index.size());
   for (const LabelledMesh& m : meshes_) {
     const std::string stem = fs::path(m.path).stem().string();
     const bool last_pose = stem.substr(stem.rfind('_') + 1) == "2";
-    mixed_labels.push_back(absl::StrCat("mix_", (class_index[m.label] + last_pose) % 3));
-    absl::StrAppend(&manifest, fs::path(m.path).lexically_relative(cluster_.dir()).string(), " ",
-                    mixed_labels.back(), "\n");
+    mixed_labels.push_back(
+        absl::StrCat("mix_", (class_index[m.label] + last_pose) % 3));
+    absl::StrAppend(
+        &manifest, fs::path(m.path).lexically_relative(cluster_.dir()).string(),
+        " ", mixed_labels.back(), "\n");
   }
   const Oracle mixed = Score(*d, mixed_labels);
   EXPECT_LT(mixed.scores.overall.ft, 0.9);  // the check below is not trivial
   EXPECT_GT(mixed.scores.overall.ft, 0.0);
   testing::WriteFile(cluster_.dir() + "/MANIFEST.txt", manifest);
   const std::string out2 = cluster_.dir() + "/out2";
-  CommandResult listed =
-      RunTpr(cluster_, "--json eval --out " + out2 + " " + cluster_.dir() + "/MANIFEST.txt");
+  CommandResult listed = RunTpr(cluster_, "--json eval --out " + out2 + " " +
+                                              cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(listed.exit_code, 0) << listed.out << listed.err;
   ExpectReport(listed.out, mixed);
   EXPECT_EQ(JsonNumber(listed.out, 0, "added"), 9);
@@ -265,7 +283,8 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
   // human table names every class and the overall row.
   CommandResult again = RunTpr(cluster_, "eval --out " + out + " " + set_);
   EXPECT_EQ(again.exit_code, 0) << again.err;
-  EXPECT_NE(again.out.find("9 already indexed"), std::string::npos) << again.out;
+  EXPECT_NE(again.out.find("9 already indexed"), std::string::npos)
+      << again.out;
   for (const auto& [cls, m] : oracle->scores.per_class) {
     EXPECT_NE(again.out.find(cls), std::string::npos) << again.out;
   }
@@ -275,25 +294,28 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
 // Without --out, the pictures go to a new temporary folder (under $TMPDIR)
 // named in the report, never into the working directory.
 TEST_F(EvalCliTest, DefaultOutputIsATemporaryFolderNotTheWorkingTree) {
-  const std::string cwd = cluster_.dir() + "/cwd", tmp = cluster_.dir() + "/tmp";
+  const std::string cwd = cluster_.dir() + "/cwd",
+                    tmp = cluster_.dir() + "/tmp";
   fs::create_directories(cwd);
   fs::create_directories(tmp);
   const std::string command = absl::StrCat(
-      "cd ", cwd, " && TMPDIR=", tmp, " TPR_EXTRACTOR=", cluster_.extractor_addresses(),
-      " TPR_INDEXER=", cluster_.indexer().address(), " ", testing::BinaryPath("tpr"),
-      " --json eval ", set_, " 2>/dev/null");
+      "cd ", cwd, " && TMPDIR=", tmp,
+      " TPR_EXTRACTOR=", cluster_.extractor_addresses(),
+      " TPR_INDEXER=", cluster_.indexer().address(), " ",
+      testing::BinaryPath("tpr"), " --json eval ", set_, " 2>/dev/null");
   FILE* pipe = popen(command.c_str(), "r");
   ASSERT_NE(pipe, nullptr);
   std::string out;
   char buffer[4096];
-  for (size_t n; (n = fread(buffer, 1, sizeof(buffer), pipe)) > 0;) out.append(buffer, n);
+  for (size_t n; (n = fread(buffer, 1, sizeof(buffer), pipe)) > 0;)
+    out.append(buffer, n);
   ASSERT_EQ(pclose(pipe), 0) << out;
   EXPECT_TRUE(fs::is_empty(cwd)) << "the working directory was written to";
   const std::string key = "\"out\":\"";
   const size_t at = out.find(key);
   ASSERT_NE(at, std::string::npos) << out;
-  const std::string folder = out.substr(at + key.size(), out.find('"', at + key.size()) -
-                                                             at - key.size());
+  const std::string folder = out.substr(
+      at + key.size(), out.find('"', at + key.size()) - at - key.size());
   EXPECT_EQ(folder.rfind(tmp + "/tpr-eval-", 0), 0u) << folder;
   ExpectSvg(folder + "/precision_recall.svg");
   ExpectSvg(folder + "/similarity.svg");
@@ -304,21 +326,26 @@ TEST_F(EvalCliTest, NothingToEvaluateExitsNonZero) {
   const std::string bad = cluster_.dir() + "/bad";
   testing::WriteFile(bad + "/a/one.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n");
   testing::WriteFile(bad + "/a/two.off", "not a mesh\n");
-  CommandResult r = RunTpr(cluster_, "--json eval --out " + cluster_.dir() + "/o " + bad);
+  CommandResult r =
+      RunTpr(cluster_, "--json eval --out " + cluster_.dir() + "/o " + bad);
   EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
   EXPECT_EQ(JsonNumber(r.out, 0, "failed"), 2) << r.out;
-  EXPECT_NE(r.err.find("nothing could be evaluated"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("nothing could be evaluated"), std::string::npos)
+      << r.err;
   EXPECT_FALSE(fs::exists(cluster_.dir() + "/o/precision_recall.svg"));
 
   // One good model per class: no query has anything relevant to find.
   const std::string single = cluster_.dir() + "/single";
   fs::create_directories(single + "/x");
   fs::copy_file(meshes_[0].path, single + "/x/m.off");
-  EXPECT_EQ(RunTpr(cluster_, "eval --out " + cluster_.dir() + "/o " + single).exit_code, 1);
+  EXPECT_EQ(RunTpr(cluster_, "eval --out " + cluster_.dir() + "/o " + single)
+                .exit_code,
+            1);
 
   // Bad arguments: a missing dataset, a manifest naming a missing file, a
   // mesh outside any class folder.
-  EXPECT_EQ(RunTpr(cluster_, "eval " + cluster_.dir() + "/no/such/set").exit_code, 2);
+  EXPECT_EQ(
+      RunTpr(cluster_, "eval " + cluster_.dir() + "/no/such/set").exit_code, 2);
   testing::WriteFile(cluster_.dir() + "/M.txt", "missing.off a\n");
   CommandResult missing = RunTpr(cluster_, "eval " + cluster_.dir() + "/M.txt");
   EXPECT_EQ(missing.exit_code, 2);

@@ -13,7 +13,8 @@ namespace tpr::extractor {
 namespace {
 
 TEST(ExtractorConvertTest, ZeroFieldsGiveTheLibraryDefaults) {
-  absl::StatusOr<extract::Options> o = OptionsFromProto(v1::ExtractOptions(), 4);
+  absl::StatusOr<extract::Options> o =
+      OptionsFromProto(v1::ExtractOptions(), 4);
   ASSERT_TRUE(o.ok()) << o.status();
   const extract::Options defaults;
   EXPECT_EQ(o->bands, defaults.bands);
@@ -54,7 +55,8 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
 }
 
 TEST(ExtractorConvertTest, DefaultsAreFilledInTheWireForm) {
-  const v1::ExtractOptions back = OptionsToProto(*OptionsFromProto(v1::ExtractOptions(), 4));
+  const v1::ExtractOptions back =
+      OptionsToProto(*OptionsFromProto(v1::ExtractOptions(), 4));
   EXPECT_EQ(back.spectrum_eigenvalues(), 50);
   EXPECT_EQ(back.bands(), extract::Options().bands);
 }
@@ -69,7 +71,8 @@ void ExpectInvalid(const v1::ExtractOptions& p, const std::string& field) {
   absl::StatusOr<extract::Options> o = OptionsFromProto(p, 4);
   ASSERT_FALSE(o.ok()) << field;
   EXPECT_TRUE(absl::IsInvalidArgument(o.status())) << o.status();
-  EXPECT_NE(o.status().message().find("options." + field), absl::string_view::npos)
+  EXPECT_NE(o.status().message().find("options." + field),
+            absl::string_view::npos)
       << o.status();
 }
 

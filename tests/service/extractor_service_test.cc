@@ -5,6 +5,9 @@
 #include "extractor/service/extractor_service.h"
 
 #include <fcntl.h>
+#include <grpcpp/client_context.h>
+#include <grpcpp/create_channel.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -15,10 +18,6 @@
 #include <fstream>
 #include <sstream>
 #include <thread>
-
-#include <grpcpp/client_context.h>
-#include <grpcpp/create_channel.h>
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_format.h"
 #include "common/server_lifecycle.h"
@@ -54,14 +53,16 @@ class ExtractorServiceTest : public ::testing::Test {
     ASSERT_TRUE(started.ok()) << started.status();
     server_ = std::move(started->server);
     address_ = absl::StrCat("127.0.0.1:", started->port);
-    absl::StatusOr<client::ExtractorClient> c = client::ExtractorClient::Connect(address_);
+    absl::StatusOr<client::ExtractorClient> c =
+        client::ExtractorClient::Connect(address_);
     ASSERT_TRUE(c.ok()) << c.status();
     client_ = std::make_unique<client::ExtractorClient>(*c);
   }
   void SetUp() override { StartWith(ServiceOptions{}); }
   void TearDown() override {
     if (server_) {
-      server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
+      server_->Shutdown(std::chrono::system_clock::now() +
+                        std::chrono::seconds(5));
       server_->Wait();
     }
     server_.reset();
@@ -79,12 +80,13 @@ TEST_F(ExtractorServiceTest, ReturnsTheLibrarySignatureForAGeneratedMesh) {
   ASSERT_FALSE(off.empty());
   v1::ExtractOptions options;
   options.set_explain(true);
-  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(off, "biped.off", options);
+  absl::StatusOr<v1::ExtractResponse> r =
+      client_->ExtractBytes(off, "biped.off", options);
   ASSERT_TRUE(r.ok()) << r.status();
 
   // Oracle: the library on the same bytes.
-  absl::StatusOr<extract::LoadedMesh> loaded =
-      extract::LoadMeshFromBuffer(off, extract::MeshFormat::kOff, "biped.off", {});
+  absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
+      off, extract::MeshFormat::kOff, "biped.off", {});
   ASSERT_TRUE(loaded.ok()) << loaded.status();
   extract::Options lib_options;
   lib_options.explain = true;
@@ -93,7 +95,8 @@ TEST_F(ExtractorServiceTest, ReturnsTheLibrarySignatureForAGeneratedMesh) {
   ASSERT_TRUE(expected.ok()) << expected.status();
 
   const v1::Signature& s = r->signature();
-  ASSERT_EQ(s.features_size(), static_cast<int>(expected->signature.features.size()));
+  ASSERT_EQ(s.features_size(),
+            static_cast<int>(expected->signature.features.size()));
   ASSERT_GT(s.features_size(), 0);
   for (int i = 0; i < s.features_size(); ++i) {
     const extract::Feature& e = expected->signature.features[i];
@@ -101,7 +104,8 @@ TEST_F(ExtractorServiceTest, ReturnsTheLibrarySignatureForAGeneratedMesh) {
               e.kind == extract::FeatureKind::kPoint);
     EXPECT_DOUBLE_EQ(s.features(i).weight(), e.weight);
     EXPECT_DOUBLE_EQ(s.features(i).integral_geodesic(), e.integral_geodesic);
-    ASSERT_EQ(s.features(i).curvature_size(), static_cast<int>(e.curvature.size()));
+    ASSERT_EQ(s.features(i).curvature_size(),
+              static_cast<int>(e.curvature.size()));
     for (size_t b = 0; b < e.curvature.size(); ++b) {
       EXPECT_DOUBLE_EQ(s.features(i).curvature(b), e.curvature[b]);
       EXPECT_DOUBLE_EQ(s.features(i).area(b), e.area[b]);
@@ -116,7 +120,8 @@ TEST_F(ExtractorServiceTest, ReturnsTheLibrarySignatureForAGeneratedMesh) {
   EXPECT_EQ(s.extractor_version(), kExtractorVersion);
   EXPECT_FALSE(s.extractor_version().empty());
   EXPECT_EQ(s.options().bands(), extract::Options{}.bands);
-  EXPECT_EQ(s.options().cycle_min_vertices(), extract::Options{}.cycle_min_vertices);
+  EXPECT_EQ(s.options().cycle_min_vertices(),
+            extract::Options{}.cycle_min_vertices);
   EXPECT_DOUBLE_EQ(s.options().ring_length_threshold(),
                    extract::Options{}.ring_length_threshold);
   EXPECT_GE(s.options().threads(), 1);
@@ -136,22 +141,26 @@ TEST_F(ExtractorServiceTest, ReturnsTheLibrarySignatureForAGeneratedMesh) {
                          expected->explanation->vertex_region.begin()));
 }
 
-TEST_F(ExtractorServiceTest, NoExplanationUnlessAskedAndMultiChunkUploadsAgree) {
+TEST_F(ExtractorServiceTest,
+       NoExplanationUnlessAskedAndMultiChunkUploadsAgree) {
   // 60k vertices of OFF text is several MiB: several 1 MiB chunks.
   const std::string off = GeneratedOff("quadruped_slender", 0, 60000);
   ASSERT_GT(off.size(), 3 * client::kChunkBytes);
   absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(off, "dog.off");
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_FALSE(r->has_explanation());
-  absl::StatusOr<extract::LoadedMesh> loaded =
-      extract::LoadMeshFromBuffer(off, extract::MeshFormat::kUnknown, "dog.off", {});
+  absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
+      off, extract::MeshFormat::kUnknown, "dog.off", {});
   ASSERT_TRUE(loaded.ok());
   EXPECT_EQ(r->signature().mesh().vertices(), loaded->stats.vertices);
 }
 
-TEST_F(ExtractorServiceTest, EachMalformedMeshOfTheCorpusIsInvalidArgumentWithItsReason) {
-  const std::filesystem::path dir = std::filesystem::path(TPR_TEST_DATA_DIR) / "meshes" / "bad";
-  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << "no corpus at " << dir;
+TEST_F(ExtractorServiceTest,
+       EachMalformedMeshOfTheCorpusIsInvalidArgumentWithItsReason) {
+  const std::filesystem::path dir =
+      std::filesystem::path(TPR_TEST_DATA_DIR) / "meshes" / "bad";
+  if (!std::filesystem::is_directory(dir))
+    GTEST_SKIP() << "no corpus at " << dir;
   int checked = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     if (!entry.is_regular_file() || entry.path().extension() == ".txt" ||
@@ -166,9 +175,11 @@ TEST_F(ExtractorServiceTest, EachMalformedMeshOfTheCorpusIsInvalidArgumentWithIt
         bytes.str(), extract::MeshFormat::kUnknown, name, {});
     if (local.ok()) continue;  // a "bad" file intake accepts with warnings
     if (!absl::IsInvalidArgument(local.status())) continue;
-    absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(bytes.str(), name);
+    absl::StatusOr<v1::ExtractResponse> r =
+        client_->ExtractBytes(bytes.str(), name);
     ASSERT_FALSE(r.ok()) << name;
-    EXPECT_TRUE(absl::IsInvalidArgument(r.status())) << name << ": " << r.status();
+    EXPECT_TRUE(absl::IsInvalidArgument(r.status()))
+        << name << ": " << r.status();
     // An empty file never reaches intake: the service itself says so.
     if (!bytes.str().empty()) {
       EXPECT_EQ(r.status().message(), local.status().message()) << name;
@@ -217,7 +228,8 @@ TEST_F(ExtractorServiceTest, MalformedMessageInTheUploadIsAnError) {
 }
 
 TEST_F(ExtractorServiceTest, EmptyUploadIsInvalidArgument) {
-  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes("", "empty.off");
+  absl::StatusOr<v1::ExtractResponse> r =
+      client_->ExtractBytes("", "empty.off");
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(absl::IsInvalidArgument(r.status())) << r.status();
 }
@@ -225,14 +237,15 @@ TEST_F(ExtractorServiceTest, EmptyUploadIsInvalidArgument) {
 TEST_F(ExtractorServiceTest, BadOptionsAreInvalidArgument) {
   v1::ExtractOptions options;
   options.set_bands(1000);
-  absl::StatusOr<v1::ExtractResponse> r =
-      client_->ExtractBytes(GeneratedOff("biped_adult", 0, 1000), "a.off", options);
+  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(
+      GeneratedOff("biped_adult", 0, 1000), "a.off", options);
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(absl::IsInvalidArgument(r.status())) << r.status();
   EXPECT_NE(r.status().message().find("bands"), absl::string_view::npos);
 }
 
-TEST_F(ExtractorServiceTest, OversizedUploadIsResourceExhaustedAndServiceKeepsServing) {
+TEST_F(ExtractorServiceTest,
+       OversizedUploadIsResourceExhaustedAndServiceKeepsServing) {
   TearDown();
   ServiceOptions options;
   options.max_mesh_bytes = 200'000;
@@ -242,10 +255,12 @@ TEST_F(ExtractorServiceTest, OversizedUploadIsResourceExhaustedAndServiceKeepsSe
   absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(big, "big.off");
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(absl::IsResourceExhausted(r.status())) << r.status();
-  EXPECT_NE(r.status().message().find("200000"), absl::string_view::npos) << r.status();
+  EXPECT_NE(r.status().message().find("200000"), absl::string_view::npos)
+      << r.status();
   const std::string off = GeneratedOff("biped_adult", 0, 1000);
   ASSERT_LT(off.size(), 200'000u);
-  absl::StatusOr<v1::ExtractResponse> ok = client_->ExtractBytes(off, "small.off");
+  absl::StatusOr<v1::ExtractResponse> ok =
+      client_->ExtractBytes(off, "small.off");
   EXPECT_TRUE(ok.ok()) << ok.status();
 }
 
@@ -265,7 +280,8 @@ TEST_F(ExtractorServiceTest, CallsBeyondMaxConcurrentAreRefusedAtOnce) {
   ServiceOptions options;
   options.max_concurrent = 1;
   StartWith(options);
-  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto channel =
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
   // Call A stays open (upload not finished) and holds the only slot.
   grpc::ClientContext a_context;
@@ -290,14 +306,17 @@ TEST_F(ExtractorServiceTest, CallsBeyondMaxConcurrentAreRefusedAtOnce) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   EXPECT_EQ(service_->InFlight(), 0);
-  EXPECT_TRUE(client_->ExtractBytes(GeneratedOff("biped_adult", 0, 1000), "c.off").ok());
+  EXPECT_TRUE(
+      client_->ExtractBytes(GeneratedOff("biped_adult", 0, 1000), "c.off")
+          .ok());
 }
 
 TEST_F(ExtractorServiceTest, ExpiredDeadlineIsDeadlineExceeded) {
   client::CallOptions call;
   call.timeout = absl::Milliseconds(1);
-  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(
-      GeneratedOff("biped_adult", 0, 20000), "a.off", {}, v1::MESH_FORMAT_OFF, &call);
+  absl::StatusOr<v1::ExtractResponse> r =
+      client_->ExtractBytes(GeneratedOff("biped_adult", 0, 20000), "a.off", {},
+                            v1::MESH_FORMAT_OFF, &call);
   ASSERT_FALSE(r.ok());
   EXPECT_TRUE(absl::IsDeadlineExceeded(r.status())) << r.status();
   for (int i = 0; i < 1000 && service_->InFlight() > 0; ++i) {
@@ -307,7 +326,8 @@ TEST_F(ExtractorServiceTest, ExpiredDeadlineIsDeadlineExceeded) {
 }
 
 TEST_F(ExtractorServiceTest, HealthIsServing) {
-  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto channel =
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
   absl::StatusOr<int> health = testing::HealthCheck(channel);
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_EQ(*health, 1);  // SERVING
@@ -319,10 +339,11 @@ TEST(ExtractorBinaryTest, SigtermDuringAnUploadFinishesItAndExitsZero) {
   testing::TempDir dir;
   testing::ServiceProcess process;
   ASSERT_TRUE(process
-                  .Start(testing::BinaryPath("tpr-extractor"), {"--threads", "1"},
-                         dir.path() + "/extractor.log")
+                  .Start(testing::BinaryPath("tpr-extractor"),
+                         {"--threads", "1"}, dir.path() + "/extractor.log")
                   .ok());
-  auto channel = grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+  auto channel = grpc::CreateChannel(process.address(),
+                                     grpc::InsecureChannelCredentials());
   absl::StatusOr<int> health = testing::HealthCheck(channel);
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_EQ(*health, 1);
@@ -330,7 +351,8 @@ TEST(ExtractorBinaryTest, SigtermDuringAnUploadFinishesItAndExitsZero) {
   const std::string off = GeneratedOff("biped_adult", 2, 3000);
   auto stub = v1::Extractor::NewStub(channel);
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(60));
   v1::ExtractResponse response;
   auto writer = stub->Extract(&context, &response);
   v1::ExtractRequest first;
@@ -390,22 +412,26 @@ TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
   options.upload_idle_timeout_ms = 400;
   options.min_upload_bytes_per_second = 0;
   StartWith(options);
-  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto channel =
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
   const auto start = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<RawUpload>> slow;
   for (int i = 0; i < options.max_concurrent; ++i) {
-    slow.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(60)));
+    slow.push_back(
+        std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(60)));
     ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
   }
   const std::string off = GeneratedOff("biped_adult", 0, 1000);
   // Up to 10 s: on a loaded 2-core machine (a landing build beside it) the
   // four calls took over a second to reach the server.
-  for (int i = 0; i < 2000 && service_->InFlight() < options.max_concurrent; ++i) {
+  for (int i = 0; i < 2000 && service_->InFlight() < options.max_concurrent;
+       ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   ASSERT_EQ(service_->InFlight(), options.max_concurrent);
-  absl::StatusOr<v1::ExtractResponse> refused = client_->ExtractBytes(off, "b.off");
+  absl::StatusOr<v1::ExtractResponse> refused =
+      client_->ExtractBytes(off, "b.off");
   EXPECT_TRUE(absl::IsResourceExhausted(refused.status())) << refused.status();
 
   for (auto& upload : slow) {
@@ -416,16 +442,17 @@ TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
               std::string::npos)
         << status.error_message();
   }
-  const double waited = std::chrono::duration<double>(
-                            std::chrono::steady_clock::now() - start)
-                            .count();
+  const double waited =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+          .count();
   EXPECT_GE(waited, 0.4);
   EXPECT_LT(waited, 5.0) << "the idle timeout was not enforced promptly";
   for (int i = 0; i < 2000 && service_->InFlight() > 0; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   EXPECT_EQ(service_->InFlight(), 0);
-  absl::StatusOr<v1::ExtractResponse> served = client_->ExtractBytes(off, "c.off");
+  absl::StatusOr<v1::ExtractResponse> served =
+      client_->ExtractBytes(off, "c.off");
   EXPECT_TRUE(served.ok()) << served.status();
 }
 
@@ -438,7 +465,8 @@ TEST_F(ExtractorServiceTest, TricklingUploadIsRefusedBelowTheMinimumRate) {
   options.upload_idle_timeout_ms = 300;
   options.min_upload_bytes_per_second = 40'000;
   StartWith(options);
-  auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  auto channel =
+      grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
   const std::string off = GeneratedOff("biped_adult", 1, 2000);
   ASSERT_GT(off.size(), 40'000u);
@@ -451,7 +479,8 @@ TEST_F(ExtractorServiceTest, TricklingUploadIsRefusedBelowTheMinimumRate) {
   // call. Bounded: at most 10 s of trickling.
   while (sent < off.size() &&
          std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
-    if (!trickle.Write(off.substr(sent, 100), first ? "trickle.off" : "")) break;
+    if (!trickle.Write(off.substr(sent, 100), first ? "trickle.off" : ""))
+      break;
     first = false;
     sent += 100;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -485,12 +514,13 @@ TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
                           "--upload-idle-timeout-ms", "500"},
                          dir.path() + "/extractor.log")
                   .ok());
-  auto channel =
-      grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+  auto channel = grpc::CreateChannel(process.address(),
+                                     grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
   std::vector<std::unique_ptr<RawUpload>> slow;
   for (int i = 0; i < 16; ++i) {
-    slow.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
+    slow.push_back(
+        std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
     ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
   }
   absl::StatusOr<client::ExtractorClient> c =
@@ -512,7 +542,8 @@ TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
   EXPECT_TRUE(served.ok()) << served.status();
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(3));
   for (auto& upload : slow) {
-    EXPECT_EQ(upload->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+    EXPECT_EQ(upload->Finish().error_code(),
+              grpc::StatusCode::DEADLINE_EXCEEDED);
   }
   // Close the connections first: open channels hold up the server's
   // graceful shutdown until its grace period ends.
@@ -527,7 +558,8 @@ TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
 int64_t PeakResidentBytes(pid_t pid) {
   std::ifstream in(absl::StrCat("/proc/", pid, "/status"));
   for (std::string line; std::getline(in, line);) {
-    if (line.rfind("VmHWM:", 0) == 0) return std::atoll(line.c_str() + 6) * 1024;
+    if (line.rfind("VmHWM:", 0) == 0)
+      return std::atoll(line.c_str() + 6) * 1024;
   }
   return -1;
 }
@@ -557,7 +589,8 @@ std::string HostileUpload(int kind, size_t bytes) {
       while (out.size() + 16 < bytes) out += "1 2 3\n";
       break;
     default:
-      while (out.size() < bytes) out += static_cast<char>('a' + out.size() % 26);
+      while (out.size() < bytes)
+        out += static_cast<char>('a' + out.size() % 26);
   }
   return out;
 }
@@ -577,32 +610,36 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
   testing::ServiceProcess process;
   ASSERT_TRUE(process
                   .Start(testing::BinaryPath("tpr-extractor"),
-                         {"--threads", std::to_string(kThreads), "--max-concurrent",
-                          std::to_string(kConcurrent), "--max-mesh-bytes",
-                          std::to_string(kMaxMesh), "--upload-idle-timeout-ms", "30000"},
+                         {"--threads", std::to_string(kThreads),
+                          "--max-concurrent", std::to_string(kConcurrent),
+                          "--max-mesh-bytes", std::to_string(kMaxMesh),
+                          "--upload-idle-timeout-ms", "30000"},
                          dir.path() + "/extractor.log")
                   .ok());
   {
     absl::StatusOr<client::ExtractorClient> c =
         client::ExtractorClient::Connect(process.address());
     ASSERT_TRUE(c.ok());
-    ASSERT_TRUE(c->ExtractBytes(GeneratedOff("biped_adult", 0, 3000), "warm.off").ok());
+    ASSERT_TRUE(
+        c->ExtractBytes(GeneratedOff("biped_adult", 0, 3000), "warm.off").ok());
   }
   const int64_t baseline = PeakResidentBytes(process.pid());
   ASSERT_GT(baseline, 0);
 
-  auto channel =
-      grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+  auto channel = grpc::CreateChannel(process.address(),
+                                     grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
   // 1. Every slot fills up to just under the limit, 1 MiB at a time.
   const size_t held_bytes = kMaxMesh - (64 << 10);
   std::vector<std::unique_ptr<RawUpload>> held;
   for (int i = 0; i < kConcurrent; ++i) {
-    held.push_back(std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
+    held.push_back(
+        std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
     const std::string data = HostileUpload(i, held_bytes);
     const char* names[] = {"a.obj", "b.off", "c.ply", "d.off"};
     for (size_t at = 0; at < data.size(); at += 1 << 20) {
-      ASSERT_TRUE(held.back()->Write(data.substr(at, 1 << 20), at == 0 ? names[i % 4] : ""));
+      ASSERT_TRUE(held.back()->Write(data.substr(at, 1 << 20),
+                                     at == 0 ? names[i % 4] : ""));
     }
   }
   // 2. Meanwhile others push oversized uploads: refused (busy, or over the
@@ -613,13 +650,17 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
     pushers.emplace_back([&, i] {
       RawUpload upload(stub.get(), std::chrono::seconds(60));
       if (i % 2 == 0) {
-        upload.Write(std::string(size_t{32} << 20, 'x'), "huge.obj");  // one message
+        upload.Write(std::string(size_t{32} << 20, 'x'),
+                     "huge.obj");  // one message
       } else {
-        for (int mb = 0; mb < 12 && upload.Write(std::string(1 << 20, 'y'), "big.off"); ++mb) {
+        for (int mb = 0;
+             mb < 12 && upload.Write(std::string(1 << 20, 'y'), "big.off");
+             ++mb) {
         }
       }
       const grpc::Status status = upload.Finish(/*close=*/true);
-      if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) ++refused;
+      if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED)
+        ++refused;
     });
   }
   for (std::thread& t : pushers) t.join();
@@ -636,18 +677,23 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
   }
   const int64_t parse_peak = PeakResidentBytes(process.pid());
   std::fprintf(stderr,
-               "VmHWM baseline %.1f MiB; +%.1f MiB holding %d uploads of %.1f MiB; +%.1f "
+               "VmHWM baseline %.1f MiB; +%.1f MiB holding %d uploads of %.1f "
+               "MiB; +%.1f "
                "MiB after parsing them\n",
-               baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0, kConcurrent,
-               held_bytes / 1048576.0, (parse_peak - baseline) / 1048576.0);
+               baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0,
+               kConcurrent, held_bytes / 1048576.0,
+               (parse_peak - baseline) / 1048576.0);
   // Uploads, from the code: each admitted call's buffer is at most
   // kMaxMesh (reserved once, never reallocated), and every call, admitted
   // or refused, holds at most one message gRPC accepted: main.cc caps a
   // message at min(max-mesh-bytes, 4 MiB) + 64 KiB.
-  const int64_t max_message = std::min<int64_t>(kMaxMesh, int64_t{4} << 20) + (64 << 10);
-  const int64_t upload_bound = kConcurrent * kMaxMesh + (kConcurrent + kPushers) * max_message;
+  const int64_t max_message =
+      std::min<int64_t>(kMaxMesh, int64_t{4} << 20) + (64 << 10);
+  const int64_t upload_bound =
+      kConcurrent * kMaxMesh + (kConcurrent + kPushers) * max_message;
   const std::string figures = absl::StrFormat(
-      "measured VmHWM baseline %.1f MiB, growth %.1f MiB holding the uploads, %.1f MiB after "
+      "measured VmHWM baseline %.1f MiB, growth %.1f MiB holding the uploads, "
+      "%.1f MiB after "
       "parsing; upload bound %.1f MiB",
       baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0,
       (parse_peak - baseline) / 1048576.0, upload_bound / 1048576.0);
@@ -670,12 +716,16 @@ TEST_F(ExtractorServiceTest, CycleMinVerticesErrorNamesTheProtoOption) {
   const std::string off = GeneratedOff("biped_adult", 0, 1000);
   v1::ExtractOptions options;
   options.set_cycle_min_vertices(10);
-  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(off, "a.off", options);
+  absl::StatusOr<v1::ExtractResponse> r =
+      client_->ExtractBytes(off, "a.off", options);
   ASSERT_TRUE(absl::IsInvalidArgument(r.status())) << r.status();
-  EXPECT_NE(r.status().message().find("options.cycle_min_vertices"), absl::string_view::npos)
+  EXPECT_NE(r.status().message().find("options.cycle_min_vertices"),
+            absl::string_view::npos)
       << r.status();
-  EXPECT_NE(r.status().message().find("got 10"), absl::string_view::npos) << r.status();
-  EXPECT_EQ(r.status().message().find("hops must"), absl::string_view::npos) << r.status();
+  EXPECT_NE(r.status().message().find("got 10"), absl::string_view::npos)
+      << r.status();
+  EXPECT_EQ(r.status().message().find("hops must"), absl::string_view::npos)
+      << r.status();
   options.set_cycle_min_vertices(5);  // the largest accepted value
   EXPECT_TRUE(client_->ExtractBytes(off, "a.off", options).ok());
 }
@@ -712,7 +762,8 @@ TEST_F(ExtractorServiceTest, ExtractFileStreamsInsteadOfReadingTheWholeFile) {
   EXPECT_LT(written.load(), int64_t{8} << 20)
       << "ExtractFile read " << written.load() << " bytes before the refusal";
   // A missing file is NOT_FOUND.
-  EXPECT_TRUE(absl::IsNotFound(client_->ExtractFile(dir.path() + "/none.off").status()));
+  EXPECT_TRUE(absl::IsNotFound(
+      client_->ExtractFile(dir.path() + "/none.off").status()));
 }
 
 }  // namespace

@@ -10,6 +10,12 @@
 #define TPR_TESTS_SERVICE_EXTSVC_TEST_UTIL_H_
 
 #include <arpa/inet.h>
+#include <grpcpp/channel.h>
+#include <grpcpp/client_context.h>
+#include <grpcpp/impl/codegen/client_unary_call.h>
+#include <grpcpp/impl/codegen/rpc_method.h>
+#include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/sync_stream.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -29,13 +35,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <grpcpp/channel.h>
-#include <grpcpp/client_context.h>
-#include <grpcpp/impl/codegen/client_unary_call.h>
-#include <grpcpp/impl/codegen/rpc_method.h>
-#include <grpcpp/support/byte_buffer.h>
-#include <grpcpp/support/sync_stream.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -69,7 +68,8 @@ class TempDir {
  public:
   TempDir() {
     std::string pattern =
-        (std::filesystem::temp_directory_path() / "tpr-extsvc-test.XXXXXX").string();
+        (std::filesystem::temp_directory_path() / "tpr-extsvc-test.XXXXXX")
+            .string();
     path_ = mkdtemp(pattern.data()) ? pattern : std::string();
   }
   ~TempDir() {
@@ -96,7 +96,9 @@ class ServiceProcess {
   absl::Status Start(const std::string& binary, std::vector<std::string> args,
                      const std::string& log_path,
                      const std::string& listen = "127.0.0.1:0") {
-    if (absl::Status s = Launch(binary, std::move(args), log_path, listen); !s.ok()) return s;
+    if (absl::Status s = Launch(binary, std::move(args), log_path, listen);
+        !s.ok())
+      return s;
     return WaitForPort(binary);
   }
 
@@ -132,7 +134,8 @@ class ServiceProcess {
  private:
   absl::Status WaitForPort(const std::string& binary) {
     const std::string& log_path = log_path_;
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    const auto give_up =
+        std::chrono::steady_clock::now() + std::chrono::seconds(30);
     while (std::chrono::steady_clock::now() < give_up) {
       std::ifstream in(log_path);
       std::stringstream text;
@@ -150,11 +153,11 @@ class ServiceProcess {
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
-    return absl::DeadlineExceededError(absl::StrCat(binary, " did not report its port"));
+    return absl::DeadlineExceededError(
+        absl::StrCat(binary, " did not report its port"));
   }
 
  public:
-
   // Sends `signo` and waits for the exit; returns the exit code, or 128 +
   // signal when killed by a signal, or -1 after `timeout` (then SIGKILLs).
   int Stop(int signo, std::chrono::seconds timeout = std::chrono::seconds(30)) {
@@ -194,25 +197,29 @@ class ServiceProcess {
 
 // OFF text of `mesh` (17 significant digits: the bytes round-trip exactly).
 inline std::string ToOff(const extract::Mesh& mesh) {
-  std::string out = absl::StrCat("OFF\n", mesh.positions.size(), " ", mesh.triangles.size(),
-                                 " 0\n");
+  std::string out = absl::StrCat("OFF\n", mesh.positions.size(), " ",
+                                 mesh.triangles.size(), " 0\n");
   char buffer[128];
   for (const Eigen::Vector3d& p : mesh.positions) {
-    std::snprintf(buffer, sizeof(buffer), "%.17g %.17g %.17g\n", p.x(), p.y(), p.z());
+    std::snprintf(buffer, sizeof(buffer), "%.17g %.17g %.17g\n", p.x(), p.y(),
+                  p.z());
     out += buffer;
   }
-  for (const auto& t : mesh.triangles) absl::StrAppend(&out, "3 ", t[0], " ", t[1], " ", t[2], "\n");
+  for (const auto& t : mesh.triangles)
+    absl::StrAppend(&out, "3 ", t[0], " ", t[1], " ", t[2], "\n");
   return out;
 }
 
 inline void WriteFile(const std::string& path, const std::string& bytes) {
-  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  std::filesystem::create_directories(
+      std::filesystem::path(path).parent_path());
   std::ofstream(path, std::ios::binary) << bytes;
 }
 
 // Calls grpc.health.v1.Health/Check for the overall server (""); see
 // HealthStatus (tests/service/ops_testing.h). Any failure is UNAVAILABLE.
-inline absl::StatusOr<int> HealthCheck(const std::shared_ptr<grpc::Channel>& channel) {
+inline absl::StatusOr<int> HealthCheck(
+    const std::shared_ptr<grpc::Channel>& channel) {
   absl::StatusOr<int> status = HealthStatus(channel, "");
   if (!status.ok()) return absl::UnavailableError(status.status().message());
   return status;
@@ -278,9 +285,8 @@ struct GeneratedFile {
   std::string off;
 };
 
-inline absl::StatusOr<std::vector<GeneratedFile>> GenerateSet(const std::string& dir,
-                                                              int classes, int poses,
-                                                              int vertices) {
+inline absl::StatusOr<std::vector<GeneratedFile>> GenerateSet(
+    const std::string& dir, int classes, int poses, int vertices) {
   std::vector<GeneratedFile> files;
   const std::vector<std::string> names = synth::ClassNames();
   if (classes > static_cast<int>(names.size())) {
@@ -291,7 +297,8 @@ inline absl::StatusOr<std::vector<GeneratedFile>> GenerateSet(const std::string&
       synth::ShapeOptions options;
       options.target_vertices = vertices;
       options.seed = 11;
-      absl::StatusOr<extract::Mesh> mesh = synth::GenerateShape(names[c], p, options);
+      absl::StatusOr<extract::Mesh> mesh =
+          synth::GenerateShape(names[c], p, options);
       if (!mesh.ok()) return mesh.status();
       GeneratedFile f;
       f.relative_path = absl::StrCat(names[c], "/pose_", p, ".off");
@@ -312,16 +319,19 @@ class Cluster {
     extractors_.resize(extractors);
     for (int i = 0; i < extractors; ++i) {
       extractors_[i] = std::make_unique<ServiceProcess>();
-      absl::Status s = extractors_[i]->Start(BinaryPath("tpr-extractor"), {"--threads", "2"},
-                                             absl::StrCat(dir_.path(), "/extractor", i, ".log"));
+      absl::Status s = extractors_[i]->Start(
+          BinaryPath("tpr-extractor"), {"--threads", "2"},
+          absl::StrCat(dir_.path(), "/extractor", i, ".log"));
       if (!s.ok()) return s;
     }
-    return indexer_.Start(BinaryPath("tpr-indexer"), {"--data-dir", dir_.path() + "/data"},
+    return indexer_.Start(BinaryPath("tpr-indexer"),
+                          {"--data-dir", dir_.path() + "/data"},
                           dir_.path() + "/indexer.log");
   }
   std::string extractor_addresses() const {
     std::string out;
-    for (const auto& e : extractors_) absl::StrAppend(&out, out.empty() ? "" : ",", e->address());
+    for (const auto& e : extractors_)
+      absl::StrAppend(&out, out.empty() ? "" : ",", e->address());
     return out;
   }
   ServiceProcess& extractor(int i) { return *extractors_[i]; }
@@ -342,20 +352,25 @@ struct Ranked {
 
 // BruteForceRanking returns every model of `models` (id -> signature) ranked
 // by exact distance (indexer/lib/metric.h: EMD plus spectral term, default
-// options, which the indexer uses) to `query`, ascending, ties by id. The oracle the
-// services' VP-tree answers are compared with.
+// options, which the indexer uses) to `query`, ascending, ties by id. The
+// oracle the services' VP-tree answers are compared with.
 inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
-    const v1::Signature& query, const std::vector<std::pair<std::string, v1::Signature>>& models) {
+    const v1::Signature& query,
+    const std::vector<std::pair<std::string, v1::Signature>>& models) {
   const index::GroundDistanceOptions options;
-  absl::StatusOr<index::Signature> query_signature = indexer::ToIndexSignature(query);
+  absl::StatusOr<index::Signature> query_signature =
+      indexer::ToIndexSignature(query);
   if (!query_signature.ok()) return query_signature.status();
-  absl::StatusOr<index::PreparedSignature> q = index::Prepare(*query_signature, options);
+  absl::StatusOr<index::PreparedSignature> q =
+      index::Prepare(*query_signature, options);
   if (!q.ok()) return q.status();
   std::vector<Ranked> ranked;
   for (const auto& [id, signature] : models) {
-    absl::StatusOr<index::Signature> model_signature = indexer::ToIndexSignature(signature);
+    absl::StatusOr<index::Signature> model_signature =
+        indexer::ToIndexSignature(signature);
     if (!model_signature.ok()) return model_signature.status();
-    absl::StatusOr<index::PreparedSignature> m = index::Prepare(*model_signature, options);
+    absl::StatusOr<index::PreparedSignature> m =
+        index::Prepare(*model_signature, options);
     if (!m.ok()) return m.status();
     ranked.push_back({index::Distance(*q, *m), id});
   }
@@ -369,21 +384,27 @@ inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
 // got.size() entries of `expected`: same distances (1e-9 relative), same ids
 // except that models at equal distance may come in either order; otherwise a
 // description of the first difference.
-inline std::string SameRanking(const std::vector<Ranked>& got, const std::vector<Ranked>& expected) {
+inline std::string SameRanking(const std::vector<Ranked>& got,
+                               const std::vector<Ranked>& expected) {
   if (got.size() > expected.size()) return "more results than models";
-  auto close = [](double a, double b) { return std::abs(a - b) <= 1e-9 * (1.0 + std::abs(b)); };
+  auto close = [](double a, double b) {
+    return std::abs(a - b) <= 1e-9 * (1.0 + std::abs(b));
+  };
   for (size_t r = 0; r < got.size(); ++r) {
     if (!close(got[r].distance, expected[r].distance)) {
-      return absl::StrCat("rank ", r + 1, ": distance ", got[r].distance, " (", got[r].id,
-                          ") vs brute force ", expected[r].distance, " (", expected[r].id, ")");
+      return absl::StrCat("rank ", r + 1, ": distance ", got[r].distance, " (",
+                          got[r].id, ") vs brute force ", expected[r].distance,
+                          " (", expected[r].id, ")");
     }
     if (got[r].id == expected[r].id) continue;
     bool tied = false;
     for (const Ranked& e : expected) {
-      if (e.id == got[r].id && close(e.distance, expected[r].distance)) tied = true;
+      if (e.id == got[r].id && close(e.distance, expected[r].distance))
+        tied = true;
     }
     if (!tied) {
-      return absl::StrCat("rank ", r + 1, ": ", got[r].id, " vs brute force ", expected[r].id);
+      return absl::StrCat("rank ", r + 1, ": ", got[r].id, " vs brute force ",
+                          expected[r].id);
     }
   }
   return "";

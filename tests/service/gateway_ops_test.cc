@@ -11,6 +11,10 @@
 // after known calls (per-shard latency counts equal to the calls each shard
 // got, per-shard errors with their code). Also a follower tpr-indexer
 // reaching its TLS primary with its own TLS options and key (issue 10).
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -19,10 +23,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -47,7 +47,8 @@ std::string TrailingRequestId(const grpc::ClientContext& context) {
 }
 
 // The JSON log lines of `log` that carry `request_id`.
-std::vector<std::string> LinesWith(const std::string& log, const std::string& request_id) {
+std::vector<std::string> LinesWith(const std::string& log,
+                                   const std::string& request_id) {
   std::vector<std::string> out;
   for (absl::string_view line : absl::StrSplit(log, '\n')) {
     if (line.find(absl::StrCat("\"request_id\":\"", request_id, "\"")) !=
@@ -75,8 +76,9 @@ class GatewayOpsTest : public ::testing::Test {
     for (int s = 0; s < kShards; ++s) {
       ASSERT_TRUE(shards_[s]
                       .Start(BinaryPath("tpr-indexer"),
-                             {"--data-dir", Path(absl::StrCat("shard", s)), "--api-keys",
-                              Path("keys"), "--tls-cert", Path("server1.pem"), "--tls-key",
+                             {"--data-dir", Path(absl::StrCat("shard", s)),
+                              "--api-keys", Path("keys"), "--tls-cert",
+                              Path("server1.pem"), "--tls-key",
                               Path("server1.key"), "--log-format", "json"},
                              ShardLog(s))
                       .ok())
@@ -84,8 +86,12 @@ class GatewayOpsTest : public ::testing::Test {
     }
   }
 
-  std::string Path(const std::string& name) const { return dir_.path() + "/" + name; }
-  std::string ShardLog(int s) const { return Path(absl::StrCat("shard", s, ".log")); }
+  std::string Path(const std::string& name) const {
+    return dir_.path() + "/" + name;
+  }
+  std::string ShardLog(int s) const {
+    return Path(absl::StrCat("shard", s, ".log"));
+  }
 
   // Starts a gateway over the shards with `shard_key` (none when empty) in
   // its environment; TLS and keys on its own port, metrics on a free port.
@@ -96,14 +102,15 @@ class GatewayOpsTest : public ::testing::Test {
       args.push_back("--shard");
       args.push_back(shards_[s].address());
     }
-    for (const char* a : {"--shard-tls", "--log-format", "json", "--metrics-listen",
-                          "127.0.0.1:0", "--health-interval-ms", "200"}) {
+    for (const char* a :
+         {"--shard-tls", "--log-format", "json", "--metrics-listen",
+          "127.0.0.1:0", "--health-interval-ms", "200"}) {
       args.emplace_back(a);
     }
     for (const std::string& a :
-         {std::string("--shard-tls-ca"), Path("ca1.pem"), std::string("--api-keys"),
-          Path("keys"), std::string("--tls-cert"), Path("server1.pem"),
-          std::string("--tls-key"), Path("server1.key")}) {
+         {std::string("--shard-tls-ca"), Path("ca1.pem"),
+          std::string("--api-keys"), Path("keys"), std::string("--tls-cert"),
+          Path("server1.pem"), std::string("--tls-key"), Path("server1.key")}) {
       args.push_back(a);
     }
     // The key reaches the child through its environment, as in production
@@ -121,7 +128,8 @@ class GatewayOpsTest : public ::testing::Test {
   }
 
   // An SDK client of `gateway` over TLS with `key` (none when empty).
-  client::IndexerClient Client(const ServiceProcess& gateway, const std::string& key) {
+  client::IndexerClient Client(const ServiceProcess& gateway,
+                               const std::string& key) {
     client::ConnectionOptions connection;
     connection.tls = true;
     connection.tls_ca_file = Path("ca1.pem");
@@ -144,7 +152,8 @@ class GatewayOpsTest : public ::testing::Test {
 
   std::vector<v1::Model> Models(int n) {
     std::vector<v1::Model> out;
-    for (const indexer::testing::TestModel& m : indexer::testing::MakeModels(n, 3, 5)) {
+    for (const indexer::testing::TestModel& m :
+         indexer::testing::MakeModels(n, 3, 5)) {
       out.push_back(indexer::testing::ToRequest(m).model());
     }
     return out;
@@ -162,14 +171,17 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
   const std::vector<v1::Model> models = Models(8);
 
   // The caller's key, checked by the gateway itself.
-  EXPECT_EQ(Client(gateway, "").Stats().status().code(), absl::StatusCode::kUnauthenticated);
+  EXPECT_EQ(Client(gateway, "").Stats().status().code(),
+            absl::StatusCode::kUnauthenticated);
   absl::StatusOr<std::string> stranger = common::NewApiKey();
   ASSERT_TRUE(stranger.ok());
   EXPECT_EQ(Client(gateway, *stranger).Stats().status().code(),
             absl::StatusCode::kUnauthenticated);
   client::IndexerClient reader = Client(gateway, keys_[Role::kRead]);
-  EXPECT_EQ(reader.Upsert(models[0], true).status().code(), absl::StatusCode::kPermissionDenied);
-  EXPECT_EQ(reader.Delete(models[0].id()).code(), absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(reader.Upsert(models[0], true).status().code(),
+            absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(reader.Delete(models[0].id()).code(),
+            absl::StatusCode::kPermissionDenied);
   client::IndexerClient writer = Client(gateway, keys_[Role::kWrite]);
   for (const v1::Model& m : models) {
     absl::StatusOr<bool> created = writer.Upsert(m, true);
@@ -181,15 +193,16 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
   ASSERT_EQ(stats->shards_size(), kShards);
   for (int s = 0; s < kShards; ++s) {
     int64_t want = 0;
-    for (const v1::Model& m : models) want += gateway::ShardOf(m.id(), kShards) == s;
+    for (const v1::Model& m : models)
+      want += gateway::ShardOf(m.id(), kShards) == s;
     EXPECT_EQ(stats->shards(s).stats().models(), want) << "shard " << s;
   }
 
   // A plaintext caller against the TLS gateway: refused, no hang.
   client::CallOptions once;
   once.max_attempts = 1;
-  absl::StatusOr<client::IndexerClient> plain =
-      client::IndexerClient::Connect(gateway.address(), client::ConnectionOptions{}, once);
+  absl::StatusOr<client::IndexerClient> plain = client::IndexerClient::Connect(
+      gateway.address(), client::ConnectionOptions{}, once);
   ASSERT_TRUE(plain.ok());
   EXPECT_EQ(plain->Stats().status().code(), absl::StatusCode::kUnavailable);
 
@@ -197,8 +210,10 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
   // caller learns which shard said what.
   ServiceProcess keyless;
   StartGateway(&keyless, "keyless", "");
-  absl::StatusOr<v1::StatsResponse> refused = Client(keyless, keys_[Role::kAdmin]).Stats();
-  EXPECT_EQ(refused.status().code(), absl::StatusCode::kUnauthenticated) << refused.status();
+  absl::StatusOr<v1::StatsResponse> refused =
+      Client(keyless, keys_[Role::kAdmin]).Stats();
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kUnauthenticated)
+      << refused.status();
   EXPECT_NE(refused.status().message().find("shard 0"), absl::string_view::npos)
       << refused.status();
   // Its metrics count the shard's refusal per shard and code.
@@ -221,14 +236,17 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
 TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
   const std::vector<v1::Model> models = Models(10);
   client::IndexerClient primary = Client(shards_[0], keys_[Role::kWrite]);
-  for (size_t i = 0; i < 6; ++i) ASSERT_TRUE(primary.Upsert(models[i], true).ok());
+  for (size_t i = 0; i < 6; ++i)
+    ASSERT_TRUE(primary.Upsert(models[i], true).ok());
 
-  auto start_follower = [&](ServiceProcess* follower, const std::string& name, Role role) {
+  auto start_follower = [&](ServiceProcess* follower, const std::string& name,
+                            Role role) {
     setenv("TPR_INDEXER_FOLLOW_API_KEY", keys_[role].c_str(), 1);
     absl::Status started = follower->Start(
         BinaryPath("tpr-indexer"),
-        {"--data-dir", Path(name), "--follow", shards_[0].address(), "--follow-tls",
-         "--follow-tls-ca", Path("ca1.pem"), "--follow-tls-server-name", "localhost"},
+        {"--data-dir", Path(name), "--follow", shards_[0].address(),
+         "--follow-tls", "--follow-tls-ca", Path("ca1.pem"),
+         "--follow-tls-server-name", "localhost"},
         Path(name + ".log"));
     unsetenv("TPR_INDEXER_FOLLOW_API_KEY");
     return started;
@@ -236,17 +254,18 @@ TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
   ServiceProcess follower;
   absl::Status started = start_follower(&follower, "follower", Role::kAdmin);
   ASSERT_TRUE(started.ok()) << started << ReadText(Path("follower.log"));
-  std::shared_ptr<grpc::Channel> channel =
-      grpc::CreateChannel(follower.address(), grpc::InsecureChannelCredentials());
+  std::shared_ptr<grpc::Channel> channel = grpc::CreateChannel(
+      follower.address(), grpc::InsecureChannelCredentials());
   auto follower_models = [&]() -> int64_t {
-    absl::StatusOr<client::IndexerClient> c =
-        client::IndexerClient::Connect(follower.address(), client::ConnectionOptions{});
+    absl::StatusOr<client::IndexerClient> c = client::IndexerClient::Connect(
+        follower.address(), client::ConnectionOptions{});
     if (!c.ok()) return -1;
     absl::StatusOr<v1::StatsResponse> stats = c->Stats();
     return stats.ok() ? stats->models() : -1;
   };
   auto wait_for = [](auto pred) {
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    const auto give_up =
+        std::chrono::steady_clock::now() + std::chrono::seconds(30);
     while (std::chrono::steady_clock::now() < give_up && !pred()) {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
@@ -257,7 +276,8 @@ TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
     return health.ok() && *health == 1;  // SERVING: copied and caught up
   })) << ReadText(Path("follower.log"));
   EXPECT_EQ(follower_models(), 6);
-  for (size_t i = 6; i < models.size(); ++i) ASSERT_TRUE(primary.Upsert(models[i], true).ok());
+  for (size_t i = 6; i < models.size(); ++i)
+    ASSERT_TRUE(primary.Upsert(models[i], true).ok());
   EXPECT_TRUE(wait_for([&] { return follower_models() == 10; }))
       << ReadText(Path("follower.log"));
   EXPECT_EQ(follower.Stop(SIGTERM), 0);
@@ -279,8 +299,10 @@ TEST_F(GatewayOpsTest, AFollowerReachesItsTlsPrimaryWithItsKey) {
 // balancer or the gateway sends it nothing; AFollowerReachesItsTlsPrimary...
 // above sees it turn SERVING once it has copied and caught up.
 TEST_F(GatewayOpsTest, AFollowerIsAliveButNotReadyUntilItHasCopiedItsPrimary) {
-  const std::string nowhere = absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
-  const std::string listen = absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
+  const std::string nowhere =
+      absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
+  const std::string listen =
+      absl::StrCat("127.0.0.1:", ::tpr::testing::FreePort());
   ServiceProcess follower;
   // The real server, and its "(port N)" line, come only after the copy;
   // meanwhile the loading server answers probes on `listen`.
@@ -295,7 +317,8 @@ TEST_F(GatewayOpsTest, AFollowerIsAliveButNotReadyUntilItHasCopiedItsPrimary) {
   absl::StatusOr<int> ready = absl::UnavailableError("not asked yet");
   for (int i = 0; i < 300 && !ready.ok(); ++i) {
     ready = HealthStatus(channel, "tpr.v1.Indexer");
-    if (!ready.ok()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (!ready.ok())
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   ASSERT_TRUE(ready.ok()) << ready.status() << ReadText(Path("lonely.log"));
   for (int i = 0; i < 5; ++i) {  // over a second: several copy attempts
@@ -308,8 +331,11 @@ TEST_F(GatewayOpsTest, AFollowerIsAliveButNotReadyUntilItHasCopiedItsPrimary) {
     std::this_thread::sleep_for(std::chrono::milliseconds(250));
   }
   const std::string log = ReadText(Path("lonely.log"));
-  EXPECT_NE(log.find("cannot copy a checkpoint of " + nowhere), std::string::npos) << log;
-  EXPECT_EQ(log.find("(port "), std::string::npos) << "no real server before the copy";
+  EXPECT_NE(log.find("cannot copy a checkpoint of " + nowhere),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(log.find("(port "), std::string::npos)
+      << "no real server before the copy";
   follower.Stop(SIGTERM);
 }
 
@@ -358,15 +384,18 @@ TEST_F(GatewayOpsTest, RequestIdTravelsToTheShardsAndBack) {
   // Log lines are written when calls end; the shards' streams end before
   // the gateway's answer, but allow the files a moment.
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  const std::vector<std::string> at_gateway = LinesWith(ReadText(logs_[&gateway]), id);
+  const std::vector<std::string> at_gateway =
+      LinesWith(ReadText(logs_[&gateway]), id);
   ASSERT_EQ(at_gateway.size(), 1u) << ReadText(logs_[&gateway]);
-  EXPECT_NE(at_gateway[0].find("\"rpc\":\"/tpr.v1.Indexer/Search\""), std::string::npos)
+  EXPECT_NE(at_gateway[0].find("\"rpc\":\"/tpr.v1.Indexer/Search\""),
+            std::string::npos)
       << at_gateway[0];
   // The search by id: a Get on the owner, then a Search on every shard.
   int searches = 0;
   for (int s = 0; s < kShards; ++s) {
     for (const std::string& line : LinesWith(ReadText(ShardLog(s)), id)) {
-      searches += line.find("\"rpc\":\"/tpr.v1.Indexer/Search\"") != std::string::npos;
+      searches +=
+          line.find("\"rpc\":\"/tpr.v1.Indexer/Search\"") != std::string::npos;
     }
     EXPECT_FALSE(LinesWith(ReadText(ShardLog(s)), id).empty()) << "shard " << s;
   }
@@ -376,8 +405,10 @@ TEST_F(GatewayOpsTest, RequestIdTravelsToTheShardsAndBack) {
       << ReadText(ShardLog(owner));
   EXPECT_TRUE(LinesWith(ReadText(ShardLog(1 - owner)), generated).empty());
   // No key ever reaches a log.
-  for (const std::string& log : {ReadText(logs_[&gateway]), ReadText(ShardLog(0))}) {
-    for (const auto& [role, key] : keys_) EXPECT_EQ(log.find(key), std::string::npos);
+  for (const std::string& log :
+       {ReadText(logs_[&gateway]), ReadText(ShardLog(0))}) {
+    for (const auto& [role, key] : keys_)
+      EXPECT_EQ(log.find(key), std::string::npos);
   }
 }
 
@@ -393,7 +424,8 @@ TEST_F(GatewayOpsTest, MetricsCountEachShardsCalls) {
     ++upserts[static_cast<size_t>(gateway::ShardOf(m.id(), kShards))];
   }
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(writer.Stats().ok());
-  EXPECT_EQ(writer.Get("no/such/model").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(writer.Get("no/such/model").status().code(),
+            absl::StatusCode::kNotFound);
 
   const int port = MetricsPort(ReadText(logs_[&gateway]));
   ASSERT_GT(port, 0) << ReadText(logs_[&gateway]);
@@ -413,16 +445,18 @@ TEST_F(GatewayOpsTest, MetricsCountEachShardsCalls) {
               0);
   }
   const int owner = gateway::ShardOf("no/such/model", kShards);
-  EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_errors_total",
-                   {absl::StrCat("shard=\"", owner, "\""), "code=\"NOT_FOUND\""}),
-            1);
+  EXPECT_EQ(
+      Sample(m.out, "tpr_gateway_shard_errors_total",
+             {absl::StrCat("shard=\"", owner, "\""), "code=\"NOT_FOUND\""}),
+      1);
   EXPECT_TRUE(std::isnan(Sample(m.out, "tpr_gateway_shard_errors_total",
                                 {"code=\"UNAUTHENTICATED\""})));
   // The gateway's own calls, as every service counts them.
   EXPECT_EQ(Sample(m.out, "tpr_rpc_requests_total",
                    {"method=\"/tpr.v1.Indexer/Upsert\"", "code=\"OK\""}),
             static_cast<double>(models.size()));
-  EXPECT_EQ(m.out.find("no/such/model"), std::string::npos) << "no per-id labels";
+  EXPECT_EQ(m.out.find("no/such/model"), std::string::npos)
+      << "no per-id labels";
 }
 
 }  // namespace

@@ -7,11 +7,10 @@
 // List pages, Stats sums, Get/Upsert/Delete errors; a stopped shard fails
 // the call with UNAVAILABLE naming it; search statistics are the shards'
 // sums; reads go to any serving replica and writes to the primary.
-#include "indexer/gateway/gateway_service.h"
-
 #include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
+#include "indexer/gateway/gateway_service.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
 
@@ -30,7 +29,8 @@ using ::tpr::testing::TempDir;
 
 constexpr int kShards = 3;
 
-grpc::Status Ingest(tpr::v1::Indexer::Stub* stub, const std::vector<TestModel>& models,
+grpc::Status Ingest(tpr::v1::Indexer::Stub* stub,
+                    const std::vector<TestModel>& models,
                     tpr::v1::BatchUpsertResponse* response) {
   grpc::ClientContext context;
   auto writer = stub->BatchUpsert(&context, response);
@@ -70,13 +70,15 @@ class GatewayTest : public ::testing::Test {
  protected:
   void SetUp() override {
     for (int s = 0; s < kShards; ++s) {
-      shards_.push_back(std::make_unique<InProcessIndexer>(absl::StrCat(dir_.path(), "/shard", s)));
+      shards_.push_back(std::make_unique<InProcessIndexer>(
+          absl::StrCat(dir_.path(), "/shard", s)));
       ASSERT_TRUE(shards_.back()->Start().ok());
     }
     reference_ = std::make_unique<InProcessIndexer>(dir_.path() + "/single");
     ASSERT_TRUE(reference_->Start().ok());
     GatewayOptions options;
-    for (auto& shard : shards_) options.shards.shards.push_back({shard->address(), {}});
+    for (auto& shard : shards_)
+      options.shards.shards.push_back({shard->address(), {}});
     options.health_interval_ms = 0;  // tests call CheckNow
     service_ = std::make_unique<GatewayService>(options);
     server_options_.shutdown_grace_ms = 2000;
@@ -119,11 +121,15 @@ class GatewayTest : public ::testing::Test {
     EXPECT_TRUE(want.status.ok()) << want.status.error_message();
     EXPECT_TRUE(got.status.ok()) << got.status.error_message();
     EXPECT_TRUE(got.got_stats);
-    EXPECT_EQ(got.neighbors.size(), want.neighbors.size()) << request.ShortDebugString();
-    for (size_t i = 0; i < std::min(got.neighbors.size(), want.neighbors.size()); ++i) {
-      EXPECT_EQ(got.neighbors[i].id(), want.neighbors[i].id()) << "rank " << i + 1;
+    EXPECT_EQ(got.neighbors.size(), want.neighbors.size())
+        << request.ShortDebugString();
+    for (size_t i = 0;
+         i < std::min(got.neighbors.size(), want.neighbors.size()); ++i) {
+      EXPECT_EQ(got.neighbors[i].id(), want.neighbors[i].id())
+          << "rank " << i + 1;
       // Bit-identical: the same EMD of the same pair of signatures.
-      EXPECT_EQ(got.neighbors[i].distance(), want.neighbors[i].distance()) << "rank " << i + 1;
+      EXPECT_EQ(got.neighbors[i].distance(), want.neighbors[i].distance())
+          << "rank " << i + 1;
       EXPECT_EQ(got.neighbors[i].label(), want.neighbors[i].label());
       EXPECT_EQ(got.neighbors[i].rank(), static_cast<int>(i + 1));
     }
@@ -138,9 +144,10 @@ class GatewayTest : public ::testing::Test {
       }
       if (request.exclude_self()) exclude = request.id();
     }
-    std::vector<indexer::testing::Hit> oracle =
-        BruteForce(query, live(), request.k(), request.radius(), request.label(), exclude);
-    EXPECT_EQ(got.neighbors.size(), oracle.size()) << request.ShortDebugString();
+    std::vector<indexer::testing::Hit> oracle = BruteForce(
+        query, live(), request.k(), request.radius(), request.label(), exclude);
+    EXPECT_EQ(got.neighbors.size(), oracle.size())
+        << request.ShortDebugString();
     for (size_t i = 0; i < std::min(got.neighbors.size(), oracle.size()); ++i) {
       EXPECT_EQ(got.neighbors[i].id(), oracle[i].id) << "rank " << i + 1;
       EXPECT_NEAR(got.neighbors[i].distance(), oracle[i].distance, 1e-9);
@@ -170,12 +177,17 @@ class GatewayTest : public ::testing::Test {
 
 TEST_F(GatewayTest, ModelsLiveOnTheirOwnShard) {
   std::vector<int64_t> expected(kShards, 0);
-  for (const TestModel& m : models_) ++expected[static_cast<size_t>(ShardOf(m.id, kShards))];
+  for (const TestModel& m : models_)
+    ++expected[static_cast<size_t>(ShardOf(m.id, kShards))];
   for (int s = 0; s < kShards; ++s) {
     grpc::ClientContext context;
     tpr::v1::StatsResponse stats;
-    ASSERT_TRUE(shards_[static_cast<size_t>(s)]->stub()->Stats(&context, {}, &stats).ok());
-    EXPECT_EQ(stats.models(), expected[static_cast<size_t>(s)]) << "shard " << s;
+    ASSERT_TRUE(shards_[static_cast<size_t>(s)]
+                    ->stub()
+                    ->Stats(&context, {}, &stats)
+                    .ok());
+    EXPECT_EQ(stats.models(), expected[static_cast<size_t>(s)])
+        << "shard " << s;
     EXPECT_GT(stats.models(), 0);
   }
 }
@@ -229,7 +241,8 @@ TEST_F(GatewayTest, TiesAcrossShardsComeInIdOrder) {
   // m00009 and its three copies are at distance 0 from each other; their ids
   // lie on different shards, and the merge must order them as one indexer.
   std::set<int> shards;
-  for (const char* id : {"m00009", "dup9_a", "dup9_b", "dup9_c"}) shards.insert(ShardOf(id, kShards));
+  for (const char* id : {"m00009", "dup9_a", "dup9_b", "dup9_c"})
+    shards.insert(ShardOf(id, kShards));
   EXPECT_GT(shards.size(), 1u);
   tpr::v1::SearchRequest request;
   request.set_id("dup9_b");
@@ -287,22 +300,28 @@ TEST_F(GatewayTest, UnaryCallsAnswerAsOneIndexer) {
 
   grpc::ClientContext dup_context;
   tpr::v1::UpsertResponse upserted;
-  EXPECT_EQ(gateway_->Upsert(&dup_context, ToRequest(models_[7]), &upserted).error_code(),
+  EXPECT_EQ(gateway_->Upsert(&dup_context, ToRequest(models_[7]), &upserted)
+                .error_code(),
             grpc::StatusCode::ALREADY_EXISTS);
   grpc::ClientContext over_context;
-  ASSERT_TRUE(gateway_->Upsert(&over_context, ToRequest(models_[7], true), &upserted).ok());
+  ASSERT_TRUE(
+      gateway_->Upsert(&over_context, ToRequest(models_[7], true), &upserted)
+          .ok());
   EXPECT_FALSE(upserted.created());
 
   tpr::v1::SearchRequest bad;
   bad.set_id("m00001");
   bad.set_k(0);
-  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
   bad.set_k(3);
   bad.set_radius(-1);
-  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
   bad.set_radius(0);
   bad.set_id("no-such-model");
-  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(RunSearch(gateway_.get(), bad).status.error_code(),
+            grpc::StatusCode::NOT_FOUND);
 
   // A batch with one bad model fails; the shards keep what they acknowledged.
   std::vector<TestModel> batch = MakeModels(20, 2, 3, "batch");
@@ -345,11 +364,14 @@ TEST_F(GatewayTest, MalformedMessageInABatchUpsertStreamIsAnError) {
 TEST_F(GatewayTest, ListMergesShardsInIdOrder) {
   int pages = 0;
   int reference_pages = 0;
-  const std::vector<std::string> want = ListAll(reference_->stub(), 1000, "", &reference_pages);
+  const std::vector<std::string> want =
+      ListAll(reference_->stub(), 1000, "", &reference_pages);
   ASSERT_EQ(want.size(), models_.size());
   for (int page_size : {1, 7, 100, 1000}) {
-    EXPECT_EQ(ListAll(gateway_.get(), page_size, "", &pages), want) << page_size;
-    EXPECT_EQ(pages, (static_cast<int>(want.size()) + page_size - 1) / page_size)
+    EXPECT_EQ(ListAll(gateway_.get(), page_size, "", &pages), want)
+        << page_size;
+    EXPECT_EQ(pages,
+              (static_cast<int>(want.size()) + page_size - 1) / page_size)
         << page_size;
   }
   EXPECT_EQ(ListAll(gateway_.get(), 9, "class4", &pages),
@@ -368,7 +390,8 @@ TEST_F(GatewayTest, ListPagesStayUnderTwoMebibytes) {
   std::vector<TestModel> big = MakeModels(90, 3, 41, "big");
   for (const TestModel& m : big) {
     tpr::v1::UpsertRequest request = ToRequest(m);
-    (*request.mutable_model()->mutable_metadata())["blob"] = std::string(60 << 10, 'x');
+    (*request.mutable_model()->mutable_metadata())["blob"] =
+        std::string(60 << 10, 'x');
     grpc::ClientContext context;
     tpr::v1::UpsertResponse response;
     ASSERT_TRUE(gateway_->Upsert(&context, request, &response).ok());
@@ -388,7 +411,8 @@ TEST_F(GatewayTest, ListPagesStayUnderTwoMebibytes) {
   }
   EXPECT_GE(pages, 2);
   int reference_pages = 0;
-  std::vector<std::string> want = ListAll(reference_->stub(), 1000, "", &reference_pages);
+  std::vector<std::string> want =
+      ListAll(reference_->stub(), 1000, "", &reference_pages);
   for (const TestModel& m : big) want.push_back(m.id);
   std::sort(want.begin(), want.end());
   EXPECT_EQ(ids, want);
@@ -408,7 +432,8 @@ TEST_F(GatewayTest, StatsSumsAndListsEachShard) {
   int64_t sum = 0;
   for (int s = 0; s < kShards; ++s) {
     EXPECT_EQ(got.shards(s).shard(), s);
-    EXPECT_EQ(got.shards(s).address(), shards_[static_cast<size_t>(s)]->address());
+    EXPECT_EQ(got.shards(s).address(),
+              shards_[static_cast<size_t>(s)]->address());
     sum += got.shards(s).stats().models();
   }
   EXPECT_EQ(sum, got.models());
@@ -471,8 +496,9 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(server_options, {&service});
   ASSERT_TRUE(started.ok()) << started.status();
-  auto gateway = tpr::v1::Indexer::NewStub(grpc::CreateChannel(
-      absl::StrCat("127.0.0.1:", started->port), grpc::InsecureChannelCredentials()));
+  auto gateway = tpr::v1::Indexer::NewStub(
+      grpc::CreateChannel(absl::StrCat("127.0.0.1:", started->port),
+                          grpc::InsecureChannelCredentials()));
   auto get = [&](const std::string& id) {
     grpc::ClientContext context;
     tpr::v1::GetRequest request;
@@ -488,7 +514,8 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
 
   // Both serving: reads alternate between the two copies.
   int on_replica = 0;
-  for (int i = 0; i < 8; ++i) on_replica += get(marker[0].id) == grpc::StatusCode::OK;
+  for (int i = 0; i < 8; ++i)
+    on_replica += get(marker[0].id) == grpc::StatusCode::OK;
   EXPECT_GT(on_replica, 0);
   EXPECT_LT(on_replica, 8);
 
@@ -505,7 +532,8 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
   // The primary stops: every read is served by the replica; writes fail
   // naming the shard, never landing on the replica.
   primary.Stop();
-  for (int i = 0; i < 4; ++i) EXPECT_EQ(get(marker[0].id), grpc::StatusCode::OK);
+  for (int i = 0; i < 4; ++i)
+    EXPECT_EQ(get(marker[0].id), grpc::StatusCode::OK);
   EXPECT_EQ(models(), 41);
   tpr::v1::SearchRequest search;
   *search.mutable_signature() = ToWire(corpus[3].signature);
@@ -516,7 +544,8 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
   {
     grpc::ClientContext context;
     tpr::v1::UpsertResponse upserted;
-    grpc::Status refused = gateway->Upsert(&context, ToRequest(fresh[0], true), &upserted);
+    grpc::Status refused =
+        gateway->Upsert(&context, ToRequest(fresh[0], true), &upserted);
     EXPECT_EQ(refused.error_code(), grpc::StatusCode::UNAVAILABLE);
     EXPECT_NE(refused.error_message().find("shard 0"), std::string::npos)
         << refused.error_message();
@@ -555,7 +584,8 @@ TEST_F(GatewayTest, AStoppedShardFailsTheCallNamingIt) {
   }
   grpc::ClientContext stats_context;
   tpr::v1::StatsResponse stats;
-  EXPECT_EQ(gateway_->Stats(&stats_context, {}, &stats).error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_EQ(gateway_->Stats(&stats_context, {}, &stats).error_code(),
+            grpc::StatusCode::UNAVAILABLE);
 }
 
 }  // namespace

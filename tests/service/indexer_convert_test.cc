@@ -2,8 +2,6 @@
 // (indexer/service/convert.h): one test per documented rule, each checking
 // the status code and that the message names the feature and field at
 // fault; and the round trip through ToWireSignature.
-#include "indexer/service/convert.h"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -13,6 +11,7 @@
 
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/service/convert.h"
 #include "tests/indexer/signature_testing.h"
 
 namespace tpr::indexer {
@@ -39,7 +38,8 @@ void ExpectInvalid(const std::function<void(v1::Signature*)>& edit,
   edit(&s);
   absl::StatusOr<index::Signature> r = ToIndexSignature(s);
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument)
+      << r.status();
   for (const std::string& name : names) {
     EXPECT_NE(std::string(r.status().message()).find(name), std::string::npos)
         << "'" << name << "' not in: " << r.status().message();
@@ -75,7 +75,8 @@ TEST(IndexerConvertTest, RoundTripIsExact) {
 TEST(IndexerConvertTest, FeatureCount) {
   ExpectInvalid([](v1::Signature* s) { s->clear_features(); }, {"no feature"});
   v1::Signature big = Valid();
-  while (big.features_size() <= index::kMaxFeatures) *big.add_features() = big.features(0);
+  while (big.features_size() <= index::kMaxFeatures)
+    *big.add_features() = big.features(0);
   absl::StatusOr<index::Signature> r = ToIndexSignature(big);
   EXPECT_EQ(r.status().code(), absl::StatusCode::kResourceExhausted);
 }
@@ -107,26 +108,39 @@ TEST(IndexerConvertTest, BandCountMustBe1To256AndMatchTheVectors) {
       },
       {"feature 0", "options.bands = 4"});
   // One vector of one feature too long (each of the three in turn).
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(2)->add_curvature(0.1); },
-                {"feature 2", "curvature"});
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(3)->mutable_area()->RemoveLast(); },
-                {"feature 3", "area"});
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(5)->add_distance(0.1); },
-                {"feature 5", "distance"});
+  ExpectInvalid(
+      [](v1::Signature* s) { s->mutable_features(2)->add_curvature(0.1); },
+      {"feature 2", "curvature"});
+  ExpectInvalid(
+      [](v1::Signature* s) {
+        s->mutable_features(3)->mutable_area()->RemoveLast();
+      },
+      {"feature 3", "area"});
+  ExpectInvalid(
+      [](v1::Signature* s) { s->mutable_features(5)->add_distance(0.1); },
+      {"feature 5", "distance"});
 }
 
 TEST(IndexerConvertTest, KindMustBePointOrRing) {
   ExpectInvalid(
-      [](v1::Signature* s) { s->mutable_features(1)->set_kind(v1::FEATURE_KIND_UNSPECIFIED); },
+      [](v1::Signature* s) {
+        s->mutable_features(1)->set_kind(v1::FEATURE_KIND_UNSPECIFIED);
+      },
       {"feature 1", "kind"});
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(1)->set_kind(v1::FeatureKind(7)); },
-                {"feature 1", "kind"});
+  ExpectInvalid(
+      [](v1::Signature* s) {
+        s->mutable_features(1)->set_kind(v1::FeatureKind(7));
+      },
+      {"feature 1", "kind"});
 }
 
 TEST(IndexerConvertTest, IntegralGeodesicInZeroOne) {
   for (double bad : {-1e-9, 1.0 + 1e-9, kNaN, kInf, -kInf}) {
-    ExpectInvalid([bad](v1::Signature* s) { s->mutable_features(4)->set_integral_geodesic(bad); },
-                  {"feature 4", "integral_geodesic"});
+    ExpectInvalid(
+        [bad](v1::Signature* s) {
+          s->mutable_features(4)->set_integral_geodesic(bad);
+        },
+        {"feature 4", "integral_geodesic"});
   }
   // The ends are valid.
   for (double good : {0.0, 1.0}) {
@@ -138,8 +152,9 @@ TEST(IndexerConvertTest, IntegralGeodesicInZeroOne) {
 
 TEST(IndexerConvertTest, WeightsNonNegativeFiniteAndSumToOne) {
   for (double bad : {-0.01, kNaN, kInf}) {
-    ExpectInvalid([bad](v1::Signature* s) { s->mutable_features(2)->set_weight(bad); },
-                  {"feature 2", "weight"});
+    ExpectInvalid(
+        [bad](v1::Signature* s) { s->mutable_features(2)->set_weight(bad); },
+        {"feature 2", "weight"});
   }
   ExpectInvalid(
       [](v1::Signature* s) {
@@ -148,29 +163,37 @@ TEST(IndexerConvertTest, WeightsNonNegativeFiniteAndSumToOne) {
       {"weights sum to", "must sum to 1"});
   // A zero weight is allowed (a feature with no mass).
   v1::Signature s = Valid();
-  s.mutable_features(1)->set_weight(s.features(1).weight() + s.features(0).weight());
+  s.mutable_features(1)->set_weight(s.features(1).weight() +
+                                    s.features(0).weight());
   s.mutable_features(0)->set_weight(0.0);
   EXPECT_TRUE(ToIndexSignature(s).ok()) << ToIndexSignature(s).status();
 }
 
 TEST(IndexerConvertTest, AreasInZeroOne) {
   for (double bad : {-1e-6, 1.5, kNaN, kInf}) {
-    ExpectInvalid([bad](v1::Signature* s) { s->mutable_features(3)->set_area(2, bad); },
-                  {"feature 3", "area[2]"});
+    ExpectInvalid(
+        [bad](v1::Signature* s) { s->mutable_features(3)->set_area(2, bad); },
+        {"feature 3", "area[2]"});
   }
 }
 
 TEST(IndexerConvertTest, DistancesNonNegativeAndFinite) {
   for (double bad : {-1e-6, kNaN, kInf}) {
-    ExpectInvalid([bad](v1::Signature* s) { s->mutable_features(0)->set_distance(1, bad); },
-                  {"feature 0", "distance[1]"});
+    ExpectInvalid(
+        [bad](v1::Signature* s) {
+          s->mutable_features(0)->set_distance(1, bad);
+        },
+        {"feature 0", "distance[1]"});
   }
 }
 
 TEST(IndexerConvertTest, CurvatureFiniteButMaySignChange) {
   for (double bad : {kNaN, kInf, -kInf}) {
-    ExpectInvalid([bad](v1::Signature* s) { s->mutable_features(5)->set_curvature(3, bad); },
-                  {"feature 5", "curvature[3]"});
+    ExpectInvalid(
+        [bad](v1::Signature* s) {
+          s->mutable_features(5)->set_curvature(3, bad);
+        },
+        {"feature 5", "curvature[3]"});
   }
   // Saddle bands have negative curvature: valid.
   v1::Signature s = Valid();
@@ -191,18 +214,22 @@ TEST(IndexerConvertTest, SpectrumCarriedAndValidated) {
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_EQ(back->spectrum, s.spectrum);
 
-  auto expect = [&](const std::function<void(v1::Signature*)>& edit, const std::string& name) {
+  auto expect = [&](const std::function<void(v1::Signature*)>& edit,
+                    const std::string& name) {
     v1::Signature bad = wire;
     edit(&bad);
     absl::StatusOr<index::Signature> r = ToIndexSignature(bad);
     ASSERT_FALSE(r.ok());
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
-    EXPECT_NE(std::string(r.status().message()).find(name), std::string::npos) << r.status();
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument)
+        << r.status();
+    EXPECT_NE(std::string(r.status().message()).find(name), std::string::npos)
+        << r.status();
   };
   for (double bad : {0.0, -1.0, kNaN, kInf}) {
     expect([bad](v1::Signature* w) { w->set_spectrum(7, bad); }, "spectrum[7]");
   }
-  expect([](v1::Signature* w) { w->set_spectrum(9, w->spectrum(8) * 0.5); }, "ascending");
+  expect([](v1::Signature* w) { w->set_spectrum(9, w->spectrum(8) * 0.5); },
+         "ascending");
   expect([](v1::Signature* w) { w->add_spectrum(1e9); }, "at most 50");
   expect(
       [](v1::Signature* w) {
@@ -225,9 +252,12 @@ TEST(IndexerConvertTest, OtherSignatureVersionsAreFailedPrecondition) {
     s.set_signature_version(version);
     absl::StatusOr<index::Signature> r = ToIndexSignature(s);
     ASSERT_FALSE(r.ok()) << version;
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition) << r.status();
-    const std::string want = version < kSignatureVersion ? "tpr add --update" : "upgrade";
-    EXPECT_NE(std::string(r.status().message()).find(want), std::string::npos) << r.status();
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition)
+        << r.status();
+    const std::string want =
+        version < kSignatureVersion ? "tpr add --update" : "upgrade";
+    EXPECT_NE(std::string(r.status().message()).find(want), std::string::npos)
+        << r.status();
   }
 }
 
@@ -235,13 +265,23 @@ TEST(IndexerConvertTest, OtherSignatureVersionsAreFailedPrecondition) {
 // 8e165, distance 1.3e240) were accepted, and their squared differences
 // overflowed, so the EMD to any other signature was +inf. Values are now
 // bounded by kMaxBandMagnitude, and the bound itself keeps the EMD finite.
-TEST(IndexerConvertTest, HugeFiniteBandValuesAreRefusedAndTheBoundKeepsEmdFinite) {
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(2)->set_curvature(1, 8.0e165); },
-                {"feature 2", "curvature[1]"});
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(2)->set_curvature(1, -8.0e165); },
-                {"feature 2", "curvature[1]"});
-  ExpectInvalid([](v1::Signature* s) { s->mutable_features(4)->set_distance(0, 1.3e240); },
-                {"feature 4", "distance[0]"});
+TEST(IndexerConvertTest,
+     HugeFiniteBandValuesAreRefusedAndTheBoundKeepsEmdFinite) {
+  ExpectInvalid(
+      [](v1::Signature* s) {
+        s->mutable_features(2)->set_curvature(1, 8.0e165);
+      },
+      {"feature 2", "curvature[1]"});
+  ExpectInvalid(
+      [](v1::Signature* s) {
+        s->mutable_features(2)->set_curvature(1, -8.0e165);
+      },
+      {"feature 2", "curvature[1]"});
+  ExpectInvalid(
+      [](v1::Signature* s) {
+        s->mutable_features(4)->set_distance(0, 1.3e240);
+      },
+      {"feature 4", "distance[0]"});
 
   // The most extreme accepted signature, 256 bands at +-bound, against a
   // valid one of 256 bands at the other extreme.
@@ -267,7 +307,8 @@ TEST(IndexerConvertTest, HugeFiniteBandValuesAreRefusedAndTheBoundKeepsEmdFinite
   ASSERT_TRUE(ia.ok()) << ia.status();
   ASSERT_TRUE(ib.ok()) << ib.status();
   const index::GroundDistanceOptions ground;
-  const double d = index::Emd(*index::Prepare(*ia, ground), *index::Prepare(*ib, ground));
+  const double d =
+      index::Emd(*index::Prepare(*ia, ground), *index::Prepare(*ib, ground));
   EXPECT_TRUE(std::isfinite(d)) << d;
   EXPECT_GT(d, 0.0);
 }

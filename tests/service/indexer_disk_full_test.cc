@@ -29,10 +29,12 @@ constexpr int kNotServing = 2;
 // The readiness (grpc.health.v1 status of "tpr.v1.Indexer") once it equals
 // `want` or 20 s passed; the last status seen (-1 on a failed call).
 int WaitForReadiness(InProcessIndexer& server, int want) {
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::seconds(20);
   int last = -1;
   while (std::chrono::steady_clock::now() < give_up) {
-    absl::StatusOr<int> s = ::tpr::testing::HealthStatus(server.channel(), "tpr.v1.Indexer");
+    absl::StatusOr<int> s =
+        ::tpr::testing::HealthStatus(server.channel(), "tpr.v1.Indexer");
     last = s.ok() ? *s : -1;
     if (last == want) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -57,7 +59,8 @@ class SmallDisk {
   bool mounted_ = false;
 };
 
-TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFreed) {
+TEST(IndexerDiskFullTest,
+     WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFreed) {
   TempDir dir;
   const std::string disk = dir.path() + "/disk";
   std::filesystem::create_directories(disk);
@@ -65,13 +68,15 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
   // (and DB::Resume succeeds) only once the free space exceeds its reserve,
   // about the write buffers' size (64 MiB), so a smaller disk never recovers.
   SmallDisk small(disk, 200 << 20);
-  if (!small.mounted()) GTEST_SKIP() << "cannot mount a tmpfs here (needs root)";
+  if (!small.mounted())
+    GTEST_SKIP() << "cannot mount a tmpfs here (needs root)";
   // Filler that is freed later: "space returns".
   const std::string filler = disk + "/filler";
   {
     std::ofstream f(filler, std::ios::binary);
     const std::string block(1 << 20, 'f');
-    for (int i = 0; i < 194; ++i) f.write(block.data(), static_cast<std::streamsize>(block.size()));
+    for (int i = 0; i < 194; ++i)
+      f.write(block.data(), static_cast<std::streamsize>(block.size()));
   }
   // Large signatures (150 features x 8 bands, ~29 KB a model) fill the
   // disk in a few hundred writes.
@@ -90,7 +95,8 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
   std::vector<TestModel> acked;
   grpc::Status failed;
   for (int i = 0; i < 2000; ++i) {
-    TestModel m{absl::StrCat("m", i), absl::StrCat("c", i % 3), gen.Member(i % 3)};
+    TestModel m{absl::StrCat("m", i), absl::StrCat("c", i % 3),
+                gen.Member(i % 3)};
     grpc::ClientContext c;
     tpr::v1::UpsertResponse resp;
     grpc::Status s = server.stub()->Upsert(&c, ToRequest(m), &resp);
@@ -101,7 +107,8 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
     acked.push_back(std::move(m));
   }
   ASSERT_FALSE(failed.ok()) << "the disk never filled";
-  EXPECT_EQ(failed.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << failed.error_message();
+  EXPECT_EQ(failed.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << failed.error_message();
   EXPECT_NE(failed.error_message().find("disk is full"), std::string::npos)
       << failed.error_message();
   EXPECT_EQ(failed.error_message().find(disk), std::string::npos)
@@ -109,15 +116,18 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
   // Meanwhile: readiness is NOT_SERVING and says why, further writes fail
   // fast the same way, reads and searches work.
   EXPECT_EQ(WaitForReadiness(server, kNotServing), kNotServing);
-  EXPECT_NE(server.core()->WriteReadiness().find("space is freed"), std::string::npos)
+  EXPECT_NE(server.core()->WriteReadiness().find("space is freed"),
+            std::string::npos)
       << server.core()->WriteReadiness();
   {
     TestModel m{"later", "c0", gen.Member(0)};
     grpc::ClientContext c;
     tpr::v1::UpsertResponse resp;
     grpc::Status s = server.stub()->Upsert(&c, ToRequest(m), &resp);
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
-    EXPECT_NE(s.error_message().find("disk is full"), std::string::npos) << s.error_message();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("disk is full"), std::string::npos)
+        << s.error_message();
   }
   EXPECT_EQ(WaitForReadiness(server, kNotServing), kNotServing);
   SearchResult r = RunSearch(server.stub(), [&] {
@@ -127,7 +137,8 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
     return q;
   }());
   ASSERT_TRUE(r.status.ok()) << r.status.error_message();
-  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(acked[0].signature, acked, 3));
+  TPR_EXPECT_SAME_RANKING(r.neighbors,
+                          BruteForce(acked[0].signature, acked, 3));
 
   // Space returns: within a few seconds (one Resume attempt a second)
   // readiness is SERVING again and writes are accepted, no restart.
@@ -168,7 +179,8 @@ TEST(IndexerDiskFullTest, WritesFailWithResourceExhaustedAndResumeOnceSpaceIsFre
     tpr::v1::GetRequest get;
     get.set_id("later");
     tpr::v1::Model got;
-    EXPECT_EQ(server.stub()->Get(&g, get, &got).error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(server.stub()->Get(&g, get, &got).error_code(),
+              grpc::StatusCode::NOT_FOUND);
   }
   server.Stop();
 }

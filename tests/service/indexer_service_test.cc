@@ -54,7 +54,8 @@ class IndexerServiceTest : public ::testing::Test {
       // Debian's gRPC is not instrumented: TSan cannot see it hand a call
       // between its threads and reports hundreds of races per call, with
       // our interceptors' and handlers' frames on top.
-      GTEST_SKIP() << "gRPC (Debian, not instrumented) hides its synchronization from TSan";
+      GTEST_SKIP() << "gRPC (Debian, not instrumented) hides its "
+                      "synchronization from TSan";
     }
     CoreOptions core;
     core.persist_interval_ms = 0;
@@ -70,7 +71,8 @@ class IndexerServiceTest : public ::testing::Test {
     for (const TestModel& m : models) {
       grpc::ClientContext context;
       tpr::v1::UpsertResponse response;
-      ASSERT_TRUE(server_->stub()->Upsert(&context, ToRequest(m), &response).ok());
+      ASSERT_TRUE(
+          server_->stub()->Upsert(&context, ToRequest(m), &response).ok());
       ASSERT_TRUE(response.created());
     }
   }
@@ -110,7 +112,8 @@ TEST_F(IndexerServiceTest, UpsertGetListDeleteStatsRoundTrip) {
   {
     grpc::ClientContext c;
     tpr::v1::UpsertResponse r;
-    ASSERT_TRUE(stub->Upsert(&c, ToRequest(relabelled, /*overwrite=*/true), &r).ok());
+    ASSERT_TRUE(
+        stub->Upsert(&c, ToRequest(relabelled, /*overwrite=*/true), &r).ok());
     EXPECT_FALSE(r.created());
     grpc::ClientContext c2;
     tpr::v1::GetRequest g;
@@ -168,7 +171,8 @@ TEST_F(IndexerServiceTest, UpsertGetListDeleteStatsRoundTrip) {
     tpr::v1::DeleteResponse r;
     ASSERT_TRUE(stub->Delete(&c, d, &r).ok());
     grpc::ClientContext c2;
-    EXPECT_EQ(stub->Delete(&c2, d, &r).error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(stub->Delete(&c2, d, &r).error_code(),
+              grpc::StatusCode::NOT_FOUND);
     grpc::ClientContext c3;
     tpr::v1::GetRequest g;
     g.set_id(models[0].id);
@@ -208,7 +212,8 @@ TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
     EXPECT_TRUE(r.got_stats);
     EXPECT_GT(r.stats.emd_computations(), 0);
     for (const auto& n : r.neighbors) {
-      EXPECT_EQ(n.label(), models[static_cast<size_t>(std::stoi(n.id().substr(1)))].label);
+      EXPECT_EQ(n.label(),
+                models[static_cast<size_t>(std::stoi(n.id().substr(1)))].label);
     }
 
     // k > n returns everything, ranked.
@@ -223,20 +228,22 @@ TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
     req.set_radius(radius);
     r = RunSearch(stub, req);
     ASSERT_TRUE(r.status.ok());
-    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 500, radius));
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(q.signature, models, 500, radius));
 
     // Label filter, with k and radius.
     req = BySignature(q.signature, 5);
     req.set_label("class2");
     r = RunSearch(stub, req);
     ASSERT_TRUE(r.status.ok());
-    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(q.signature, models, 5, 0, "class2"));
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(q.signature, models, 5, 0, "class2"));
     for (const auto& n : r.neighbors) EXPECT_EQ(n.label(), "class2");
     req.set_radius(radius);
     r = RunSearch(stub, req);
     ASSERT_TRUE(r.status.ok());
-    TPR_EXPECT_SAME_RANKING(r.neighbors,
-                            BruteForce(q.signature, models, 5, radius, "class2"));
+    TPR_EXPECT_SAME_RANKING(
+        r.neighbors, BruteForce(q.signature, models, 5, radius, "class2"));
   }
 
   // By stored id, with and without the query model itself.
@@ -252,7 +259,8 @@ TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
     req.set_exclude_self(true);
     r = RunSearch(stub, req);
     ASSERT_TRUE(r.status.ok());
-    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(m.signature, models, 6, 0, "", m.id));
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(m.signature, models, 6, 0, "", m.id));
   }
 }
 
@@ -296,13 +304,16 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
     EXPECT_TRUE(res.neighbors.empty());
     return res.status.error_code();
   };
-  EXPECT_EQ(search_code(ById(models[0].id, 0)), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_EQ(search_code(ById(models[0].id, -3)), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(search_code(ById(models[0].id, 0)),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(search_code(ById(models[0].id, -3)),
+            grpc::StatusCode::INVALID_ARGUMENT);
   tpr::v1::SearchRequest negative = ById(models[0].id, 3);
   negative.set_radius(-0.5);
   EXPECT_EQ(search_code(negative), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(search_code(ById("no-such-model", 3)), grpc::StatusCode::NOT_FOUND);
-  EXPECT_EQ(search_code(ById(models[0].id, 1001)), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(search_code(ById(models[0].id, 1001)),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);
   tpr::v1::SearchRequest no_query;
   no_query.set_k(3);
   EXPECT_EQ(search_code(no_query), grpc::StatusCode::INVALID_ARGUMENT);
@@ -310,7 +321,8 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
   // Malformed signatures: weights not summing to 1, unequal band lengths,
   // a feature without kind, no feature at all.
   tpr::v1::Signature bad_weights = ToWire(models[0].signature);
-  bad_weights.mutable_features(0)->set_weight(bad_weights.features(0).weight() + 0.3);
+  bad_weights.mutable_features(0)->set_weight(bad_weights.features(0).weight() +
+                                              0.3);
   tpr::v1::Signature bad_bands = ToWire(models[0].signature);
   bad_bands.mutable_features(1)->add_curvature(0.1);
   tpr::v1::Signature bad_kind = ToWire(models[0].signature);
@@ -327,7 +339,8 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
     tpr::v1::UpsertResponse resp;
     grpc::Status s = stub->Upsert(&c, u, &resp);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-    EXPECT_NE(s.error_message().find(models[1].id), std::string::npos) << s.error_message();
+    EXPECT_NE(s.error_message().find(models[1].id), std::string::npos)
+        << s.error_message();
   }
 
   // Ids: empty and too long.
@@ -345,7 +358,8 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
     (*u.mutable_model()->mutable_metadata())["blob"] = std::string(70000, 'b');
     grpc::ClientContext c;
     tpr::v1::UpsertResponse resp;
-    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(),
+              grpc::StatusCode::RESOURCE_EXHAUSTED);
   }
   // A rejected model was not written.
   {
@@ -354,13 +368,15 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
     g.set_id(models[1].id);
     tpr::v1::Model m;
     ASSERT_TRUE(stub->Get(&c, g, &m).ok());
-    EXPECT_EQ(m.signature().SerializeAsString(), ToWire(models[1].signature).SerializeAsString());
+    EXPECT_EQ(m.signature().SerializeAsString(),
+              ToWire(models[1].signature).SerializeAsString());
   }
 
   // Still serving, and exact.
   SearchResult r = RunSearch(stub, ById(models[0].id, 4));
   ASSERT_TRUE(r.status.ok());
-  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[0].signature, models, 4));
+  TPR_EXPECT_SAME_RANKING(r.neighbors,
+                          BruteForce(models[0].signature, models, 4));
 }
 
 // Issue 12 item 3: a label of tens of MiB made List and Stats fail for
@@ -380,16 +396,20 @@ TEST_F(IndexerServiceTest, LabelsAreBoundedAndListAndStatsStayUnderFourMiB) {
     grpc::Status s = stub->Upsert(&c, u, &resp);
     // Past the server's 64 MiB receive limit it is not; the label check
     // answers, naming the length and the limit.
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
-    EXPECT_NE(s.error_message().find("label"), std::string::npos) << s.error_message();
-    EXPECT_NE(s.error_message().find("256"), std::string::npos) << s.error_message();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("label"), std::string::npos)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("256"), std::string::npos)
+        << s.error_message();
   }
   {
     tpr::v1::UpsertRequest u = ToRequest(models[0]);
     u.mutable_model()->set_label(std::string(kMaxLabelBytes + 1, 'L'));
     grpc::ClientContext c;
     tpr::v1::UpsertResponse resp;
-    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(stub->Upsert(&c, u, &resp).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
   }
   // Every model as large as List can carry: longest id, longest label,
   // 64 KiB of metadata; each label distinct. 120 of them are ~7.9 MB.
@@ -445,13 +465,15 @@ TEST_F(IndexerServiceTest, LabelsAreBoundedAndListAndStatsStayUnderFourMiB) {
     grpc::ClientContext c;
     tpr::v1::BatchUpsertResponse resp;
     auto writer = stub->BatchUpsert(&c, &resp);
-    const std::vector<TestModel> more = MakeModels(kMaxStatsLabels + 50, 3, 92, "s");
+    const std::vector<TestModel> more =
+        MakeModels(kMaxStatsLabels + 50, 3, 92, "s");
     for (size_t i = 0; i < more.size(); ++i) {
       tpr::v1::UpsertRequest u = ToRequest(more[i]);
       std::string label = absl::StrCat("label", i, "-");
       label.resize(kMaxLabelBytes, 'z');
       // Labels 0..9 hold 3 models each, the rest one.
-      u.mutable_model()->set_label(i < 30 ? absl::StrCat("popular", i % 10) : label);
+      u.mutable_model()->set_label(i < 30 ? absl::StrCat("popular", i % 10)
+                                          : label);
       ASSERT_TRUE(writer->Write(u));
     }
     writer->WritesDone();
@@ -462,9 +484,11 @@ TEST_F(IndexerServiceTest, LabelsAreBoundedAndListAndStatsStayUnderFourMiB) {
   grpc::Status s = stub->Stats(&c, tpr::v1::StatsRequest(), &stats);
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_LE(stats.ByteSizeLong(), size_t{4} << 20);
-  EXPECT_EQ(stats.models(), static_cast<int64_t>(models.size() + kMaxStatsLabels + 50));
+  EXPECT_EQ(stats.models(),
+            static_cast<int64_t>(models.size() + kMaxStatsLabels + 50));
   EXPECT_EQ(stats.labels().size(), static_cast<int>(kMaxStatsLabels));
-  for (int i = 0; i < 10; ++i) EXPECT_EQ(stats.labels().at(absl::StrCat("popular", i)), 3);
+  for (int i = 0; i < 10; ++i)
+    EXPECT_EQ(stats.labels().at(absl::StrCat("popular", i)), 3);
 }
 
 // Issue 12 item 8 (indexer): invalid UTF-8 in an id, garbage bytes and ids
@@ -475,13 +499,15 @@ TEST_F(IndexerServiceTest, BadBytesAndIdsOutsideTheAlphabetAreInvalidArgument) {
   const std::vector<TestModel> models = MakeModels(2, 1, 95);
   auto raw_upsert = [&](const std::string& bytes) {
     grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::seconds(10));
     grpc::Slice slice(bytes.data(), bytes.size());
     grpc::ByteBuffer request(&slice, 1);
     grpc::ByteBuffer response;
-    const grpc::internal::RpcMethod method("/tpr.v1.Indexer/Upsert",
-                                           grpc::internal::RpcMethod::NORMAL_RPC);
-    return grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
+    const grpc::internal::RpcMethod method(
+        "/tpr.v1.Indexer/Upsert", grpc::internal::RpcMethod::NORMAL_RPC);
+    return grpc::internal::BlockingUnaryCall<grpc::ByteBuffer,
+                                             grpc::ByteBuffer>(
         server_->channel().get(), method, &context, request, &response);
   };
   // A valid request, serialized, then its id's bytes replaced by bytes that
@@ -493,11 +519,15 @@ TEST_F(IndexerServiceTest, BadBytesAndIdsOutsideTheAlphabetAreInvalidArgument) {
   ASSERT_NE(at, std::string::npos);
   bytes.replace(at, 13, std::string("bad\xff\xfe-id-utf8", 13));
   for (const std::string& garbage :
-       {bytes, std::string("\xff\xff\xff\xff\xff\xff", 6), std::string("\x0a\x05\x0a", 3)}) {
+       {bytes, std::string("\xff\xff\xff\xff\xff\xff", 6),
+        std::string("\x0a\x05\x0a", 3)}) {
     grpc::Status s = raw_upsert(garbage);
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
-    EXPECT_NE(s.error_message().find("UTF-8"), std::string::npos) << s.error_message();
-    EXPECT_NE(s.error_message().find("Upsert"), std::string::npos) << s.error_message();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("UTF-8"), std::string::npos)
+        << s.error_message();
+    EXPECT_NE(s.error_message().find("Upsert"), std::string::npos)
+        << s.error_message();
   }
   // The untouched request goes through the same raw path.
   EXPECT_TRUE(raw_upsert(ToRequest(models[0]).SerializeAsString()).ok());
@@ -517,7 +547,8 @@ TEST_F(IndexerServiceTest, BadBytesAndIdsOutsideTheAlphabetAreInvalidArgument) {
     tpr::v1::UpsertResponse resp;
     grpc::Status s = server_->stub()->Upsert(&c, ToRequest(m), &resp);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << id;
-    EXPECT_NE(s.error_message().find(problem), std::string::npos) << s.error_message();
+    EXPECT_NE(s.error_message().find(problem), std::string::npos)
+        << s.error_message();
   }
   // Non-ASCII printable ids are fine.
   TestModel accented = models[1];
@@ -534,7 +565,8 @@ TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
     grpc::ClientContext c;
     tpr::v1::BatchUpsertResponse resp;
     auto writer = stub->BatchUpsert(&c, &resp);
-    for (size_t i = 0; i < 30; ++i) ASSERT_TRUE(writer->Write(ToRequest(models[i])));
+    for (size_t i = 0; i < 30; ++i)
+      ASSERT_TRUE(writer->Write(ToRequest(models[i])));
     // Duplicates without overwrite are skipped, with overwrite written.
     ASSERT_TRUE(writer->Write(ToRequest(models[0])));
     ASSERT_TRUE(writer->Write(ToRequest(models[1], true)));
@@ -547,7 +579,8 @@ TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
     grpc::ClientContext c;
     tpr::v1::BatchUpsertResponse resp;
     auto writer = stub->BatchUpsert(&c, &resp);
-    for (size_t i = 30; i < 35; ++i) ASSERT_TRUE(writer->Write(ToRequest(models[i])));
+    for (size_t i = 30; i < 35; ++i)
+      ASSERT_TRUE(writer->Write(ToRequest(models[i])));
     TestModel bad = models[35];
     bad.signature.features.clear();
     writer->Write(ToRequest(bad));
@@ -564,7 +597,8 @@ TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
   std::vector<TestModel> kept(models.begin(), models.begin() + 35);
   SearchResult r = RunSearch(stub, BySignature(models[39].signature, 50));
   ASSERT_TRUE(r.status.ok());
-  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[39].signature, kept, 50));
+  TPR_EXPECT_SAME_RANKING(r.neighbors,
+                          BruteForce(models[39].signature, kept, 50));
 }
 
 // Issue 12: bytes that do not parse in the middle of a BatchUpsert stream
@@ -639,7 +673,8 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
     threads.emplace_back([&, w] {
       auto stub = tpr::v1::Indexer::NewStub(server_->channel());
       written[static_cast<size_t>(w)] =
-          MakeModels(kWritesEach, 3, 100 + static_cast<uint64_t>(w), absl::StrCat("w", w, "-"));
+          MakeModels(kWritesEach, 3, 100 + static_cast<uint64_t>(w),
+                     absl::StrCat("w", w, "-"));
       for (const TestModel& m : written[static_cast<size_t>(w)]) {
         grpc::ClientContext c;
         tpr::v1::UpsertResponse r;
@@ -650,13 +685,17 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
   for (int s = 0; s < kSearchers; ++s) {
     threads.emplace_back([&, s] {
       auto stub = tpr::v1::Indexer::NewStub(server_->channel());
-      const std::vector<TestModel> queries = MakeModels(5, 3, 200 + static_cast<uint64_t>(s), "q");
+      const std::vector<TestModel> queries =
+          MakeModels(5, 3, 200 + static_cast<uint64_t>(s), "q");
       // Bounded: until the writers finish, at most 200 searches.
       for (int i = 0; i < 200 && !writers_done.load(); ++i) {
-        SearchResult r = RunSearch(stub.get(), BySignature(queries[i % 5].signature, 10));
-        if (!r.status.ok() || r.neighbors.size() != 10 || !r.got_stats) ++errors;
+        SearchResult r =
+            RunSearch(stub.get(), BySignature(queries[i % 5].signature, 10));
+        if (!r.status.ok() || r.neighbors.size() != 10 || !r.got_stats)
+          ++errors;
         for (size_t j = 1; j < r.neighbors.size(); ++j) {
-          if (r.neighbors[j].distance() < r.neighbors[j - 1].distance()) ++errors;
+          if (r.neighbors[j].distance() < r.neighbors[j - 1].distance())
+            ++errors;
         }
         ++searches;
       }
@@ -677,10 +716,10 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
   }
 }
 
-// IndexerCore without the wire: writers (single upserts), a batch writer (group commits), a
-// deleter and searchers at once, on a small rebuild threshold so that the
-// tree is rebuilt in the background meanwhile, with two search threads per
-// query. Every id has one signature for its whole life, so each neighbour
+// IndexerCore without the wire: writers (single upserts), a batch writer (group
+// commits), a deleter and searchers at once, on a small rebuild threshold so
+// that the tree is rebuilt in the background meanwhile, with two search threads
+// per query. Every id has one signature for its whole life, so each neighbour
 // a concurrent search returns must carry exactly its EMD to the query (no
 // torn read), in ascending order; afterwards searches equal brute force
 // over the final state.
@@ -690,7 +729,8 @@ TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
     // live in Debian's uninstrumented libabsl_synchronization: TSan sees no
     // lock and reports every guarded access (seen: outdated_, read in
     // StartSearch and erased in WriteGroupLocked, both under view_mu_).
-    GTEST_SKIP() << "absl::Mutex (Debian, not instrumented) is invisible to TSan";
+    GTEST_SKIP()
+        << "absl::Mutex (Debian, not instrumented) is invisible to TSan";
   }
   TempDir dir;
   CoreOptions options;
@@ -699,7 +739,8 @@ TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
   options.index.rebuild_threshold = 16;
   options.index.search_threads = 2;
   options.batch_group = 8;
-  absl::StatusOr<std::unique_ptr<IndexerCore>> opened = IndexerCore::Open(options);
+  absl::StatusOr<std::unique_ptr<IndexerCore>> opened =
+      IndexerCore::Open(options);
   ASSERT_TRUE(opened.ok()) << opened.status();
   IndexerCore* core = opened->get();
   const std::vector<TestModel> base = MakeModels(40, 3, 71);
@@ -745,7 +786,8 @@ TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
   for (int t = 0; t < 2; ++t) {
     threads.emplace_back([&, t] {
       for (int i = 0; i < 100 && (i < 3 || writers_left.load() > 0); ++i) {
-        const TestModel& q = queries[static_cast<size_t>(i + t) % queries.size()];
+        const TestModel& q =
+            queries[static_cast<size_t>(i + t) % queries.size()];
         auto session = core->StartSearch(BySignature(q.signature, 8), nullptr);
         if (!session.ok()) {
           ++errors;
@@ -756,9 +798,12 @@ TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
         while (std::optional<tpr::v1::Neighbor> n = (*session)->Next()) {
           ++got;
           auto it = by_id.find(n->id());
-          if (it == by_id.end() || n->label() != it->second->label || n->distance() < last ||
-              std::abs(n->distance() -
-                       BruteForce(q.signature, {*it->second}, 1).front().distance) > 1e-9) {
+          if (it == by_id.end() || n->label() != it->second->label ||
+              n->distance() < last ||
+              std::abs(
+                  n->distance() -
+                  BruteForce(q.signature, {*it->second}, 1).front().distance) >
+                  1e-9) {
             ++errors;
           }
           last = n->distance();
@@ -782,7 +827,8 @@ TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
     auto session = core->StartSearch(BySignature(q.signature, 30), nullptr);
     ASSERT_TRUE(session.ok()) << session.status();
     std::vector<tpr::v1::Neighbor> got;
-    while (std::optional<tpr::v1::Neighbor> n = (*session)->Next()) got.push_back(*n);
+    while (std::optional<tpr::v1::Neighbor> n = (*session)->Next())
+      got.push_back(*n);
     TPR_EXPECT_SAME_RANKING(got, BruteForce(q.signature, final_state, 30));
   }
 }
@@ -813,7 +859,8 @@ TEST_F(IndexerServiceTest, SearchSeesTheLabelsOfItsStartDespiteLaterWrites) {
       changed.label = "relabelled";
       changed.signature = other[i].signature;
       tpr::v1::UpsertResponse r;
-      ASSERT_TRUE(server_->stub()->Upsert(&c, ToRequest(changed, true), &r).ok());
+      ASSERT_TRUE(
+          server_->stub()->Upsert(&c, ToRequest(changed, true), &r).ok());
     } else if (i % 4 == 1) {
       tpr::v1::DeleteRequest d;
       d.set_id(before[i].id);
@@ -831,15 +878,19 @@ TEST_F(IndexerServiceTest, SearchSeesTheLabelsOfItsStartDespiteLaterWrites) {
   for (const TestModel& m : before) label_before[m.id] = m.label;
   auto drain = [&](SearchSession& session) {
     std::vector<tpr::v1::Neighbor> out;
-    while (std::optional<tpr::v1::Neighbor> n = session.Next()) out.push_back(*n);
+    while (std::optional<tpr::v1::Neighbor> n = session.Next())
+      out.push_back(*n);
     return out;
   };
   const std::vector<tpr::v1::Neighbor> got_all = drain(**all);
   TPR_EXPECT_SAME_RANKING(got_all, BruteForce(query, before, 40));
-  for (const tpr::v1::Neighbor& n : got_all) EXPECT_EQ(n.label(), label_before[n.id()]) << n.id();
+  for (const tpr::v1::Neighbor& n : got_all)
+    EXPECT_EQ(n.label(), label_before[n.id()]) << n.id();
   const std::vector<tpr::v1::Neighbor> got_label = drain(**by_label);
-  TPR_EXPECT_SAME_RANKING(got_label, BruteForce(query, before, 40, 0, kept_label));
-  for (const tpr::v1::Neighbor& n : got_label) EXPECT_EQ(n.label(), kept_label) << n.id();
+  TPR_EXPECT_SAME_RANKING(got_label,
+                          BruteForce(query, before, 40, 0, kept_label));
+  for (const tpr::v1::Neighbor& n : got_label)
+    EXPECT_EQ(n.label(), kept_label) << n.id();
 
   // A search started now sees the new state.
   std::vector<TestModel> after;
@@ -855,12 +906,15 @@ TEST_F(IndexerServiceTest, SearchSeesTheLabelsOfItsStartDespiteLaterWrites) {
   }
   SearchResult now = RunSearch(server_->stub(), filtered);
   ASSERT_TRUE(now.status.ok());
-  TPR_EXPECT_SAME_RANKING(now.neighbors, BruteForce(query, after, 40, 0, kept_label));
-  for (const tpr::v1::Neighbor& n : now.neighbors) EXPECT_EQ(n.label(), kept_label);
+  TPR_EXPECT_SAME_RANKING(now.neighbors,
+                          BruteForce(query, after, 40, 0, kept_label));
+  for (const tpr::v1::Neighbor& n : now.neighbors)
+    EXPECT_EQ(n.label(), kept_label);
 }
 
 TEST_F(IndexerServiceTest, HealthAnswersServing) {
-  absl::StatusOr<int> health = tpr::testing::HealthStatus(server_->channel(), "");
+  absl::StatusOr<int> health =
+      tpr::testing::HealthStatus(server_->channel(), "");
   ASSERT_TRUE(health.ok()) << health.status();
   EXPECT_EQ(*health, 1);  // SERVING
 }
@@ -872,11 +926,13 @@ TEST_F(IndexerServiceTest, ReflectionListsTheIndexerService) {
   EXPECT_NE(services->find("grpc.health.v1.Health"), std::string::npos);
 }
 
-TEST_F(IndexerServiceTest, ClientCancellationEndsTheStreamAndServerKeepsServing) {
+TEST_F(IndexerServiceTest,
+       ClientCancellationEndsTheStreamAndServerKeepsServing) {
   const std::vector<TestModel> models = MakeModels(120, 3, 71);
   AddAll(models);
   grpc::ClientContext context;
-  auto reader = server_->stub()->Search(&context, BySignature(models[5].signature, 120));
+  auto reader =
+      server_->stub()->Search(&context, BySignature(models[5].signature, 120));
   tpr::v1::SearchResponse response;
   ASSERT_TRUE(reader->Read(&response));
   ASSERT_TRUE(response.has_neighbor());
@@ -884,9 +940,11 @@ TEST_F(IndexerServiceTest, ClientCancellationEndsTheStreamAndServerKeepsServing)
   while (reader->Read(&response)) {
   }
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
-  SearchResult r = RunSearch(server_->stub(), BySignature(models[5].signature, 3));
+  SearchResult r =
+      RunSearch(server_->stub(), BySignature(models[5].signature, 3));
   ASSERT_TRUE(r.status.ok());
-  TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(models[5].signature, models, 3));
+  TPR_EXPECT_SAME_RANKING(r.neighbors,
+                          BruteForce(models[5].signature, models, 3));
 }
 
 // Issue 12 item 4 (search side): a slow search (k = every model, large
@@ -903,7 +961,8 @@ TEST_F(IndexerServiceTest, SearchStopsComputingAtTheClientsDeadline) {
   tpr::index::testing::SignatureGenerator gen(options);
   std::vector<TestModel> models;
   for (int i = 0; i < 300; ++i) {
-    models.push_back({absl::StrCat("big", i), absl::StrCat("class", i % 5), gen.Member(i % 5)});
+    models.push_back({absl::StrCat("big", i), absl::StrCat("class", i % 5),
+                      gen.Member(i % 5)});
   }
   {
     grpc::ClientContext c;
@@ -915,7 +974,8 @@ TEST_F(IndexerServiceTest, SearchStopsComputingAtTheClientsDeadline) {
   }
   server_->core()->WaitForRebuild();
   const tpr::index::Signature query = gen.Member(2);
-  tpr::v1::SearchRequest request = BySignature(query, static_cast<int>(models.size()));
+  tpr::v1::SearchRequest request =
+      BySignature(query, static_cast<int>(models.size()));
 
   // The full search, in process, for its time and work.
   const auto full_start = std::chrono::steady_clock::now();
@@ -929,12 +989,16 @@ TEST_F(IndexerServiceTest, SearchStopsComputingAtTheClientsDeadline) {
   const int64_t full_emds = (*full)->Stats().emd_computations();
   ASSERT_EQ(returned, models.size());
   ASSERT_GE(full_emds, static_cast<int64_t>(models.size()));
-  ASSERT_GT(full_ms, 100.0) << "the search is too quick to be cut by a deadline";
+  ASSERT_GT(full_ms, 100.0)
+      << "the search is too quick to be cut by a deadline";
 
-  const IndexerService::SearchCounters before = server_->service()->search_counters();
-  const auto deadline_after = std::chrono::microseconds(static_cast<int64_t>(full_ms * 100));
+  const IndexerService::SearchCounters before =
+      server_->service()->search_counters();
+  const auto deadline_after =
+      std::chrono::microseconds(static_cast<int64_t>(full_ms * 100));
   grpc::ClientContext context;
-  const auto deadline = std::chrono::system_clock::now() + deadline_after;  // 10% of it
+  const auto deadline =
+      std::chrono::system_clock::now() + deadline_after;  // 10% of it
   context.set_deadline(deadline);
   auto reader = server_->stub()->Search(&context, request);
   tpr::v1::SearchResponse response;
@@ -942,25 +1006,32 @@ TEST_F(IndexerServiceTest, SearchStopsComputingAtTheClientsDeadline) {
   }
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
   // Wait for the server's handler to end (it may finish its current EMD).
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::seconds(30);
   while (server_->service()->search_counters().running > 0 &&
          std::chrono::steady_clock::now() < give_up) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
   const double stopped_after_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::system_clock::now() - deadline)
+      std::chrono::duration<double, std::milli>(
+          std::chrono::system_clock::now() - deadline)
           .count();
-  const IndexerService::SearchCounters after = server_->service()->search_counters();
+  const IndexerService::SearchCounters after =
+      server_->service()->search_counters();
   EXPECT_EQ(after.running, 0);
   const int64_t emds = after.emd_computations - before.emd_computations;
   // At 10% of the time, about 10% of the EMDs; half leaves room for a
   // loaded machine while still failing a search that runs on.
-  EXPECT_LT(emds, full_emds / 2) << "of " << full_emds << " in " << full_ms << " ms";
-  EXPECT_LT(stopped_after_ms, full_ms / 2) << "full search: " << full_ms << " ms";
-  std::printf("full search %.0f ms, %lld EMDs; deadline at %.0f ms: %lld EMDs, stopped %.1f ms "
-              "after the deadline\n",
-              full_ms, static_cast<long long>(full_emds), full_ms / 10,
-              static_cast<long long>(emds), stopped_after_ms);
+  EXPECT_LT(emds, full_emds / 2)
+      << "of " << full_emds << " in " << full_ms << " ms";
+  EXPECT_LT(stopped_after_ms, full_ms / 2)
+      << "full search: " << full_ms << " ms";
+  std::printf(
+      "full search %.0f ms, %lld EMDs; deadline at %.0f ms: %lld EMDs, stopped "
+      "%.1f ms "
+      "after the deadline\n",
+      full_ms, static_cast<long long>(full_emds), full_ms / 10,
+      static_cast<long long>(emds), stopped_after_ms);
 }
 
 }  // namespace

@@ -10,13 +10,6 @@
 #ifndef TPR_TESTS_SERVICE_INDEXER_TESTING_H_
 #define TPR_TESTS_SERVICE_INDEXER_TESTING_H_
 
-#include <algorithm>
-#include <map>
-#include <memory>
-#include <string>
-#include <utility>
-#include <vector>
-
 #include <grpcpp/client_context.h>
 #include <grpcpp/create_channel.h>
 #include <grpcpp/impl/codegen/client_unary_call.h>
@@ -24,6 +17,13 @@
 #include <grpcpp/security/credentials.h>
 #include <grpcpp/support/byte_buffer.h>
 #include <grpcpp/support/sync_stream.h>
+
+#include <algorithm>
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "common/grpc_status.h"
@@ -72,11 +72,13 @@ inline std::vector<TestModel> MakeModels(int n, int classes, uint64_t seed,
   return out;
 }
 
-inline tpr::v1::UpsertRequest ToRequest(const TestModel& m, bool overwrite = false) {
+inline tpr::v1::UpsertRequest ToRequest(const TestModel& m,
+                                        bool overwrite = false) {
   tpr::v1::UpsertRequest r;
   r.mutable_model()->set_id(m.id);
   r.mutable_model()->set_label(m.label);
-  (*r.mutable_model()->mutable_metadata())["source"] = absl::StrCat("gen/", m.id);
+  (*r.mutable_model()->mutable_metadata())["source"] =
+      absl::StrCat("gen/", m.id);
   *r.mutable_model()->mutable_signature() = ToWire(m.signature);
   r.set_overwrite(overwrite);
   return r;
@@ -93,7 +95,8 @@ struct Hit {
 // (distance, id), first k.
 inline std::vector<Hit> BruteForce(const tpr::index::Signature& query,
                                    const std::vector<TestModel>& models, int k,
-                                   double radius = 0, const std::string& label = "",
+                                   double radius = 0,
+                                   const std::string& label = "",
                                    const std::string& exclude = "") {
   const tpr::index::GroundDistanceOptions ground;
   const tpr::index::PreparedSignature q = *tpr::index::Prepare(query, ground);
@@ -101,7 +104,8 @@ inline std::vector<Hit> BruteForce(const tpr::index::Signature& query,
   for (const TestModel& m : models) {
     if (!label.empty() && m.label != label) continue;
     if (m.id == exclude) continue;
-    const double d = tpr::index::Emd(q, *tpr::index::Prepare(m.signature, ground));
+    const double d =
+        tpr::index::Emd(q, *tpr::index::Prepare(m.signature, ground));
     if (radius > 0 && d > radius) continue;
     hits.push_back({m.id, d});
   }
@@ -120,14 +124,17 @@ struct SearchResult {
   tpr::v1::SearchStats stats;
 };
 
-inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::SearchRequest& request) {
+inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub,
+                              const tpr::v1::SearchRequest& request) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(60));
   SearchResult result;
   auto reader = stub->Search(&context, request);
   tpr::v1::SearchResponse response;
   while (reader->Read(&response)) {
-    if (response.has_neighbor()) result.neighbors.push_back(response.neighbor());
+    if (response.has_neighbor())
+      result.neighbors.push_back(response.neighbor());
     if (response.has_stats()) {
       result.got_stats = true;
       result.stats = response.stats();
@@ -145,13 +152,15 @@ inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub, const tpr::v1::Searc
 inline absl::StatusOr<std::string> ReflectedServices(
     const std::shared_ptr<grpc::Channel>& channel) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(10));
   const grpc::internal::RpcMethod method(
       "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
       grpc::internal::RpcMethod::BIDI_STREAMING);
-  std::unique_ptr<grpc::ClientReaderWriter<grpc::ByteBuffer, grpc::ByteBuffer>> stream(
-      grpc::internal::ClientReaderWriterFactory<grpc::ByteBuffer, grpc::ByteBuffer>::Create(
-          channel.get(), method, &context));
+  std::unique_ptr<grpc::ClientReaderWriter<grpc::ByteBuffer, grpc::ByteBuffer>>
+      stream(grpc::internal::ClientReaderWriterFactory<
+             grpc::ByteBuffer, grpc::ByteBuffer>::Create(channel.get(), method,
+                                                         &context));
   const char request_bytes[] = {0x3a, 0x00};
   grpc::Slice slice(request_bytes, sizeof(request_bytes));
   grpc::ByteBuffer request(&slice, 1);
@@ -161,7 +170,8 @@ inline absl::StatusOr<std::string> ReflectedServices(
   grpc::ByteBuffer response;
   while (stream->Read(&response)) {
     std::vector<grpc::Slice> slices;
-    if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read the answer");
+    if (!response.Dump(&slices).ok())
+      return absl::InternalError("cannot read the answer");
     for (const grpc::Slice& s : slices) {
       bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
     }
@@ -183,14 +193,17 @@ class InProcessIndexer {
   ~InProcessIndexer() { Stop(); }
 
   absl::Status Start(ServiceOptions service_options = {}) {
-    absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(core_options_);
+    absl::StatusOr<std::unique_ptr<IndexerCore>> core =
+        IndexerCore::Open(core_options_);
     if (!core.ok()) return core.status();
     core_ = std::move(*core);
     service_ = std::make_unique<IndexerService>(core_.get(), service_options);
     server_options_.shutdown_grace_ms = 2000;
     // Readiness as in indexer/service/main.cc, polled faster for tests.
     server_options_.readiness_service = "tpr.v1.Indexer";
-    server_options_.readiness_check = [c = core_.get()] { return c->WriteReadiness(); };
+    server_options_.readiness_check = [c = core_.get()] {
+      return c->WriteReadiness();
+    };
     server_options_.readiness_poll_ms = 100;
     absl::StatusOr<tpr::common::StartedServer> started =
         tpr::common::StartServer(server_options_, {service_.get()});
@@ -235,16 +248,17 @@ class InProcessIndexer {
 
 // ExpectSameRanking compares a received ranking with the oracle's: same ids
 // in the same order, distances equal to rounding, ranks 1..n.
-#define TPR_EXPECT_SAME_RANKING(received, expected)                              \
-  do {                                                                           \
-    const auto& r_ = (received);                                                 \
-    const auto& e_ = (expected);                                                 \
-    ASSERT_EQ(r_.size(), e_.size());                                             \
-    for (size_t i_ = 0; i_ < e_.size(); ++i_) {                                  \
-      EXPECT_EQ(r_[i_].id(), e_[i_].id) << "rank " << i_ + 1;                    \
-      EXPECT_NEAR(r_[i_].distance(), e_[i_].distance, 1e-9) << "rank " << i_ + 1; \
-      EXPECT_EQ(r_[i_].rank(), static_cast<int>(i_ + 1));                        \
-    }                                                                            \
+#define TPR_EXPECT_SAME_RANKING(received, expected)           \
+  do {                                                        \
+    const auto& r_ = (received);                              \
+    const auto& e_ = (expected);                              \
+    ASSERT_EQ(r_.size(), e_.size());                          \
+    for (size_t i_ = 0; i_ < e_.size(); ++i_) {               \
+      EXPECT_EQ(r_[i_].id(), e_[i_].id) << "rank " << i_ + 1; \
+      EXPECT_NEAR(r_[i_].distance(), e_[i_].distance, 1e-9)   \
+          << "rank " << i_ + 1;                               \
+      EXPECT_EQ(r_[i_].rank(), static_cast<int>(i_ + 1));     \
+    }                                                         \
   } while (false)
 
 }  // namespace tpr::indexer::testing

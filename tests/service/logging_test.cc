@@ -8,14 +8,14 @@
 // while a service loads, a stand-in on its port reports alive-not-ready and
 // refuses calls with UNAVAILABLE, and the real server takes the port over
 // without closing it.
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
+
 #include <atomic>
 #include <mutex>
 #include <string>
 #include <thread>
-
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
-#include <gtest/gtest.h>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_split.h"
@@ -36,7 +36,8 @@ std::string TrailingRequestId(const grpc::ClientContext& context) {
 // The log line (JSON) that carries `request_id`, or "".
 std::string LineWith(const std::string& log, const std::string& request_id) {
   for (absl::string_view line : absl::StrSplit(log, '\n')) {
-    if (line.find(absl::StrCat("\"request_id\":\"", request_id, "\"")) != absl::string_view::npos) {
+    if (line.find(absl::StrCat("\"request_id\":\"", request_id, "\"")) !=
+        absl::string_view::npos) {
       return std::string(line);
     }
   }
@@ -54,12 +55,14 @@ bool IsHexId(const std::string& id) {
 TEST(LoggingTest, RequestIdsComeBackAndJsonLinesCarryThem) {
   TempDir dir;
   ServiceProcess indexer;
-  ASSERT_TRUE(indexer
-                  .Start(BinaryPath("tpr-indexer"),
-                         {"--data-dir", dir.path() + "/data", "--log-format", "json"},
-                         dir.path() + "/indexer.log")
-                  .ok());
-  auto channel = grpc::CreateChannel(indexer.address(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(
+      indexer
+          .Start(BinaryPath("tpr-indexer"),
+                 {"--data-dir", dir.path() + "/data", "--log-format", "json"},
+                 dir.path() + "/indexer.log")
+          .ok());
+  auto channel = grpc::CreateChannel(indexer.address(),
+                                     grpc::InsecureChannelCredentials());
   auto stub = tpr::v1::Indexer::NewStub(channel);
 
   // A client id travels back; the API key header never reaches the log.
@@ -67,7 +70,8 @@ TEST(LoggingTest, RequestIdsComeBackAndJsonLinesCarryThem) {
   stats_context.AddMetadata("x-request-id", "test-req-42");
   stats_context.AddMetadata("authorization", "Bearer tpr_NEVER_LOGGED");
   tpr::v1::StatsResponse stats;
-  ASSERT_TRUE(stub->Stats(&stats_context, tpr::v1::StatsRequest(), &stats).ok());
+  ASSERT_TRUE(
+      stub->Stats(&stats_context, tpr::v1::StatsRequest(), &stats).ok());
   EXPECT_EQ(TrailingRequestId(stats_context), "test-req-42");
 
   // No id: one is generated (16 hex digits) and returned.
@@ -75,7 +79,8 @@ TEST(LoggingTest, RequestIdsComeBackAndJsonLinesCarryThem) {
   tpr::v1::GetRequest get;
   get.set_id("no/such/model");
   tpr::v1::Model model;
-  EXPECT_EQ(stub->Get(&get_context, get, &model).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(stub->Get(&get_context, get, &model).error_code(),
+            grpc::StatusCode::NOT_FOUND);
   const std::string generated = TrailingRequestId(get_context);
   EXPECT_TRUE(IsHexId(generated)) << generated;
 
@@ -92,14 +97,22 @@ TEST(LoggingTest, RequestIdsComeBackAndJsonLinesCarryThem) {
   ASSERT_FALSE(stats_line.empty()) << log;
   EXPECT_EQ(stats_line.front(), '{');
   EXPECT_EQ(stats_line.back(), '}');
-  EXPECT_NE(stats_line.find("\"service\":\"tpr-indexer\""), std::string::npos) << stats_line;
-  EXPECT_NE(stats_line.find("\"rpc\":\"/tpr.v1.Indexer/Stats\""), std::string::npos) << stats_line;
-  EXPECT_NE(stats_line.find("\"status\":\"OK\""), std::string::npos) << stats_line;
-  EXPECT_NE(stats_line.find("\"peer\":\"ipv4:127.0.0.1:"), std::string::npos) << stats_line;
-  EXPECT_NE(stats_line.find("\"duration_ms\":"), std::string::npos) << stats_line;
+  EXPECT_NE(stats_line.find("\"service\":\"tpr-indexer\""), std::string::npos)
+      << stats_line;
+  EXPECT_NE(stats_line.find("\"rpc\":\"/tpr.v1.Indexer/Stats\""),
+            std::string::npos)
+      << stats_line;
+  EXPECT_NE(stats_line.find("\"status\":\"OK\""), std::string::npos)
+      << stats_line;
+  EXPECT_NE(stats_line.find("\"peer\":\"ipv4:127.0.0.1:"), std::string::npos)
+      << stats_line;
+  EXPECT_NE(stats_line.find("\"duration_ms\":"), std::string::npos)
+      << stats_line;
   const std::string get_line = LineWith(log, generated);
-  EXPECT_NE(get_line.find("\"status\":\"NOT_FOUND\""), std::string::npos) << log;
-  EXPECT_NE(get_line.find("\"rpc\":\"/tpr.v1.Indexer/Get\""), std::string::npos) << get_line;
+  EXPECT_NE(get_line.find("\"status\":\"NOT_FOUND\""), std::string::npos)
+      << log;
+  EXPECT_NE(get_line.find("\"rpc\":\"/tpr.v1.Indexer/Get\""), std::string::npos)
+      << get_line;
   EXPECT_FALSE(LineWith(log, replaced).empty()) << log;
   EXPECT_EQ(log.find("NEVER_LOGGED"), std::string::npos) << log;
   EXPECT_EQ(log.find("evil"), std::string::npos) << log;
@@ -112,24 +125,33 @@ TEST(LoggingTest, RequestIdsComeBackAndJsonLinesCarryThem) {
 TEST(LoggingTest, BinaryReportsLivenessAndReadiness) {
   TempDir dir;
   ServiceProcess extractor;
-  ASSERT_TRUE(
-      extractor.Start(BinaryPath("tpr-extractor"), {"--no-log-calls"}, dir.path() + "/e.log").ok());
-  ServiceProcess indexer;
-  ASSERT_TRUE(indexer.Start(BinaryPath("tpr-indexer"), {"--data-dir", dir.path() + "/data"},
-                            dir.path() + "/i.log")
+  ASSERT_TRUE(extractor
+                  .Start(BinaryPath("tpr-extractor"), {"--no-log-calls"},
+                         dir.path() + "/e.log")
                   .ok());
-  auto e = grpc::CreateChannel(extractor.address(), grpc::InsecureChannelCredentials());
-  auto i = grpc::CreateChannel(indexer.address(), grpc::InsecureChannelCredentials());
+  ServiceProcess indexer;
+  ASSERT_TRUE(indexer
+                  .Start(BinaryPath("tpr-indexer"),
+                         {"--data-dir", dir.path() + "/data"},
+                         dir.path() + "/i.log")
+                  .ok());
+  auto e = grpc::CreateChannel(extractor.address(),
+                               grpc::InsecureChannelCredentials());
+  auto i = grpc::CreateChannel(indexer.address(),
+                               grpc::InsecureChannelCredentials());
   EXPECT_EQ(HealthStatus(e, "").value_or(-1), 1);
   EXPECT_EQ(HealthStatus(e, "tpr.v1.Extractor").value_or(-1), 1);
   EXPECT_EQ(HealthStatus(i, "").value_or(-1), 1);
   EXPECT_EQ(HealthStatus(i, "tpr.v1.Indexer").value_or(-1), 1);
-  EXPECT_EQ(HealthStatus(i, "tpr.v1.Nothing").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(HealthStatus(i, "tpr.v1.Nothing").status().code(),
+            absl::StatusCode::kNotFound);
   // The indexer answered health checks while it loaded, on the same port.
-  EXPECT_NE(ReadText(dir.path() + "/i.log")
-                .find(absl::StrCat("not ready: loading the data directory; health answers on port ",
-                                   indexer.address().substr(indexer.address().rfind(':') + 1))),
-            std::string::npos)
+  EXPECT_NE(
+      ReadText(dir.path() + "/i.log")
+          .find(absl::StrCat(
+              "not ready: loading the data directory; health answers on port ",
+              indexer.address().substr(indexer.address().rfind(':') + 1))),
+      std::string::npos)
       << ReadText(dir.path() + "/i.log");
 }
 
@@ -141,21 +163,26 @@ TEST(LoggingTest, WhileLoadingAliveNotReadyAndThePortIsHandedOver) {
       common::StartLoadingServer(options, "loading the data directory");
   ASSERT_TRUE(loading.ok()) << loading.status();
   const std::string address = absl::StrCat("127.0.0.1:", (*loading)->port);
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  auto channel =
+      grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
   EXPECT_EQ(HealthStatus(channel, "").value_or(-1), 1) << "alive";
-  EXPECT_EQ(HealthStatus(channel, "tpr.v1.Indexer").value_or(-1), 2) << "not ready";
+  EXPECT_EQ(HealthStatus(channel, "tpr.v1.Indexer").value_or(-1), 2)
+      << "not ready";
   auto stub = tpr::v1::Indexer::NewStub(channel);
   {
     grpc::ClientContext context;
     tpr::v1::StatsResponse stats;
     const grpc::Status status = stub->Stats(&context, {}, &stats);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
-    EXPECT_EQ(status.error_message(), "loading-test is not ready: loading the data directory");
+    EXPECT_EQ(status.error_message(),
+              "loading-test is not ready: loading the data directory");
   }
   // The real server binds the same port while the stand-in still holds it.
-  options.listen_address = common::ListenAddressWithPort("127.0.0.1:0", (*loading)->port);
+  options.listen_address =
+      common::ListenAddressWithPort("127.0.0.1:0", (*loading)->port);
   EXPECT_EQ(options.listen_address, address);
-  absl::StatusOr<common::StartedServer> started = common::StartServer(options, {});
+  absl::StatusOr<common::StartedServer> started =
+      common::StartServer(options, {});
   ASSERT_TRUE(started.ok()) << started.status();
   EXPECT_EQ(started->port, (*loading)->port);
   loading->reset();
@@ -179,20 +206,23 @@ TEST(LoggingTest, ReadinessFollowsTheCheckAndDrainingEndsIt) {
     std::lock_guard<std::mutex> lock(mu);
     return reason;
   };
-  absl::StatusOr<common::StartedServer> started = common::StartServer(options, {});
+  absl::StatusOr<common::StartedServer> started =
+      common::StartServer(options, {});
   ASSERT_TRUE(started.ok()) << started.status();
   auto channel = grpc::CreateChannel(absl::StrCat("127.0.0.1:", started->port),
                                      grpc::InsecureChannelCredentials());
   auto wait_for = [&](int want) {
     for (int i = 0; i < 500; ++i) {
-      if (HealthStatus(channel, "tpr.v1.Test").value_or(-1) == want) return true;
+      if (HealthStatus(channel, "tpr.v1.Test").value_or(-1) == want)
+        return true;
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     return false;
   };
   // Not ready from the very first probe (the constructor polls once).
   EXPECT_EQ(HealthStatus(channel, "tpr.v1.Test").value_or(-1), 2);
-  EXPECT_EQ(HealthStatus(channel, "").value_or(-1), 1) << "liveness stays SERVING";
+  EXPECT_EQ(HealthStatus(channel, "").value_or(-1), 1)
+      << "liveness stays SERVING";
   {
     std::lock_guard<std::mutex> lock(mu);
     reason = "";

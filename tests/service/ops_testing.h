@@ -4,6 +4,11 @@
 #ifndef TPR_TESTS_SERVICE_OPS_TESTING_H_
 #define TPR_TESTS_SERVICE_OPS_TESTING_H_
 
+#include <grpcpp/channel.h>
+#include <grpcpp/client_context.h>
+#include <grpcpp/impl/codegen/client_unary_call.h>
+#include <grpcpp/impl/codegen/rpc_method.h>
+#include <grpcpp/support/byte_buffer.h>
 #include <sys/wait.h>
 
 #include <chrono>
@@ -15,12 +20,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <grpcpp/channel.h>
-#include <grpcpp/client_context.h>
-#include <grpcpp/impl/codegen/client_unary_call.h>
-#include <grpcpp/impl/codegen/rpc_method.h>
-#include <grpcpp/support/byte_buffer.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -37,10 +36,11 @@ namespace tpr::testing {
 // (service, a string), the answer field 1 (status: 1 SERVING, 2
 // NOT_SERVING). Returns the status value, or the call's error (NOT_FOUND for
 // a service the server does not know).
-inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& channel,
-                                        const std::string& service) {
+inline absl::StatusOr<int> HealthStatus(
+    const std::shared_ptr<grpc::Channel>& channel, const std::string& service) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(10));
   std::string bytes;
   if (!service.empty()) {
     bytes.push_back('\x0a');
@@ -52,17 +52,20 @@ inline absl::StatusOr<int> HealthStatus(const std::shared_ptr<grpc::Channel>& ch
   grpc::ByteBuffer response;
   const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
                                          grpc::internal::RpcMethod::NORMAL_RPC);
-  grpc::Status s = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
-      channel.get(), method, &context, request, &response);
+  grpc::Status s =
+      grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
+          channel.get(), method, &context, request, &response);
   if (!s.ok()) return tpr::common::FromGrpcStatus(s);
   std::vector<grpc::Slice> slices;
-  if (!response.Dump(&slices).ok()) return absl::InternalError("cannot read response");
+  if (!response.Dump(&slices).ok())
+    return absl::InternalError("cannot read response");
   std::string answer;
   for (const grpc::Slice& piece : slices) {
     answer.append(reinterpret_cast<const char*>(piece.begin()), piece.size());
   }
   if (answer.empty()) return 0;  // UNKNOWN, the default value, is not sent.
-  if (answer.size() != 2 || answer[0] != '\x08') return absl::InternalError("odd answer");
+  if (answer.size() != 2 || answer[0] != '\x08')
+    return absl::InternalError("odd answer");
   return static_cast<int>(answer[1]);
 }
 
@@ -88,7 +91,8 @@ inline ShellResult RunCommand(const std::string& command) {
   if (pipe == nullptr) return result;
   char buffer[4096];
   size_t n;
-  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) result.out.append(buffer, n);
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0)
+    result.out.append(buffer, n);
   const int status = pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return result;
@@ -103,21 +107,25 @@ inline ShellResult RunShell(const std::string& command) {
 // localhost/127.0.0.1, signed by ca1), server2 (same names, signed by ca2),
 // client1 (signed by ca1), client2 (signed by ca2). Each X has X.pem, X.key.
 inline bool MakeCertificates(const std::string& dir) {
-  const std::string ec = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
+  const std::string ec =
+      "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
   std::string script = absl::StrCat(
       "set -e; cd ", dir, "; ",
       "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > san.ext; ",
       "printf 'extendedKeyUsage=clientAuth\\n' > client.ext; ");
   for (const char* ca : {"ca1", "ca2"}) {
-    absl::StrAppend(&script, "openssl req -x509 ", ec, " -keyout ", ca, ".key -out ", ca,
-                    ".pem -days 2 -subj /CN=tpr-test-", ca, " 2>/dev/null; ");
+    absl::StrAppend(&script, "openssl req -x509 ", ec, " -keyout ", ca,
+                    ".key -out ", ca, ".pem -days 2 -subj /CN=tpr-test-", ca,
+                    " 2>/dev/null; ");
   }
   for (const char* who : {"server1", "server2", "client1", "client2"}) {
-    const std::string ca = "ca" + std::string(who).substr(std::string(who).size() - 1);
+    const std::string ca =
+        "ca" + std::string(who).substr(std::string(who).size() - 1);
     const bool server = std::string(who).rfind("server", 0) == 0;
-    absl::StrAppend(&script, "openssl req ", ec, " -keyout ", who, ".key -out ", who,
-                    ".csr -subj /CN=", server ? "localhost" : who, " 2>/dev/null; ",
-                    "openssl x509 -req -in ", who, ".csr -CA ", ca, ".pem -CAkey ", ca,
+    absl::StrAppend(&script, "openssl req ", ec, " -keyout ", who, ".key -out ",
+                    who, ".csr -subj /CN=", server ? "localhost" : who,
+                    " 2>/dev/null; ", "openssl x509 -req -in ", who,
+                    ".csr -CA ", ca, ".pem -CAkey ", ca,
                     ".key -CAcreateserial -days 2 -out ", who, ".pem -extfile ",
                     server ? "san.ext" : "client.ext", " 2>/dev/null; ");
   }
@@ -127,7 +135,7 @@ inline bool MakeCertificates(const std::string& dir) {
 // The value of the sample `name` whose labels include every one of
 // `labels` ("code=\"OK\""), or NaN when absent.
 inline double Sample(const std::string& scrape, const std::string& name,
-              const std::vector<std::string>& labels = {}) {
+                     const std::vector<std::string>& labels = {}) {
   for (absl::string_view line : absl::StrSplit(scrape, '\n')) {
     if (line.empty() || line[0] == '#') continue;
     const size_t space = line.rfind(' ');

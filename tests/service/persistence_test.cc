@@ -50,10 +50,12 @@ std::string ReadText(const std::string& path) {
   return text.str();
 }
 
-grpc::Status BatchAdd(tpr::v1::Indexer::Stub* stub, const std::vector<TestModel>& models,
-                      size_t begin, size_t end) {
+grpc::Status BatchAdd(tpr::v1::Indexer::Stub* stub,
+                      const std::vector<TestModel>& models, size_t begin,
+                      size_t end) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::seconds(30));
   tpr::v1::BatchUpsertResponse response;
   auto writer = stub->BatchUpsert(&context, &response);
   for (size_t i = begin; i < end; ++i) {
@@ -128,7 +130,8 @@ TEST(PersistenceTest, RestartGivesIdenticalAnswersFromThePersistedTree) {
   }
   grpc::ClientContext c1;
   tpr::v1::StatsResponse stats_before;
-  ASSERT_TRUE(server.stub()->Stats(&c1, tpr::v1::StatsRequest(), &stats_before).ok());
+  ASSERT_TRUE(
+      server.stub()->Stats(&c1, tpr::v1::StatsRequest(), &stats_before).ok());
 
   server.Stop();
   lines->clear();
@@ -143,7 +146,8 @@ TEST(PersistenceTest, RestartGivesIdenticalAnswersFromThePersistedTree) {
 
   grpc::ClientContext c2;
   tpr::v1::StatsResponse stats_after;
-  ASSERT_TRUE(server.stub()->Stats(&c2, tpr::v1::StatsRequest(), &stats_after).ok());
+  ASSERT_TRUE(
+      server.stub()->Stats(&c2, tpr::v1::StatsRequest(), &stats_after).ok());
   EXPECT_EQ(stats_after.models(), 197);
   EXPECT_EQ(stats_after.models(), stats_before.models());
   EXPECT_EQ(stats_after.labels().size(), stats_before.labels().size());
@@ -174,7 +178,8 @@ TEST(PersistenceTest, KillDashNineDuringBatchAddKeepsEveryAcknowledgedModel) {
 
   {
     ServiceProcess p;
-    ASSERT_TRUE(p.Start(binary, {"--data-dir", data}, dir.path() + "/log1").ok());
+    ASSERT_TRUE(
+        p.Start(binary, {"--data-dir", data}, dir.path() + "/log1").ok());
     auto stub = Connect(p.address());
     ASSERT_TRUE(BatchAdd(stub.get(), first, 0, first.size()).ok());
     // An idle C++ channel has no thread to answer the server's shutdown
@@ -186,7 +191,8 @@ TEST(PersistenceTest, KillDashNineDuringBatchAddKeepsEveryAcknowledgedModel) {
   std::vector<std::string> acked;
   {
     ServiceProcess p;
-    ASSERT_TRUE(p.Start(binary, {"--data-dir", data}, dir.path() + "/log2").ok());
+    ASSERT_TRUE(
+        p.Start(binary, {"--data-dir", data}, dir.path() + "/log2").ok());
     auto stub = Connect(p.address());
     std::mutex mu;
     std::atomic<size_t> acked_count{0};
@@ -194,19 +200,23 @@ TEST(PersistenceTest, KillDashNineDuringBatchAddKeepsEveryAcknowledgedModel) {
       for (size_t begin = 0; begin < second.size(); begin += 20) {
         if (!BatchAdd(stub.get(), second, begin, begin + 20).ok()) return;
         std::lock_guard<std::mutex> lock(mu);
-        for (size_t i = begin; i < begin + 20; ++i) acked.push_back(second[i].id);
+        for (size_t i = begin; i < begin + 20; ++i)
+          acked.push_back(second[i].id);
         acked_count = acked.size();
       }
     });
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (acked_count.load() < 100 && std::chrono::steady_clock::now() < give_up) {
+    const auto give_up =
+        std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (acked_count.load() < 100 &&
+           std::chrono::steady_clock::now() < give_up) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     EXPECT_EQ(p.Stop(SIGKILL), 128 + SIGKILL);
     writer.join();
   }
   ASSERT_GE(acked.size(), 100u);
-  EXPECT_LT(acked.size(), second.size()) << "the kill came after the last batch";
+  EXPECT_LT(acked.size(), second.size())
+      << "the kill came after the last batch";
 
   ServiceProcess p;
   ASSERT_TRUE(p.Start(binary, {"--data-dir", data}, dir.path() + "/log3").ok());
@@ -243,7 +253,9 @@ TEST(PersistenceTest, SigtermDuringASearchStreamExitsCleanly) {
   if (!std::filesystem::exists(binary)) GTEST_SKIP() << "no " << binary;
   TempDir dir;
   ServiceProcess p;
-  ASSERT_TRUE(p.Start(binary, {"--data-dir", dir.path() + "/data"}, dir.path() + "/log").ok());
+  ASSERT_TRUE(
+      p.Start(binary, {"--data-dir", dir.path() + "/data"}, dir.path() + "/log")
+          .ok());
   auto stub = Connect(p.address());
   const std::vector<TestModel> models = MakeModels(300, 3, 10);
   ASSERT_TRUE(BatchAdd(stub.get(), models, 0, models.size()).ok());
@@ -274,7 +286,8 @@ TEST(PersistenceTest, SigtermDuringASearchStreamExitsCleanly) {
 }
 
 // The files of a RocksDB directory with names ending in `suffix`.
-std::set<std::string> FilesEndingIn(const std::string& dir, const std::string& suffix) {
+std::set<std::string> FilesEndingIn(const std::string& dir,
+                                    const std::string& suffix) {
   std::set<std::string> out;
   for (const auto& e : std::filesystem::directory_iterator(dir)) {
     const std::string name = e.path().filename().string();
@@ -289,7 +302,8 @@ std::set<std::string> FilesEndingIn(const std::string& dir, const std::string& s
 // The MANIFEST the directory's CURRENT file names.
 std::string CurrentManifest(const std::string& dir) {
   std::string name = ReadText(dir + "/CURRENT");
-  while (!name.empty() && (name.back() == '\n' || name.back() == '\r')) name.pop_back();
+  while (!name.empty() && (name.back() == '\n' || name.back() == '\r'))
+    name.pop_back();
   return dir + "/" + name;
 }
 
@@ -297,7 +311,9 @@ std::string CurrentManifest(const std::string& dir) {
 // flushes), then applies `damage` to the closed directory and checks that
 // reopening is refused with DATA_LOSS naming the MANIFEST, and that the
 // refused open deleted no table file.
-void ExpectManifestDamageRefused(const std::function<void(const std::string&)>& damage, size_t kSessions = 1) {
+void ExpectManifestDamageRefused(
+    const std::function<void(const std::string&)>& damage,
+    size_t kSessions = 1) {
   TempDir dir;
   const std::string data = dir.path() + "/data";
   const std::vector<TestModel> models = MakeModels(200, 4, 21);
@@ -306,7 +322,8 @@ void ExpectManifestDamageRefused(const std::function<void(const std::string&)>& 
     core.persist_interval_ms = 0;
     InProcessIndexer server(data, core);
     ASSERT_TRUE(server.Start().ok());
-    for (size_t begin = session * 200 / kSessions; begin < (session + 1) * 200 / kSessions; begin += 20) {
+    for (size_t begin = session * 200 / kSessions;
+         begin < (session + 1) * 200 / kSessions; begin += 20) {
       ASSERT_TRUE(BatchAdd(server.stub(), models, begin, begin + 20).ok());
     }
   }  // Stop: memtables flushed, write-ahead logs obsolete.
@@ -318,25 +335,30 @@ void ExpectManifestDamageRefused(const std::function<void(const std::string&)>& 
   absl::StatusOr<std::unique_ptr<IndexerCore>> opened = IndexerCore::Open(core);
   ASSERT_FALSE(opened.ok()) << "served " << (*opened)->Stats().models()
                             << " models of 200 acknowledged";
-  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
+  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss)
+      << opened.status();
   EXPECT_NE(opened.status().message().find("MANIFEST-"), std::string::npos)
       << opened.status();
-  EXPECT_EQ(FilesEndingIn(data, ".sst"), tables) << "the refused open deleted table files";
+  EXPECT_EQ(FilesEndingIn(data, ".sst"), tables)
+      << "the refused open deleted table files";
   // Refused again: the first refusal changed nothing that would let a
   // second open through.
   opened = IndexerCore::Open(core);
-  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
+  EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss)
+      << opened.status();
 }
 
 TEST(PersistenceTest, ManifestTruncatedBy100BytesIsRefusedWithDataLoss) {
   ExpectManifestDamageRefused([](const std::string& manifest) {
-    std::filesystem::resize_file(manifest, std::filesystem::file_size(manifest) - 100);
+    std::filesystem::resize_file(manifest,
+                                 std::filesystem::file_size(manifest) - 100);
   });
 }
 
 TEST(PersistenceTest, ManifestTruncatedTo300BytesIsRefusedWithDataLoss) {
-  ExpectManifestDamageRefused(
-      [](const std::string& manifest) { std::filesystem::resize_file(manifest, 300); });
+  ExpectManifestDamageRefused([](const std::string& manifest) {
+    std::filesystem::resize_file(manifest, 300);
+  });
 }
 
 // kill -9 of the real binary after 50 acknowledged models (in five batches),
@@ -351,7 +373,8 @@ TEST(PersistenceTest, FlippedByteInTheWriteAheadLogIsRefusedWithDataLoss) {
   const std::vector<TestModel> models = MakeModels(50, 3, 22);
   {
     ServiceProcess p;
-    ASSERT_TRUE(p.Start(binary, {"--data-dir", killed}, dir.path() + "/log").ok());
+    ASSERT_TRUE(
+        p.Start(binary, {"--data-dir", killed}, dir.path() + "/log").ok());
     auto stub = Connect(p.address());
     for (size_t begin = 0; begin < models.size(); begin += 10) {
       ASSERT_TRUE(BatchAdd(stub.get(), models, begin, begin + 10).ok());
@@ -368,7 +391,8 @@ TEST(PersistenceTest, FlippedByteInTheWriteAheadLogIsRefusedWithDataLoss) {
       wal_size = size;
     }
   }
-  ASSERT_GT(wal_size, 1000u) << "the acknowledged writes are not in a write-ahead log";
+  ASSERT_GT(wal_size, 1000u)
+      << "the acknowledged writes are not in a write-ahead log";
 
   // Undamaged, the killed directory opens with every acknowledged model.
   {
@@ -381,11 +405,14 @@ TEST(PersistenceTest, FlippedByteInTheWriteAheadLogIsRefusedWithDataLoss) {
     EXPECT_EQ((*opened)->Stats().models(), 50);
   }
   for (double at : {0.25, 0.5, 0.75, 0.98}) {
-    SCOPED_TRACE(absl::StrCat("byte flipped at ", at, " of ", wal, " (", wal_size, " bytes)"));
-    const std::string copy = absl::StrCat(dir.path(), "/flipped", static_cast<int>(at * 100));
+    SCOPED_TRACE(absl::StrCat("byte flipped at ", at, " of ", wal, " (",
+                              wal_size, " bytes)"));
+    const std::string copy =
+        absl::StrCat(dir.path(), "/flipped", static_cast<int>(at * 100));
     std::filesystem::copy(killed, copy);
     {
-      std::fstream f(copy + "/" + wal, std::ios::in | std::ios::out | std::ios::binary);
+      std::fstream f(copy + "/" + wal,
+                     std::ios::in | std::ios::out | std::ios::binary);
       const std::streamoff offset = static_cast<std::streamoff>(wal_size * at);
       f.seekg(offset);
       char byte = 0;
@@ -396,18 +423,22 @@ TEST(PersistenceTest, FlippedByteInTheWriteAheadLogIsRefusedWithDataLoss) {
     }
     CoreOptions core;
     core.data_dir = copy;
-    absl::StatusOr<std::unique_ptr<IndexerCore>> opened = IndexerCore::Open(core);
+    absl::StatusOr<std::unique_ptr<IndexerCore>> opened =
+        IndexerCore::Open(core);
     ASSERT_FALSE(opened.ok()) << "served " << (*opened)->Stats().models()
                               << " models of 50 acknowledged";
-    EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss) << opened.status();
-    EXPECT_NE(opened.status().message().find(wal), std::string::npos) << opened.status();
+    EXPECT_EQ(opened.status().code(), absl::StatusCode::kDataLoss)
+        << opened.status();
+    EXPECT_NE(opened.status().message().find(wal), std::string::npos)
+        << opened.status();
     if (at == 0.5) {
       // The binary refuses to serve: it exits, saying why.
       ServiceProcess p;
       absl::Status started =
           p.Start(binary, {"--data-dir", copy}, dir.path() + "/log_flipped");
       EXPECT_FALSE(started.ok());
-      EXPECT_NE(ReadText(dir.path() + "/log_flipped").find("DATA_LOSS"), std::string::npos);
+      EXPECT_NE(ReadText(dir.path() + "/log_flipped").find("DATA_LOSS"),
+                std::string::npos);
     }
   }
 }

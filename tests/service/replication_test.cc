@@ -3,6 +3,10 @@
 // check is the primary itself: a restored or following indexer must answer
 // every search byte for byte as the primary does (serialized neighbours),
 // and Stats must count the same models.
+#include "indexer/service/replication.h"
+
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -10,13 +14,10 @@
 #include <thread>
 #include <vector>
 
-#include <gtest/gtest.h>
-
 #include "common/server_lifecycle.h"
 #include "common/status_macros.h"
 #include "indexer/service/admin_service.h"
 #include "indexer/service/follower.h"
-#include "indexer/service/replication.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
 
@@ -53,13 +54,16 @@ class Node {
     if (!core_options_.follow.empty()) {
       follower_ = std::make_unique<Follower>(core_.get(), follower_options_);
     }
-    admin_ = std::make_unique<IndexerAdminService>(core_.get(), follower_.get(), AdminOptions{});
+    admin_ = std::make_unique<IndexerAdminService>(core_.get(), follower_.get(),
+                                                   AdminOptions{});
     server_options_.shutdown_grace_ms = 2000;
     TPR_ASSIGN_OR_RETURN(tpr::common::StartedServer started,
-                         tpr::common::StartServer(server_options_, {service_.get(), admin_.get()}));
+                         tpr::common::StartServer(
+                             server_options_, {service_.get(), admin_.get()}));
     server_ = std::move(started.server);
     port_ = started.port;
-    auto channel = grpc::CreateChannel(address(), grpc::InsecureChannelCredentials());
+    auto channel =
+        grpc::CreateChannel(address(), grpc::InsecureChannelCredentials());
     stub_ = tpr::v1::Indexer::NewStub(channel);
     admin_stub_ = tpr::v1::IndexerAdmin::NewStub(channel);
     if (follower_ != nullptr) follower_->Start([this] { resync_ = true; });
@@ -100,13 +104,15 @@ class Node {
 };
 
 void Ingest(IndexerCore* core, const std::vector<TestModel>& models) {
-  for (const TestModel& m : models) ASSERT_TRUE(core->Upsert(ToRequest(m, true)).ok()) << m.id;
+  for (const TestModel& m : models)
+    ASSERT_TRUE(core->Upsert(ToRequest(m, true)).ok()) << m.id;
 }
 
 // Every answer of `node` to a fixed set of queries (by signature, by id with
 // exclude_self, with a label filter and a radius), serialized: neighbours
 // byte for byte, in order.
-std::vector<std::string> Answers(Node& node, const std::vector<TestModel>& queries) {
+std::vector<std::string> Answers(Node& node,
+                                 const std::vector<TestModel>& queries) {
   std::vector<std::string> out;
   for (size_t i = 0; i < queries.size(); ++i) {
     tpr::v1::SearchRequest by_signature;
@@ -119,8 +125,10 @@ std::vector<std::string> Answers(Node& node, const std::vector<TestModel>& queri
     by_id.set_label(i % 2 == 0 ? "class0" : "");
     for (const auto& request : {by_signature, by_id}) {
       testing::SearchResult r = RunSearch(node.stub(), request);
-      std::string answer = r.status.ok() ? "" : absl::StrCat("error ", r.status.error_code());
-      for (const tpr::v1::Neighbor& n : r.neighbors) answer += n.SerializeAsString() + "|";
+      std::string answer =
+          r.status.ok() ? "" : absl::StrCat("error ", r.status.error_code());
+      for (const tpr::v1::Neighbor& n : r.neighbors)
+        answer += n.SerializeAsString() + "|";
       out.push_back(answer);
     }
   }
@@ -149,7 +157,8 @@ StorageOptions NoArchive() {
 
 template <typename Pred>
 bool WaitFor(Pred pred, int seconds = 30) {
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
   while (std::chrono::steady_clock::now() < give_up) {
     if (pred()) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -201,7 +210,8 @@ TEST(BackupTest, RestoreAnswersByteIdenticallyAndRefusesANonEmptyDirectory) {
     EXPECT_EQ(restored.models(), id == 1 ? 100 : 119);
     Node copy(into);
     ASSERT_TRUE(copy.Start().ok());
-    EXPECT_EQ(Answers(copy, queries), id == 1 ? at_first : at_second) << "backup " << id;
+    EXPECT_EQ(Answers(copy, queries), id == 1 ? at_first : at_second)
+        << "backup " << id;
   }
 
   // Refused: a non-empty directory (nothing touched), the indexer's own
@@ -215,17 +225,22 @@ TEST(BackupTest, RestoreAnswersByteIdenticallyAndRefusesANonEmptyDirectory) {
   tpr::v1::RestoreResponse ignored;
   grpc::Status s = Call(primary, restore, &ignored);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
-  EXPECT_NE(s.error_message().find("not empty"), std::string::npos) << s.error_message();
-  EXPECT_NE(s.error_message().find(busy), std::string::npos) << s.error_message();
+  EXPECT_NE(s.error_message().find("not empty"), std::string::npos)
+      << s.error_message();
+  EXPECT_NE(s.error_message().find(busy), std::string::npos)
+      << s.error_message();
   EXPECT_TRUE(std::filesystem::exists(busy + "/keep.txt"));
   restore.set_data_dir(tmp.path() + "/primary");
-  EXPECT_EQ(Call(primary, restore, &ignored).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(Call(primary, restore, &ignored).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
   restore.set_data_dir(tmp.path() + "/fresh");
   restore.set_backup_id(9);
-  EXPECT_EQ(Call(primary, restore, &ignored).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(Call(primary, restore, &ignored).error_code(),
+            grpc::StatusCode::NOT_FOUND);
   restore.set_backup_dir(tmp.path() + "/nothing");
   restore.set_backup_id(0);
-  EXPECT_EQ(Call(primary, restore, &ignored).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(Call(primary, restore, &ignored).error_code(),
+            grpc::StatusCode::NOT_FOUND);
 
   // keep_last prunes the set.
   request.set_keep_last(1);
@@ -234,7 +249,8 @@ TEST(BackupTest, RestoreAnswersByteIdenticallyAndRefusesANonEmptyDirectory) {
   restore.set_backup_dir(backups);
   restore.set_backup_id(1);
   restore.set_data_dir(tmp.path() + "/gone");
-  EXPECT_EQ(Call(primary, restore, &ignored).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(Call(primary, restore, &ignored).error_code(),
+            grpc::StatusCode::NOT_FOUND);
 }
 
 TEST(FollowerTest, CopiesTailsRefusesWritesAndPromotes) {
@@ -245,8 +261,12 @@ TEST(FollowerTest, CopiesTailsRefusesWritesAndPromotes) {
   Ingest(primary.core(), {models.begin(), models.begin() + 60});
 
   Node follower(tmp.path() + "/follower", primary.address());
-  { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-  ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+  {
+    absl::Status started = follower.Start();
+    ASSERT_TRUE(started.ok()) << started;
+  }
+  ASSERT_TRUE(
+      WaitFor([&] { return follower.follower()->Readiness().empty(); }));
   const std::vector<TestModel> queries(models.begin(), models.begin() + 10);
   EXPECT_EQ(Answers(follower, queries), Answers(primary, queries));
 
@@ -266,21 +286,29 @@ TEST(FollowerTest, CopiesTailsRefusesWritesAndPromotes) {
     return follower.follower()->Status().applied_sequence() >=
            LatestSequence(primary.core()->storage());
   }));
-  EXPECT_EQ(follower.core()->Stats().models(), primary.core()->Stats().models());
+  EXPECT_EQ(follower.core()->Stats().models(),
+            primary.core()->Stats().models());
   EXPECT_EQ(Answers(follower, queries), Answers(primary, queries));
 
   // Read-only: writes fail naming the primary.
-  absl::StatusOr<bool> refused = follower.core()->Upsert(ToRequest(models[140], true));
+  absl::StatusOr<bool> refused =
+      follower.core()->Upsert(ToRequest(models[140], true));
   EXPECT_TRUE(absl::IsFailedPrecondition(refused.status())) << refused.status();
-  EXPECT_NE(refused.status().message().find(primary.address()), std::string::npos);
-  EXPECT_TRUE(absl::IsFailedPrecondition(follower.core()->Delete(models[0].id)));
+  EXPECT_NE(refused.status().message().find(primary.address()),
+            std::string::npos);
+  EXPECT_TRUE(
+      absl::IsFailedPrecondition(follower.core()->Delete(models[0].id)));
 
   // Restarted (its store holds the applied sequence): it resumes, catches
   // up with what was written meanwhile, and is not ready before.
   follower.Stop();
   Ingest(primary.core(), {models.begin() + 140, models.end()});
-  { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-  ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+  {
+    absl::Status started = follower.Start();
+    ASSERT_TRUE(started.ok()) << started;
+  }
+  ASSERT_TRUE(
+      WaitFor([&] { return follower.follower()->Readiness().empty(); }));
   EXPECT_EQ(Answers(follower, queries), Answers(primary, queries));
   EXPECT_EQ(follower.core()->Stats().models(), 149);
 
@@ -307,8 +335,12 @@ TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   Ingest(primary.core(), {models.begin(), models.begin() + 20});
   {
     Node follower(tmp.path() + "/follower", primary.address());
-    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-    ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+    {
+      absl::Status started = follower.Start();
+      ASSERT_TRUE(started.ok()) << started;
+    }
+    ASSERT_TRUE(
+        WaitFor([&] { return follower.follower()->Readiness().empty(); }));
   }
   // While it is down the primary writes and flushes (a backup flushes), so
   // the log the follower needs is deleted.
@@ -319,7 +351,10 @@ TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   ASSERT_TRUE(Call(primary, request, &ignored).ok());
   {
     Node follower(tmp.path() + "/follower", primary.address());
-    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
+    {
+      absl::Status started = follower.Start();
+      ASSERT_TRUE(started.ok()) << started;
+    }
     ASSERT_TRUE(WaitFor([&] { return follower.resync(); }));
     EXPECT_FALSE(follower.follower()->Readiness().empty());
   }
@@ -328,8 +363,12 @@ TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   EXPECT_NE(text.find("state resync"), std::string::npos) << text;
   // The restart copies afresh and matches the primary.
   Node follower(tmp.path() + "/follower", primary.address());
-  { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-  ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+  {
+    absl::Status started = follower.Start();
+    ASSERT_TRUE(started.ok()) << started;
+  }
+  ASSERT_TRUE(
+      WaitFor([&] { return follower.follower()->Readiness().empty(); }));
   EXPECT_FALSE(follower.resync());
   const std::vector<TestModel> queries(models.begin(), models.begin() + 8);
   EXPECT_EQ(Answers(follower, queries), Answers(primary, queries));
@@ -380,7 +419,8 @@ TEST(LogCursorTest, ReadsOnlyWhatIsNewAcrossPollsAndLogFiles) {
     EXPECT_EQ(seen[i].count, (*all)[i].count) << i;
     EXPECT_EQ(seen[i].data, (*all)[i].data) << i;
     if (i > 0) {
-      EXPECT_EQ(seen[i].sequence, seen[i - 1].sequence + seen[i - 1].count) << i;
+      EXPECT_EQ(seen[i].sequence, seen[i - 1].sequence + seen[i - 1].count)
+          << i;
     }
   }
 }
@@ -392,12 +432,14 @@ TEST(LogCursorTest, ASequenceNoLongerKeptIsOutOfRange) {
   Storage& storage = primary.core()->storage();
   const std::vector<TestModel> models = MakeModels(6, 2, 19);
   Ingest(primary.core(), {models.begin(), models.begin() + 3});
-  ASSERT_TRUE(CreateCheckpoint(storage, tmp.path() + "/checkpoint").ok());  // flushes
+  ASSERT_TRUE(
+      CreateCheckpoint(storage, tmp.path() + "/checkpoint").ok());  // flushes
   Ingest(primary.core(), {models.begin() + 3, models.end()});
   LogCursor cursor(storage, 1);
   absl::StatusOr<std::vector<LoggedBatch>> got = cursor.Read(1 << 20);
   EXPECT_TRUE(absl::IsOutOfRange(got.status())) << got.status();
-  EXPECT_NE(got.status().message().find("sequence 1 is no longer"), std::string::npos)
+  EXPECT_NE(got.status().message().find("sequence 1 is no longer"),
+            std::string::npos)
       << got.status();
 }
 
@@ -416,21 +458,28 @@ TEST(FollowerTest, RefusesToTailAnotherDatabase) {
   tpr::v1::BackupResponse ignored;
   ASSERT_TRUE(Call(*primary, backup, &ignored).ok());
   Ingest(primary->core(), {models.begin() + 20, models.begin() + 30});
-  absl::StatusOr<std::string> primary_id = DatabaseIdentity(primary->core()->storage());
+  absl::StatusOr<std::string> primary_id =
+      DatabaseIdentity(primary->core()->storage());
   ASSERT_TRUE(primary_id.ok() && !primary_id->empty());
 
   const std::string follower_dir = tmp.path() + "/follower";
   uint64_t applied = 0;
   {
     Node follower(follower_dir, primary->address());
-    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-    ASSERT_TRUE(WaitFor([&] { return follower.follower()->Readiness().empty(); }));
-    const tpr::v1::ReplicationStatusResponse status = follower.follower()->Status();
+    {
+      absl::Status started = follower.Start();
+      ASSERT_TRUE(started.ok()) << started;
+    }
+    ASSERT_TRUE(
+        WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+    const tpr::v1::ReplicationStatusResponse status =
+        follower.follower()->Status();
     EXPECT_EQ(status.db_identity(), *primary_id);
     EXPECT_EQ(status.error(), "");
     // The copy is a database of its own (a promoted follower is not its
     // former primary).
-    absl::StatusOr<std::string> own = DatabaseIdentity(follower.core()->storage());
+    absl::StatusOr<std::string> own =
+        DatabaseIdentity(follower.core()->storage());
     ASSERT_TRUE(own.ok());
     EXPECT_NE(*own, *primary_id);
     applied = status.applied_sequence();
@@ -461,12 +510,17 @@ TEST(FollowerTest, RefusesToTailAnotherDatabase) {
 
   for (Node* wrong : {&restored_primary, &other}) {
     Node follower(follower_dir, wrong->address());
-    { absl::Status started = follower.Start(); ASSERT_TRUE(started.ok()) << started; }
-    ASSERT_TRUE(WaitFor([&] { return !follower.follower()->Status().error().empty(); }));
+    {
+      absl::Status started = follower.Start();
+      ASSERT_TRUE(started.ok()) << started;
+    }
+    ASSERT_TRUE(WaitFor(
+        [&] { return !follower.follower()->Status().error().empty(); }));
     const std::string reason = follower.follower()->Readiness();
     EXPECT_NE(reason.find("refuses to be tailed"), std::string::npos) << reason;
     EXPECT_NE(reason.find(*primary_id), std::string::npos) << reason;
-    absl::StatusOr<std::string> wrong_id = DatabaseIdentity(wrong->core()->storage());
+    absl::StatusOr<std::string> wrong_id =
+        DatabaseIdentity(wrong->core()->storage());
     ASSERT_TRUE(wrong_id.ok());
     EXPECT_NE(reason.find(*wrong_id), std::string::npos) << reason;
     // Nothing applied: the copy of the original is intact.
@@ -488,7 +542,8 @@ TEST(FollowerTest, RefusesADirectoryHoldingAPrimarysData) {
   options.data_dir = tmp.path() + "/data";
   absl::Status st = PrepareFollowerDir(options);
   EXPECT_TRUE(absl::IsFailedPrecondition(st)) << st;
-  EXPECT_NE(st.message().find("never wipes a primary"), std::string::npos) << st;
+  EXPECT_NE(st.message().find("never wipes a primary"), std::string::npos)
+      << st;
   EXPECT_TRUE(std::filesystem::exists(tmp.path() + "/data/CURRENT"));
 }
 

@@ -58,17 +58,20 @@ std::unique_ptr<IndexerCore> OpenCore(const std::string& dir) {
   CoreOptions options;
   options.data_dir = dir;
   options.persist_interval_ms = 0;
-  absl::StatusOr<std::unique_ptr<IndexerCore>> core = IndexerCore::Open(options);
+  absl::StatusOr<std::unique_ptr<IndexerCore>> core =
+      IndexerCore::Open(options);
   EXPECT_TRUE(core.ok()) << core.status();
   return core.ok() ? std::move(*core) : nullptr;
 }
 
-absl::StatusOr<std::vector<std::string>> SearchIds(const IndexerCore& core,
-                                                   const tpr::v1::SearchRequest& request) {
-  absl::StatusOr<std::unique_ptr<SearchSession>> s = core.StartSearch(request, nullptr);
+absl::StatusOr<std::vector<std::string>> SearchIds(
+    const IndexerCore& core, const tpr::v1::SearchRequest& request) {
+  absl::StatusOr<std::unique_ptr<SearchSession>> s =
+      core.StartSearch(request, nullptr);
   if (!s.ok()) return s.status();
   std::vector<std::string> ids;
-  while (std::optional<tpr::v1::Neighbor> n = (*s)->Next()) ids.push_back(n->id());
+  while (std::optional<tpr::v1::Neighbor> n = (*s)->Next())
+    ids.push_back(n->id());
   return ids;
 }
 
@@ -104,13 +107,15 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
   const tpr::v1::StatsResponse stats = core->Stats();
   EXPECT_EQ(stats.models(), 24);
   EXPECT_EQ(stats.indexed() + stats.buffered(), 16);
-  absl::StatusOr<tpr::v1::ListResponse> list = core->List(tpr::v1::ListRequest());
+  absl::StatusOr<tpr::v1::ListResponse> list =
+      core->List(tpr::v1::ListRequest());
   ASSERT_TRUE(list.ok());
   EXPECT_EQ(list->models_size(), 24);
   for (const tpr::v1::Model& m : old) {
     absl::StatusOr<tpr::v1::Model> got = core->Get(m.id());
     ASSERT_TRUE(got.ok()) << got.status();
-    EXPECT_EQ(got->signature().SerializeAsString(), m.signature().SerializeAsString());
+    EXPECT_EQ(got->signature().SerializeAsString(),
+              m.signature().SerializeAsString());
   }
 
   // Searches say what to do.
@@ -122,8 +127,10 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
   by_old_id.set_k(5);
   for (const tpr::v1::SearchRequest& r : {by_signature, by_old_id}) {
     absl::StatusOr<std::vector<std::string>> ids = SearchIds(*core, r);
-    EXPECT_EQ(ids.status().code(), absl::StatusCode::kFailedPrecondition) << ids.status();
-    EXPECT_NE(ids.status().message().find("tpr add --update"), std::string::npos)
+    EXPECT_EQ(ids.status().code(), absl::StatusCode::kFailedPrecondition)
+        << ids.status();
+    EXPECT_NE(ids.status().message().find("tpr add --update"),
+              std::string::npos)
         << ids.status();
   }
   // An old-version signature is never stored, nor searched with.
@@ -132,7 +139,8 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
   stale.set_overwrite(true);
   absl::StatusOr<bool> refused = core->Upsert(stale);
   EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_NE(refused.status().message().find("tpr add --update"), std::string::npos);
+  EXPECT_NE(refused.status().message().find("tpr add --update"),
+            std::string::npos);
 
   // Re-extracting (overwriting) the old ones makes searching work again;
   // Delete of an old one counts too.
@@ -148,7 +156,8 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
 
   // The answer is exact against brute force over the 23 current models.
   std::vector<std::pair<std::string, tpr::v1::Signature>> live;
-  for (size_t i = 0; i < 23; ++i) live.push_back({models[i].id, ToWire(models[i].signature)});
+  for (size_t i = 0; i < 23; ++i)
+    live.push_back({models[i].id, ToWire(models[i].signature)});
   absl::StatusOr<std::vector<tpr::testing::Ranked>> want =
       tpr::testing::BruteForceRanking(by_signature.signature(), live);
   ASSERT_TRUE(want.ok()) << want.status();
@@ -161,7 +170,8 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
   core = OpenCore(dir.path());
   ASSERT_NE(core, nullptr);
   EXPECT_EQ(core->Stats().models(), 23);
-  absl::StatusOr<std::vector<std::string>> again = SearchIds(*core, by_signature);
+  absl::StatusOr<std::vector<std::string>> again =
+      SearchIds(*core, by_signature);
   ASSERT_TRUE(again.ok()) << again.status();
   EXPECT_EQ(*again, *ids);
 }

@@ -6,7 +6,6 @@
 
 #include <filesystem>
 #include <fstream>
-
 #include <map>
 #include <mutex>
 #include <string>
@@ -33,7 +32,8 @@ TEST(StorageTest, WriteGetDeleteAndScanInIdOrder) {
   for (const TestModel& m : models) protos.push_back(ModelOf(m));
   // Written in reverse order; the scan returns id order.
   std::vector<ModelWrite> writes;
-  for (size_t i = protos.size(); i-- > 0;) writes.push_back({protos[i].id(), &protos[i]});
+  for (size_t i = protos.size(); i-- > 0;)
+    writes.push_back({protos[i].id(), &protos[i]});
   ASSERT_TRUE((*storage)->Write(writes).ok());
   EXPECT_EQ((*storage)->last_seq(), 5u);
 
@@ -54,8 +54,8 @@ TEST(StorageTest, WriteGetDeleteAndScanInIdOrder) {
                     return absl::OkStatus();
                   })
                   .ok());
-  EXPECT_EQ(ids, (std::vector<std::string>{models[0].id, models[2].id, models[3].id,
-                                           models[4].id}));
+  EXPECT_EQ(ids, (std::vector<std::string>{models[0].id, models[2].id,
+                                           models[3].id, models[4].id}));
   // Reverse write order: model 0 was written last (seq 5), model 4 first.
   EXPECT_EQ(seqs, (std::vector<uint64_t>{5, 3, 2, 1}));
   EXPECT_GT((*storage)->DiskBytes(), 0);
@@ -87,25 +87,29 @@ TEST(StorageTest, ParallelScanMatchesSequentialScanAndStopsAtAnError) {
   std::mutex mu;
   std::map<std::string, std::pair<uint64_t, std::string>> parallel;
   int duplicates = 0;
-  ASSERT_TRUE((*storage)
-                  ->ForEachModel(
-                      [&](uint64_t seq, tpr::v1::Model&& m) {
-                        std::lock_guard<std::mutex> lock(mu);
-                        if (!parallel.emplace(m.id(), std::make_pair(seq, m.SerializeAsString()))
-                                 .second) {
-                          ++duplicates;
-                        }
-                        return absl::OkStatus();
-                      },
-                      /*threads=*/2)
-                  .ok());
+  ASSERT_TRUE(
+      (*storage)
+          ->ForEachModel(
+              [&](uint64_t seq, tpr::v1::Model&& m) {
+                std::lock_guard<std::mutex> lock(mu);
+                if (!parallel
+                         .emplace(m.id(),
+                                  std::make_pair(seq, m.SerializeAsString()))
+                         .second) {
+                  ++duplicates;
+                }
+                return absl::OkStatus();
+              },
+              /*threads=*/2)
+          .ok());
   EXPECT_EQ(duplicates, 0);
   EXPECT_EQ(parallel, sequential);
 
   const std::string bad = models[400].id;
   absl::Status st = (*storage)->ForEachModel(
       [&](uint64_t, tpr::v1::Model&& m) {
-        return m.id() == bad ? absl::DataLossError("bad " + bad) : absl::OkStatus();
+        return m.id() == bad ? absl::DataLossError("bad " + bad)
+                             : absl::OkStatus();
       },
       /*threads=*/2);
   EXPECT_TRUE(absl::IsDataLoss(st)) << st;
@@ -121,7 +125,10 @@ TEST(StorageTest, TreeAndSequenceSurviveReopen) {
     auto storage = Storage::Open(dir.path());
     ASSERT_TRUE(storage.ok());
     EXPECT_TRUE(absl::IsNotFound((*storage)->LoadTree().status()));
-    ASSERT_TRUE((*storage)->Write({{protos[0].id(), &protos[0]}, {protos[1].id(), &protos[1]}}).ok());
+    ASSERT_TRUE((*storage)
+                    ->Write({{protos[0].id(), &protos[0]},
+                             {protos[1].id(), &protos[1]}})
+                    .ok());
     ASSERT_TRUE((*storage)->SaveTree(std::string("tree\0bytes", 10), 2).ok());
     ASSERT_TRUE((*storage)->Write({{protos[2].id(), &protos[2]}}).ok());
     ASSERT_TRUE((*storage)->Write({{protos[2].id(), nullptr}}).ok());
@@ -154,8 +161,10 @@ void WriteFourBatches(const std::string& dir) {
   for (const TestModel& m : models) protos.push_back(ModelOf(m));
   auto storage = Storage::Open(dir);
   ASSERT_TRUE(storage.ok()) << storage.status();
-  for (const tpr::v1::Model& m : protos) ASSERT_TRUE((*storage)->Write({{m.id(), &m}}).ok());
-  ASSERT_TRUE((*storage)->Write({{protos[1].id(), nullptr}, {"absent", nullptr}}).ok());
+  for (const tpr::v1::Model& m : protos)
+    ASSERT_TRUE((*storage)->Write({{m.id(), &m}}).ok());
+  ASSERT_TRUE(
+      (*storage)->Write({{protos[1].id(), nullptr}, {"absent", nullptr}}).ok());
   EXPECT_EQ((*storage)->model_count(), 2u);
 }
 
@@ -176,7 +185,8 @@ TEST(StorageTest, ModelCountSurvivesReopenAndMatchesTheScan) {
   EXPECT_TRUE((*storage)->CheckScanned(2).ok());
   absl::Status short_scan = (*storage)->CheckScanned(1);
   EXPECT_TRUE(absl::IsDataLoss(short_scan)) << short_scan;
-  EXPECT_NE(short_scan.message().find("MANIFEST-"), std::string::npos) << short_scan;
+  EXPECT_NE(short_scan.message().find("MANIFEST-"), std::string::npos)
+      << short_scan;
 }
 
 // ACKNOWLEDGED claiming more than the database holds (what a lost MANIFEST
@@ -195,8 +205,10 @@ TEST(StorageTest, DatabaseBehindWhatWasAcknowledgedIsDataLoss) {
   }
   std::map<std::string, uintmax_t> files;
   // Every file, the archived write-ahead logs kept for followers included.
-  for (const auto& e : std::filesystem::recursive_directory_iterator(dir.path())) {
-    if (e.is_regular_file()) files[e.path().lexically_relative(dir.path()).string()] = e.file_size();
+  for (const auto& e :
+       std::filesystem::recursive_directory_iterator(dir.path())) {
+    if (e.is_regular_file())
+      files[e.path().lexically_relative(dir.path()).string()] = e.file_size();
   }
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.path());
   ASSERT_FALSE(storage.ok());
@@ -207,8 +219,10 @@ TEST(StorageTest, DatabaseBehindWhatWasAcknowledgedIsDataLoss) {
       << "names the server path: " << storage.status();
   std::map<std::string, uintmax_t> after;
   // Every file, the archived write-ahead logs kept for followers included.
-  for (const auto& e : std::filesystem::recursive_directory_iterator(dir.path())) {
-    if (e.is_regular_file()) after[e.path().lexically_relative(dir.path()).string()] = e.file_size();
+  for (const auto& e :
+       std::filesystem::recursive_directory_iterator(dir.path())) {
+    if (e.is_regular_file())
+      after[e.path().lexically_relative(dir.path()).string()] = e.file_size();
   }
   EXPECT_EQ(after, files);
 

@@ -6,12 +6,12 @@
 // with one from another authority, the certificate reloaded when its files
 // change, and unusable files refused at start; tpr-extractor serving mutual
 // TLS with the same flags.
+#include <gtest/gtest.h>
+
 #include <chrono>
 #include <filesystem>
 #include <string>
 #include <thread>
-
-#include <gtest/gtest.h>
 
 #include "common/auth.h"
 #include "tests/service/extsvc_test_util.h"
@@ -37,28 +37,34 @@ class TlsTest : public ::testing::Test {
     // Write a temporary and rename, as a certificate manager does, so the
     // watcher never sees a half-written pair.
     const std::string tmp = Path(to + ".tmp");
-    std::filesystem::copy_file(Path(from), tmp,
-                               std::filesystem::copy_options::overwrite_existing);
+    std::filesystem::copy_file(
+        Path(from), tmp, std::filesystem::copy_options::overwrite_existing);
     std::filesystem::rename(tmp, Path(to));
   }
 
-  std::string Path(const std::string& name) const { return dir_.path() + "/" + name; }
+  std::string Path(const std::string& name) const {
+    return dir_.path() + "/" + name;
+  }
 
   void StartIndexer(std::vector<std::string> extra) {
     std::vector<std::string> args = {"--data-dir", Path("data")};
     args.insert(args.end(), extra.begin(), extra.end());
-    ASSERT_TRUE(server_.Start(BinaryPath("tpr-indexer"), args, Path("indexer.log")).ok())
+    ASSERT_TRUE(
+        server_.Start(BinaryPath("tpr-indexer"), args, Path("indexer.log"))
+            .ok())
         << ReadText(Path("indexer.log"));
   }
 
   void StartTlsIndexer(std::vector<std::string> extra = {}) {
-    std::vector<std::string> args = {"--tls-cert", Path("serving.pem"), "--tls-key",
-                                     Path("serving.key"), "--tls-refresh-s", "1"};
+    std::vector<std::string> args = {"--tls-cert",      Path("serving.pem"),
+                                     "--tls-key",       Path("serving.key"),
+                                     "--tls-refresh-s", "1"};
     args.insert(args.end(), extra.begin(), extra.end());
     StartIndexer(args);
   }
 
-  ConnectionOptions Tls(const std::string& ca, const std::string& client = "") const {
+  ConnectionOptions Tls(const std::string& ca,
+                        const std::string& client = "") const {
     ConnectionOptions c;
     c.tls = true;
     c.tls_ca_file = Path(ca + ".pem");
@@ -70,7 +76,8 @@ class TlsTest : public ::testing::Test {
   }
 
   // Stats over a fresh channel; the status, and the time the call took.
-  absl::Status Stats(const ConnectionOptions& connection, double* seconds = nullptr) {
+  absl::Status Stats(const ConnectionOptions& connection,
+                     double* seconds = nullptr) {
     client::CallOptions call;
     call.timeout = absl::Seconds(20);
     absl::StatusOr<IndexerClient> indexer =
@@ -79,7 +86,9 @@ class TlsTest : public ::testing::Test {
     const auto start = std::chrono::steady_clock::now();
     absl::Status status = indexer->Stats().status();
     if (seconds != nullptr) {
-      *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      *seconds = std::chrono::duration<double>(
+                     std::chrono::steady_clock::now() - start)
+                     .count();
     }
     return status;
   }
@@ -91,21 +100,23 @@ class TlsTest : public ::testing::Test {
 TEST_F(TlsTest, HandshakeSucceedsAndCarriesAnApiKey) {
   absl::StatusOr<std::string> key = common::NewApiKey();
   ASSERT_TRUE(key.ok());
-  WriteFile(Path("keys"), common::KeyFileLine(*key, common::Role::kRead, "t") + "\n");
+  WriteFile(Path("keys"),
+            common::KeyFileLine(*key, common::Role::kRead, "t") + "\n");
   StartTlsIndexer({"--api-keys", Path("keys")});
   ConnectionOptions connection = Tls("ca1");
   EXPECT_EQ(Stats(connection).code(), absl::StatusCode::kUnauthenticated);
   connection.api_key = *key;
   std::string request_id;
-  connection.on_call_done = [&](absl::string_view, absl::string_view id, const grpc::Status&) {
+  connection.on_call_done = [&](absl::string_view, absl::string_view id,
+                                const grpc::Status&) {
     request_id = std::string(id);
   };
   EXPECT_TRUE(Stats(connection).ok());
   EXPECT_EQ(request_id.size(), 16u) << "the request id comes back over TLS";
   // By host name (the certificate's DNS name) as well as by IP address.
   client::CallOptions call;
-  absl::StatusOr<IndexerClient> by_name =
-      IndexerClient::Connect(absl::StrCat("localhost:", server_.port()), connection, call);
+  absl::StatusOr<IndexerClient> by_name = IndexerClient::Connect(
+      absl::StrCat("localhost:", server_.port()), connection, call);
   ASSERT_TRUE(by_name.ok());
   EXPECT_TRUE(by_name->Stats().ok());
 }
@@ -115,7 +126,8 @@ TEST_F(TlsTest, PlaintextClientGetsAClearErrorNotAHang) {
   double seconds = 0;
   absl::Status status = Stats(ConnectionOptions(), &seconds);
   EXPECT_EQ(status.code(), absl::StatusCode::kUnavailable) << status;
-  EXPECT_NE(status.message().find("does it use TLS?"), absl::string_view::npos) << status;
+  EXPECT_NE(status.message().find("does it use TLS?"), absl::string_view::npos)
+      << status;
   EXPECT_LT(seconds, 10.0) << "must fail fast, not wait for the 20 s deadline";
 }
 
@@ -133,7 +145,8 @@ TEST_F(TlsTest, WrongAuthorityIsRefused) {
   double seconds = 0;
   absl::Status status = Stats(Tls("ca2"), &seconds);
   EXPECT_EQ(status.code(), absl::StatusCode::kUnavailable) << status;
-  EXPECT_NE(status.message().find("--tls-ca"), absl::string_view::npos) << status;
+  EXPECT_NE(status.message().find("--tls-ca"), absl::string_view::npos)
+      << status;
   EXPECT_LT(seconds, 10.0);
   EXPECT_TRUE(Stats(Tls("ca1")).ok());
 }
@@ -144,7 +157,8 @@ TEST_F(TlsTest, MutualTlsRefusesClientsWithoutAGoodCertificate) {
   absl::Status none = Stats(Tls("ca1"), &seconds);
   EXPECT_EQ(none.code(), absl::StatusCode::kUnavailable) << none;
   EXPECT_LT(seconds, 10.0);
-  EXPECT_EQ(Stats(Tls("ca1", "client2")).code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(Stats(Tls("ca1", "client2")).code(),
+            absl::StatusCode::kUnavailable);
   EXPECT_TRUE(Stats(Tls("ca1", "client1")).ok());
   ConnectionOptions half = Tls("ca1", "client1");
   half.tls_key_file.clear();
@@ -168,16 +182,19 @@ TEST_F(TlsTest, CertificateIsReloadedWhenItsFilesChange) {
 
 TEST_F(TlsTest, TprCommandTakesTheTlsFlags) {
   StartTlsIndexer({"--tls-client-ca", Path("ca1.pem")});
-  const std::string tpr = absl::StrCat(BinaryPath("tpr"), " --indexer ", server_.address());
-  ShellResult r = RunShell(absl::StrCat(tpr, " --tls --tls-ca ", Path("ca1.pem"), " --tls-cert ",
-                                        Path("client1.pem"), " --tls-key ", Path("client1.key"),
-                                        " --json stats"));
+  const std::string tpr =
+      absl::StrCat(BinaryPath("tpr"), " --indexer ", server_.address());
+  ShellResult r =
+      RunShell(absl::StrCat(tpr, " --tls --tls-ca ", Path("ca1.pem"),
+                            " --tls-cert ", Path("client1.pem"), " --tls-key ",
+                            Path("client1.key"), " --json stats"));
   EXPECT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("\"models\""), std::string::npos) << r.out;
   r = RunShell(tpr + " stats");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.out.find("does it use TLS?"), std::string::npos) << r.out;
-  r = RunShell(absl::StrCat("TPR_TLS=1 TPR_TLS_CA=", Path("ca1.pem"), " ", tpr, " stats"));
+  r = RunShell(absl::StrCat("TPR_TLS=1 TPR_TLS_CA=", Path("ca1.pem"), " ", tpr,
+                            " stats"));
   EXPECT_EQ(r.exit_code, 1) << "mutual TLS without a client certificate";
   EXPECT_NE(r.out.find("--tls-cert"), std::string::npos) << r.out;
 }
@@ -187,14 +204,16 @@ TEST_F(TlsTest, TprCommandTakesTheTlsFlags) {
 // certificate refused fast.
 TEST_F(TlsTest, ExtractorServesMutualTls) {
   ServiceProcess extractor;
-  ASSERT_TRUE(extractor
-                  .Start(BinaryPath("tpr-extractor"),
-                         {"--tls-cert", Path("serving.pem"), "--tls-key", Path("serving.key"),
-                          "--tls-client-ca", Path("ca1.pem")},
-                         Path("extractor.log"))
-                  .ok())
+  ASSERT_TRUE(
+      extractor
+          .Start(BinaryPath("tpr-extractor"),
+                 {"--tls-cert", Path("serving.pem"), "--tls-key",
+                  Path("serving.key"), "--tls-client-ca", Path("ca1.pem")},
+                 Path("extractor.log"))
+          .ok())
       << ReadText(Path("extractor.log"));
-  absl::StatusOr<std::vector<GeneratedFile>> files = GenerateSet(Path("set"), 1, 1, 600);
+  absl::StatusOr<std::vector<GeneratedFile>> files =
+      GenerateSet(Path("set"), 1, 1, 600);
   ASSERT_TRUE(files.ok()) << files.status();
   auto extract = [&](const ConnectionOptions& connection) {
     client::CallOptions call;
@@ -207,27 +226,34 @@ TEST_F(TlsTest, ExtractorServesMutualTls) {
   const auto start = std::chrono::steady_clock::now();
   absl::Status plain = extract(ConnectionOptions());
   EXPECT_EQ(plain.code(), absl::StatusCode::kUnavailable) << plain;
-  EXPECT_NE(plain.message().find("does it use TLS?"), absl::string_view::npos) << plain;
+  EXPECT_NE(plain.message().find("does it use TLS?"), absl::string_view::npos)
+      << plain;
   EXPECT_EQ(extract(Tls("ca1")).code(), absl::StatusCode::kUnavailable);
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20.0);
+  EXPECT_LT(
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+          .count(),
+      20.0);
   absl::Status mutual = extract(Tls("ca1", "client1"));
   EXPECT_TRUE(mutual.ok()) << mutual;
 }
 
 TEST_F(TlsTest, UnusableFilesAreRefusedAtStart) {
   auto start = [&](const std::string& cert, const std::string& key) {
-    return RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ", Path("data"),
-                                 " --tls-cert ", Path(cert), " --tls-key ", Path(key)));
+    return RunShell(absl::StrCat(BinaryPath("tpr-indexer"), " --data-dir ",
+                                 Path("data"), " --tls-cert ", Path(cert),
+                                 " --tls-key ", Path(key)));
   };
   ShellResult mismatch = start("server1.pem", "server2.key");
   EXPECT_EQ(mismatch.exit_code, 2) << mismatch.out;
-  EXPECT_NE(mismatch.out.find("does not match"), std::string::npos) << mismatch.out;
+  EXPECT_NE(mismatch.out.find("does not match"), std::string::npos)
+      << mismatch.out;
   ShellResult missing = start("absent.pem", "server1.key");
   EXPECT_EQ(missing.exit_code, 2) << missing.out;
   EXPECT_NE(missing.out.find("absent.pem"), std::string::npos) << missing.out;
   ShellResult swapped = start("server1.key", "server1.pem");
   EXPECT_EQ(swapped.exit_code, 2) << swapped.out;
-  EXPECT_NE(swapped.out.find("no PEM certificate"), std::string::npos) << swapped.out;
+  EXPECT_NE(swapped.out.find("no PEM certificate"), std::string::npos)
+      << swapped.out;
 }
 
 }  // namespace

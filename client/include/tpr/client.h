@@ -5,14 +5,20 @@
 // stopped early, and channels over several addresses or a dns:/// name with
 // round-robin load balancing. Messages are the tpr.v1 protobuf types.
 //
-//   auto extractor = tpr::client::ExtractorClient::Connect("127.0.0.1:7001,127.0.0.1:7011");
+//   auto extractor = tpr::client::ExtractorClient::Connect(
+//       "127.0.0.1:7001,127.0.0.1:7011");
 //   auto indexer = tpr::client::IndexerClient::Connect("127.0.0.1:7002");
-//   absl::StatusOr<tpr::v1::ExtractResponse> r = extractor->ExtractFile("dog.off");
-//   tpr::v1::Model model;  model.set_id("dog.off");  *model.mutable_signature() = r->signature();
+//   absl::StatusOr<tpr::v1::ExtractResponse> r =
+//       extractor->ExtractFile("dog.off");
+//   tpr::v1::Model model;
+//   model.set_id("dog.off");
+//   *model.mutable_signature() = r->signature();
 //   absl::Status s = indexer->Upsert(model, /*overwrite=*/true).status();
 //   tpr::v1::SearchRequest q;  q.set_id("dog.off");  q.set_k(5);
 //   std::unique_ptr<tpr::client::SearchStream> stream = indexer->Search(q);
-//   for (tpr::v1::Neighbor n; stream->Next(&n);) Print(n.rank(), n.id(), n.distance());
+//   for (tpr::v1::Neighbor n; stream->Next(&n);) {
+//     Print(n.rank(), n.id(), n.distance());
+//   }
 //   absl::Status done = stream->Finish();   // OK, or why the stream broke
 //
 // Thread-safety: ExtractorClient and IndexerClient are thread-safe and cheap
@@ -21,16 +27,16 @@
 #ifndef TPR_CLIENT_CLIENT_H_
 #define TPR_CLIENT_CLIENT_H_
 
+#include <grpcpp/channel.h>
+#include <grpcpp/client_context.h>
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
+
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <grpcpp/channel.h>
-#include <grpcpp/client_context.h>
-#include <grpcpp/security/credentials.h>
-#include <grpcpp/support/channel_arguments.h>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -76,7 +82,8 @@ absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses);
 // 2 s (gRPC's default starts at 1 s and grows to 120 s). Connection happens
 // lazily on the first call.
 // Errors: those of ChannelTarget.
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses);
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
+    absl::string_view addresses);
 
 // ConnectionOptions: how a client reaches and authenticates to the servers
 // (TLS, API key) and what it hears about each call. Defaults: plaintext, no
@@ -115,8 +122,8 @@ ConnectionOptions ConnectionOptionsFromEnvironment();
 // that cannot connect fails with UNAVAILABLE and a hint: plaintext against
 // a TLS server, or a TLS handshake refused (wrong CA, wrong name, missing
 // client certificate), never a hang.
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view addresses,
-                                                           const ConnectionOptions& connection);
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
+    absl::string_view addresses, const ConnectionOptions& connection);
 
 // MakeChannelCredentials returns the channel credentials MakeChannel uses
 // for `connection` (plaintext, or TLS with the CA and client certificate
@@ -125,8 +132,9 @@ absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(absl::string_view add
 // their own channels, e.g. tpr-gateway's to its shards. Errors: NOT_FOUND
 // naming a missing file, INVALID_ARGUMENT for a certificate without its key
 // or TLS files without tls. Thread-safe.
-absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(
-    const ConnectionOptions& connection, grpc::ChannelArguments* args);
+absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>>
+MakeChannelCredentials(const ConnectionOptions& connection,
+                       grpc::ChannelArguments* args);
 
 // kChunkBytes is the size of one upload message of ExtractorClient: 1 MiB,
 // well under gRPC's 4 MiB default message limit.
@@ -137,15 +145,16 @@ class ExtractorClient {
  public:
   // Uses `channel` (see MakeChannel); `defaults` apply to calls that pass no
   // CallOptions.
-  explicit ExtractorClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
+  explicit ExtractorClient(std::shared_ptr<grpc::Channel> channel,
+                           CallOptions defaults = {});
 
   // Connect returns a client over MakeChannel(addresses).
   static absl::StatusOr<ExtractorClient> Connect(absl::string_view addresses,
                                                  CallOptions defaults = {});
   // Connect over MakeChannel(addresses, connection): TLS and API key.
-  static absl::StatusOr<ExtractorClient> Connect(absl::string_view addresses,
-                                                 const ConnectionOptions& connection,
-                                                 CallOptions defaults = {});
+  static absl::StatusOr<ExtractorClient> Connect(
+      absl::string_view addresses, const ConnectionOptions& connection,
+      CallOptions defaults = {});
 
   // ExtractFile uploads the mesh file at `path` as ExtractBytes does (file
   // name: its base name), reading it kChunkBytes at a time as it streams, so
@@ -153,9 +162,9 @@ class ExtractorClient {
   // the file again). NOT_FOUND when the file cannot be opened, DATA_LOSS
   // when reading it fails midway (the call is cancelled); otherwise as
   // ExtractBytes. Cost: one read of the file plus the call.
-  absl::StatusOr<v1::ExtractResponse> ExtractFile(const std::string& path,
-                                                  const v1::ExtractOptions& options = {},
-                                                  const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::ExtractResponse> ExtractFile(
+      const std::string& path, const v1::ExtractOptions& options = {},
+      const CallOptions* call = nullptr) const;
 
   // ExtractBytes uploads `bytes` in kChunkBytes messages (the first carries
   // format, file_name and options) and returns the server's response.
@@ -163,12 +172,11 @@ class ExtractorClient {
   // mesh, RESOURCE_EXHAUSTED above its limits or when it is busy,
   // DEADLINE_EXCEEDED, UNAVAILABLE after max_attempts). Retried on
   // UNAVAILABLE (extraction is a pure function of bytes and options).
-  absl::StatusOr<v1::ExtractResponse> ExtractBytes(absl::string_view bytes,
-                                                   absl::string_view file_name,
-                                                   const v1::ExtractOptions& options = {},
-                                                   v1::MeshFormat format =
-                                                       v1::MESH_FORMAT_UNSPECIFIED,
-                                                   const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::ExtractResponse> ExtractBytes(
+      absl::string_view bytes, absl::string_view file_name,
+      const v1::ExtractOptions& options = {},
+      v1::MeshFormat format = v1::MESH_FORMAT_UNSPECIFIED,
+      const CallOptions* call = nullptr) const;
 
  private:
   std::shared_ptr<grpc::Channel> channel_;
@@ -224,13 +232,14 @@ class BatchUpsertWriter {
 // (writes to primaries, reads to any ready copy) or list only the primary.
 class IndexerClient {
  public:
-  explicit IndexerClient(std::shared_ptr<grpc::Channel> channel, CallOptions defaults = {});
+  explicit IndexerClient(std::shared_ptr<grpc::Channel> channel,
+                         CallOptions defaults = {});
   static absl::StatusOr<IndexerClient> Connect(absl::string_view addresses,
                                                CallOptions defaults = {});
   // Connect over MakeChannel(addresses, connection): TLS and API key.
-  static absl::StatusOr<IndexerClient> Connect(absl::string_view addresses,
-                                               const ConnectionOptions& connection,
-                                               CallOptions defaults = {});
+  static absl::StatusOr<IndexerClient> Connect(
+      absl::string_view addresses, const ConnectionOptions& connection,
+      CallOptions defaults = {});
 
   // Upsert stores `model`; returns true when the id was new. ALREADY_EXISTS
   // when the id exists and !overwrite; INVALID_ARGUMENT for a bad id or
@@ -241,23 +250,26 @@ class IndexerClient {
 
   // BatchUpsert starts a streaming batch upsert under one deadline. Never
   // retried (the stream is not replayable).
-  std::unique_ptr<BatchUpsertWriter> BatchUpsert(const CallOptions* call = nullptr) const;
+  std::unique_ptr<BatchUpsertWriter> BatchUpsert(
+      const CallOptions* call = nullptr) const;
 
   // Delete removes `id`. NOT_FOUND when unknown. Not retried (a retry after
   // a lost reply would report NOT_FOUND for a delete that happened).
-  absl::Status Delete(const std::string& id, const CallOptions* call = nullptr) const;
+  absl::Status Delete(const std::string& id,
+                      const CallOptions* call = nullptr) const;
 
   // Get returns the model `id` with its signature. NOT_FOUND when unknown.
-  absl::StatusOr<v1::Model> Get(const std::string& id, const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::Model> Get(const std::string& id,
+                                const CallOptions* call = nullptr) const;
 
   // List returns one page (see ListRequest). Retried on UNAVAILABLE.
-  absl::StatusOr<v1::ListResponse> List(const v1::ListRequest& request,
-                                        const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::ListResponse> List(
+      const v1::ListRequest& request, const CallOptions* call = nullptr) const;
 
   // ListAll pages through every model (with `label` if non-empty) and
   // returns them in id order, without signatures. Cost: one call per 1000.
-  absl::StatusOr<std::vector<v1::Model>> ListAll(const std::string& label = "",
-                                                 const CallOptions* call = nullptr) const;
+  absl::StatusOr<std::vector<v1::Model>> ListAll(
+      const std::string& label = "", const CallOptions* call = nullptr) const;
 
   // Search starts a k-NN search (see SearchRequest) and returns its stream.
   // Retried on UNAVAILABLE while no neighbour has been delivered yet. Errors
@@ -266,7 +278,8 @@ class IndexerClient {
                                        const CallOptions* call = nullptr) const;
 
   // Stats returns the server's counts and sizes.
-  absl::StatusOr<v1::StatsResponse> Stats(const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::StatsResponse> Stats(
+      const CallOptions* call = nullptr) const;
 
  private:
   std::shared_ptr<grpc::Channel> channel_;

@@ -5,7 +5,8 @@
 // client/cli/connection.cc (no prefix, with environment variables).
 //
 //   tpr::client::ConnectionOptions primary;
-//   tpr::client::AddPeerConnectionFlags(app, "follow", "the primary", &primary);
+//   tpr::client::AddPeerConnectionFlags(app, "follow", "the primary",
+//                                       &primary);
 //   ... CLI11_PARSE ...; MakeChannelCredentials(primary, &args)
 //
 // Header-only and templated on the CLI11 app type, so that the SDK itself
@@ -26,7 +27,8 @@ namespace tpr::client {
 // caller's flag (its role and environment variable differ per program).
 // `*connection` must outlive parsing.
 template <typename App>
-void AddPeerConnectionFlags(App& app, const std::string& prefix, const std::string& peer,
+void AddPeerConnectionFlags(App& app, const std::string& prefix,
+                            const std::string& peer,
                             ConnectionOptions* connection) {
   const std::string p = "--" + prefix + "-tls";
   app.add_flag(p, connection->tls, "speak TLS to " + peer);
@@ -34,11 +36,13 @@ void AddPeerConnectionFlags(App& app, const std::string& prefix, const std::stri
                  "PEM authority the certificates of " + peer +
                      " are checked against (default: the system's roots)");
   app.add_option(p + "-cert", connection->tls_cert_file,
-                 "PEM client certificate for " + peer + " when it demands mutual TLS (with " +
-                     p + "-key)");
-  app.add_option(p + "-key", connection->tls_key_file, "PEM private key of " + p + "-cert");
+                 "PEM client certificate for " + peer +
+                     " when it demands mutual TLS (with " + p + "-key)");
+  app.add_option(p + "-key", connection->tls_key_file,
+                 "PEM private key of " + p + "-cert");
   app.add_option(p + "-server-name", connection->tls_server_name,
-                 "name the certificate of " + peer + " carries, when not the host in its address");
+                 "name the certificate of " + peer +
+                     " carries, when not the host in its address");
 }
 
 }  // namespace tpr::client

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The formatting check can fail: in a scratch git repository holding
+# scripts/format and .clang-format, a formatted file passes, and a file with
+# a line over the column limit, or one clang-format would change, is refused
+# (exit 1) and named. Exit 77 (skipped) without clang-format-14.
+set -euo pipefail
+ROOT="$1"
+command -v "${CLANG_FORMAT:-clang-format-14}" >/dev/null || exit 77
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+mkdir -p "$work/scripts"
+cp "$ROOT/scripts/format" "$work/scripts/format"
+cp "$ROOT/.clang-format" "$work/.clang-format"
+cd "$work"
+git init -q . && git config user.email t@t && git config user.name t
+printf 'int Add(int a, int b) { return a + b; }\n' > good.cc
+git add -A && git commit -qm good
+scripts/format --all >/dev/null || { echo "a formatted file was refused"; exit 1; }
+
+expect_refused() {  # FILE CONTENT
+  printf '%s' "$2" > "$1"
+  git add -A && git commit -qm "$1"
+  if out="$(scripts/format --all)"; then
+    echo "not refused: $1"; exit 1
+  fi
+  grep -q "^$1 " <<<"$out" || { echo "refusal does not name $1: $out"; exit 1; }
+  git rm -q "$1" && git commit -qm "rm $1"
+}
+expect_refused long.h "// $(printf 'x%.0s' $(seq 1 90))
+"
+expect_refused spacing.cc 'int  Sub( int a,int b ){return a-b;}
+'
+echo "format check refuses both files"
