@@ -185,14 +185,6 @@ __attribute__((target("avx512f"))) int CollectAvx512(const double* cost, int cs,
 using CollectFn = int (*)(const double*, int, int, const double*, const double*,
                           double, int*, int*);
 
-CollectFn PickCollect() {
-#ifdef TPR_HAVE_X86_PRICING
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) return CollectAvx512;
-#endif
-  return CollectScalar;
-}
-
 // RowArgMin returns the first j < cs minimizing row[j] + mask[j] (mask is
 // a per-column offset, +inf for closed and padding columns; cs a positive
 // multiple of 8; at least one finite entry).
@@ -237,12 +229,26 @@ __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
 
 using RowArgMinFn = int (*)(const double*, const double*, int);
 
-RowArgMinFn PickRowArgMin() {
+// The pricing kernels this CPU runs, chosen once by one CPU check: the
+// avx512f pair where the CPU has it, else the scalar pair (same results).
+struct PricingKernels {
+  CollectFn collect;
+  RowArgMinFn row_arg_min;
+};
+
+PricingKernels PickPricingKernels() {
 #ifdef TPR_HAVE_X86_PRICING
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) return RowArgMinAvx512;
+  if (__builtin_cpu_supports("avx512f")) {
+    return {CollectAvx512, RowArgMinAvx512};
+  }
 #endif
-  return RowArgMinScalar;
+  return {CollectScalar, RowArgMinScalar};
+}
+
+const PricingKernels& Kernels() {
+  static const PricingKernels kernels = PickPricingKernels();
+  return kernels;
 }
 
 }  // namespace
@@ -401,7 +407,7 @@ void EmdSolver::Impl::InitialBasis() {
     col_mask[j] = open ? -col_mask[j] : kInf;
     open_cols += open;
   }
-  static const RowArgMinFn row_arg_min = PickRowArgMin();
+  const RowArgMinFn row_arg_min = Kernels().row_arg_min;
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
   // which measured 8% fewer pivots than index order at n = m = 30.
@@ -654,7 +660,7 @@ double EmdSolver::Impl::Solve() {
   // strongly feasible tree excludes cycling in exact arithmetic).
   const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
   for (int j = m; j < cs; ++j) vpad[j] = -kInf;
-  static const CollectFn collect = PickCollect();
+  const CollectFn collect = Kernels().collect;
   int candidates = 0;
   bool fresh = false;  // no pivot since the last major pass
   while (stats.pivots < max_pivots) {
