@@ -4,7 +4,7 @@
 // finishes in-flight calls, persists the VP-tree and exits 0.
 //
 //   tpr-indexer --listen 127.0.0.1:7002 --data-dir /var/lib/tpr
-//   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f \
+//   tpr-indexer --listen 127.0.0.1:7012 --data-dir /var/lib/tpr-f
 //       --follow 127.0.0.1:7002
 //   tpr-indexer ... --follow HOST:7002 --follow-tls --follow-tls-ca ca.pem
 //               (and TPR_INDEXER_FOLLOW_API_KEY): a secured primary

@@ -4,7 +4,7 @@
 // conversion) holds on a noisy machine. Meshes: a synthetic biped at the
 // given vertex count, sent as OFF text.
 //
-//   bench_extractor_service --benchmark_filter='/10000/' \
+//   bench_extractor_service --benchmark_filter='/10000/'
 //       --benchmark_repetitions=3
 #include <benchmark/benchmark.h>
 

@@ -18,7 +18,7 @@
 //    for 4 s; how long until the follower has applied each write (ms) and
 //    how many keys it was behind when sampled.
 //
-//   bench_gateway --benchmark_filter=\
+//   bench_gateway --benchmark_filter=
 //   'BM_Knn10SingleVsGateway/100000/0|BM_Ingest.*/10000|BM_FollowerLag'
 //
 // Signatures: tests/indexer/signature_testing.h, 20 clustered classes, 30
