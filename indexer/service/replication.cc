@@ -3,10 +3,11 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
-#include <mutex>
 #include <utility>
 
+#include "absl/base/const_init.h"
 #include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
 #include "common/status_macros.h"
 #include "rocksdb/db.h"
 #include "rocksdb/transaction_log.h"
@@ -147,8 +148,8 @@ absl::StatusOr<BackupResult> CreateBackup(Storage& storage,
   }
   // One writer per backup set (RocksDB's rule); backups are rare, so one
   // lock for the process is enough.
-  static std::mutex* const backup_mu = new std::mutex;
-  std::lock_guard<std::mutex> lock(*backup_mu);
+  static absl::Mutex backup_mu(absl::kConstInit);
+  absl::MutexLock lock(&backup_mu);
   std::error_code ec;
   std::filesystem::create_directories(backup_dir, ec);
   if (ec) {
