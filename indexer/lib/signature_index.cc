@@ -571,15 +571,15 @@ void SignatureIndex::Rebuild() {
 
 namespace {
 
-constexpr char kMagic[6] = {'T', 'P', 'R', 'S', 'I', 'X'};
-constexpr uint16_t kVersion = 1;
+constexpr Frame kFrame{"TPRSIX", /*version=*/1, "signature-index",
+                       "corrupt index bytes"};
 
 std::vector<double> OptionValues(const GroundDistanceOptions& g) {
   return {g.w1, g.w2, g.w3, g.w4, g.k_scale, g.a_scale, g.h_scale};
 }
 
 absl::Status Corrupt(absl::string_view what) {
-  return absl::DataLossError(absl::StrCat("corrupt index bytes: ", what));
+  return CorruptFrame(kFrame, what);
 }
 
 }  // namespace
@@ -587,8 +587,7 @@ absl::Status Corrupt(absl::string_view what) {
 std::string SignatureIndex::SerializeTree() const {
   std::shared_ptr<const Snapshot> s = snapshot();
   const TreePart& t = *s->tree;
-  std::string out(kMagic, sizeof kMagic);
-  PutU(&out, kVersion, 2);
+  std::string out = BeginFrame(kFrame);
   for (double v : OptionValues(options_.ground)) {
     uint64_t bits;
     std::memcpy(&bits, &v, sizeof bits);
@@ -603,7 +602,7 @@ std::string SignatureIndex::SerializeTree() const {
   const std::string tree = t.tree.Serialize();
   PutU(&out, tree.size(), 8);
   out += tree;
-  PutU(&out, Fnv1a(out.data(), out.size()), 8);
+  EndFrame(&out);
   return out;
 }
 
@@ -612,31 +611,9 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     const std::vector<std::pair<std::string, Signature>>& items,
     IndexOptions options) {
   TPR_RETURN_IF_ERROR(ValidateOptions(options.ground));
-  const absl::string_view bytes = tree_bytes;
-  if (bytes.size() < sizeof kMagic + 2 ||
-      std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
-    return absl::InvalidArgumentError("not signature-index bytes (bad magic)");
-  }
-  {
-    ByteReader r(bytes.substr(sizeof kMagic));
-    uint64_t version = 0;
-    r.U(2, &version);
-    if (version != kVersion) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature-index bytes of version ", version,
-                       "; this build reads ", kVersion));
-    }
-  }
-  if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
-  const size_t body = bytes.size() - 8;
-  {
-    ByteReader tail(bytes.substr(body));
-    uint64_t checksum = 0;
-    tail.U(8, &checksum);
-    if (checksum != Fnv1a(bytes.data(), body))
-      return Corrupt("checksum mismatch");
-  }
-  ByteReader r(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+  TPR_ASSIGN_OR_RETURN(const absl::string_view payload,
+                       OpenFrame(tree_bytes, kFrame));
+  ByteReader r(payload);
   const std::vector<double> want = OptionValues(options.ground);
   for (double w : want) {
     uint64_t bits;

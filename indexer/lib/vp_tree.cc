@@ -640,19 +640,18 @@ std::vector<ItemNeighbor> VpTree::Range(QuerySpec spec,
 
 namespace {
 
-constexpr char kMagic[6] = {'T', 'P', 'R', 'V', 'P', 'T'};
-constexpr uint16_t kVersion = 1;
+constexpr Frame kFrame{"TPRVPT", /*version=*/1, "VP-tree",
+                       "corrupt VP-tree bytes"};
 
 absl::Status Corrupt(absl::string_view what) {
-  return absl::DataLossError(absl::StrCat("corrupt VP-tree bytes: ", what));
+  return CorruptFrame(kFrame, what);
 }
 
 }  // namespace
 
 std::string VpTree::Serialize() const {
   const Data& d = *data_;
-  std::string out(kMagic, sizeof kMagic);
-  PutU(&out, kVersion, 2);
+  std::string out = BeginFrame(kFrame);
   PutU(&out, d.n_items, 4);
   PutU(&out, d.nodes.size(), 4);
   for (const Node& n : d.nodes) {
@@ -672,7 +671,7 @@ std::string VpTree::Serialize() const {
       PutF(&out, d.item_dists[d.item_row[item] + j]);
     }
   }
-  PutU(&out, Fnv1a(out.data(), out.size()), 8);
+  EndFrame(&out);
   return out;
 }
 
@@ -687,27 +686,9 @@ class VpTreeReader {
   }
 
   static absl::StatusOr<VpTree> Read(absl::string_view bytes) {
-    if (bytes.size() < sizeof kMagic + 2 ||
-        std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
-      return absl::InvalidArgumentError("not VP-tree bytes (bad magic)");
-    }
-    ByteReader r(bytes.substr(sizeof kMagic));
-    uint64_t version = 0;
-    r.U(2, &version);
-    if (version != kVersion) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("VP-tree bytes of version ", version,
-                       "; this build reads ", kVersion));
-    }
-    if (bytes.size() < sizeof kMagic + 2 + 8) return Corrupt("truncated");
-    const size_t body = bytes.size() - 8;
-    ByteReader tail(bytes.substr(body));
-    uint64_t checksum = 0;
-    tail.U(8, &checksum);
-    if (checksum != Fnv1a(bytes.data(), body)) {
-      return Corrupt("checksum mismatch");
-    }
-    r = ByteReader(bytes.substr(sizeof kMagic + 2, body - sizeof kMagic - 2));
+    absl::StatusOr<absl::string_view> payload = OpenFrame(bytes, kFrame);
+    if (!payload.ok()) return payload.status();
+    ByteReader r(*payload);
 
     VpTree tree;
     VpTree::Data& d = *tree.data_;
