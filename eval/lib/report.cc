@@ -60,6 +60,51 @@ int TotalModels(const ClassSizes& sizes) {
 
 }  // namespace
 
+namespace {
+
+// AppendEscaped appends ASCII byte c with the escapes JSON and the text
+// output share (backslash, newline, carriage return, tab), the JSON-only
+// ones when `json` ('"', backspace, form feed), and any other control byte
+// as \u00XX (JSON) or \xXX (text).
+void AppendEscaped(unsigned char c, bool json, std::string* out) {
+  switch (c) {
+    case '\\':
+      *out += "\\\\";
+      return;
+    case '\n':
+      *out += "\\n";
+      return;
+    case '\r':
+      *out += "\\r";
+      return;
+    case '\t':
+      *out += "\\t";
+      return;
+    case '"':
+      *out += json ? "\\\"" : "\"";
+      return;
+    case '\b':
+      if (json) {
+        *out += "\\b";
+        return;
+      }
+      break;
+    case '\f':
+      if (json) {
+        *out += "\\f";
+        return;
+      }
+      break;
+  }
+  if (c < 0x20 || c == 0x7F) {
+    absl::StrAppendFormat(out, json ? "\\u%04x" : "\\x%02x", c);
+  } else {
+    out->push_back(static_cast<char>(c));
+  }
+}
+
+}  // namespace
+
 // Hand-written rather than through a JSON library: the reports are a few
 // flat objects, and a string escaper and a number formatter are all they
 // need (protobuf's printer serves the messages the CLI prints whole).
@@ -78,35 +123,7 @@ std::string JsonString(absl::string_view s) {
       }
       continue;
     }
-    switch (c) {
-      case '"':
-        out += "\\\"";
-        break;
-      case '\\':
-        out += "\\\\";
-        break;
-      case '\n':
-        out += "\\n";
-        break;
-      case '\r':
-        out += "\\r";
-        break;
-      case '\t':
-        out += "\\t";
-        break;
-      case '\b':
-        out += "\\b";
-        break;
-      case '\f':
-        out += "\\f";
-        break;
-      default:
-        if (c < 0x20 || c == 0x7F) {
-          absl::StrAppendFormat(&out, "\\u%04x", c);
-        } else {
-          out += static_cast<char>(c);
-        }
-    }
+    AppendEscaped(c, /*json=*/true, &out);
     ++i;
   }
   return out + "\"";
@@ -117,25 +134,10 @@ std::string TextField(absl::string_view s) {
   out.reserve(s.size());
   for (char ch : s) {
     const unsigned char c = static_cast<unsigned char>(ch);
-    switch (c) {
-      case '\\':
-        out += "\\\\";
-        break;
-      case '\n':
-        out += "\\n";
-        break;
-      case '\r':
-        out += "\\r";
-        break;
-      case '\t':
-        out += "\\t";
-        break;
-      default:
-        if (c < 0x20 || c == 0x7F) {
-          absl::StrAppendFormat(&out, "\\x%02x", c);
-        } else {
-          out += ch;
-        }
+    if (c >= 0x80) {
+      out += ch;
+    } else {
+      AppendEscaped(c, /*json=*/false, &out);
     }
   }
   return out;
