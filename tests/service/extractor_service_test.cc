@@ -25,12 +25,15 @@
 #include "extractor/lib/mesh_io.h"
 #include "extractor/service/convert.h"
 #include "extractor/synth/synth.h"
+#include "tests/sanitizers/sanitizer_build.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tpr/client.h"
 
 namespace tpr::extractor {
 namespace {
 
+using ::tpr::testing::kAddressSanitizer;
+using ::tpr::testing::kSanitizerSlowdown;
 using ::tpr::testing::ToOff;
 
 std::string GeneratedOff(const std::string& cls, int pose, int vertices) {
@@ -146,7 +149,12 @@ TEST_F(ExtractorServiceTest,
   // 60k vertices of OFF text is several MiB: several 1 MiB chunks.
   const std::string off = GeneratedOff("quadruped_slender", 0, 60000);
   ASSERT_GT(off.size(), 3 * client::kChunkBytes);
-  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(off, "dog.off");
+  // The default 60 s deadline is ample in Release; under ASan this
+  // extraction alone took longer (scripts/test --sanitize).
+  client::CallOptions call;
+  call.timeout = absl::Seconds(60 * kSanitizerSlowdown);
+  absl::StatusOr<v1::ExtractResponse> r = client_->ExtractBytes(
+      off, "dog.off", {}, v1::MESH_FORMAT_UNSPECIFIED, &call);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_FALSE(r->has_explanation());
   absl::StatusOr<extract::LoadedMesh> loaded = extract::LoadMeshFromBuffer(
@@ -404,14 +412,19 @@ class RawUpload {
 // Issue 12 item 5, reproduced: as many uploads as there are slots each send
 // 4 bytes and wait. While they wait everyone else is refused; after the idle
 // timeout they are refused with DEADLINE_EXCEEDED naming the flag, their
-// slots are free, and a normal client is served.
+// slots are free, and a normal client is served. Under a sanitizer every
+// wait and time bound is kSanitizerSlowdown times longer (the four stalled
+// calls must all be admitted before the first one's idle timeout ends).
 TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
   TearDown();
   ServiceOptions options;
   options.max_concurrent = 4;
-  options.upload_idle_timeout_ms = 400;
+  options.upload_idle_timeout_ms = 400 * kSanitizerSlowdown;
   options.min_upload_bytes_per_second = 0;
   StartWith(options);
+  // Generated before the uploads start: under ASan generating it took
+  // longer than the idle timeout, which then freed the slots early.
+  const std::string off = GeneratedOff("biped_adult", 0, 1000);
   auto channel =
       grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
@@ -422,10 +435,10 @@ TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
         std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(60)));
     ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
   }
-  const std::string off = GeneratedOff("biped_adult", 0, 1000);
   // Up to 10 s: on a loaded 2-core machine (a landing build beside it) the
   // four calls took over a second to reach the server.
-  for (int i = 0; i < 2000 && service_->InFlight() < options.max_concurrent;
+  for (int i = 0; i < 2000 * kSanitizerSlowdown &&
+                  service_->InFlight() < options.max_concurrent;
        ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
@@ -445,9 +458,11 @@ TEST_F(ExtractorServiceTest, StalledUploadsAreRefusedAfterTheIdleTimeout) {
   const double waited =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
           .count();
-  EXPECT_GE(waited, 0.4);
-  EXPECT_LT(waited, 5.0) << "the idle timeout was not enforced promptly";
-  for (int i = 0; i < 2000 && service_->InFlight() > 0; ++i) {
+  EXPECT_GE(waited, options.upload_idle_timeout_ms / 1000.0);
+  EXPECT_LT(waited, 5.0 * kSanitizerSlowdown)
+      << "the idle timeout was not enforced promptly";
+  for (int i = 0; i < 2000 * kSanitizerSlowdown && service_->InFlight() > 0;
+       ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   EXPECT_EQ(service_->InFlight(), 0);
@@ -505,15 +520,25 @@ TEST_F(ExtractorServiceTest, TricklingUploadIsRefusedBelowTheMinimumRate) {
 // The reproduction of issue 12 item 5 on the real binary with its flags:
 // 16 streams that send 4 bytes and wait no longer hold every slot for
 // minutes; a normal client is served once the idle timeout has passed.
+// Under a sanitizer the idle timeout and every wait and time bound are
+// kSanitizerSlowdown times longer.
 TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
   testing::TempDir dir;
   testing::ServiceProcess process;
-  ASSERT_TRUE(process
-                  .Start(testing::BinaryPath("tpr-extractor"),
-                         {"--threads", "1", "--max-concurrent", "16",
-                          "--upload-idle-timeout-ms", "500"},
-                         dir.path() + "/extractor.log")
-                  .ok());
+  const int idle_timeout_ms = 500 * kSanitizerSlowdown;
+  ASSERT_TRUE(
+      process
+          .Start(testing::BinaryPath("tpr-extractor"),
+                 {"--threads", "1", "--max-concurrent", "16",
+                  "--upload-idle-timeout-ms", std::to_string(idle_timeout_ms)},
+                 dir.path() + "/extractor.log")
+          .ok());
+  // The mesh and the client exist before the uploads start: under ASan
+  // generating the mesh took longer than the idle timeout.
+  const std::string off = GeneratedOff("biped_adult", 0, 1000);
+  absl::StatusOr<client::ExtractorClient> c =
+      client::ExtractorClient::Connect(process.address());
+  ASSERT_TRUE(c.ok());
   auto channel = grpc::CreateChannel(process.address(),
                                      grpc::InsecureChannelCredentials());
   auto stub = v1::Extractor::NewStub(channel);
@@ -523,24 +548,23 @@ TEST(ExtractorBinaryTest, SixteenStalledStreamsReleaseTheirSlots) {
         std::make_unique<RawUpload>(stub.get(), std::chrono::seconds(120)));
     ASSERT_TRUE(slow.back()->Write("OFF\n", "slow.off"));
   }
-  absl::StatusOr<client::ExtractorClient> c =
-      client::ExtractorClient::Connect(process.address());
-  ASSERT_TRUE(c.ok());
-  const std::string off = GeneratedOff("biped_adult", 0, 1000);
   // Right away every slot is held (the 16 were admitted first) ...
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100) *
+                              kSanitizerSlowdown);
   absl::StatusOr<v1::ExtractResponse> refused = c->ExtractBytes(off, "a.off");
   EXPECT_TRUE(absl::IsResourceExhausted(refused.status())) << refused.status();
   // ... and a client retrying for a few seconds gets through.
   const auto start = std::chrono::steady_clock::now();
   absl::StatusOr<v1::ExtractResponse> served = refused;
   while (!served.ok() && absl::IsResourceExhausted(served.status()) &&
-         std::chrono::steady_clock::now() - start < std::chrono::seconds(10)) {
+         std::chrono::steady_clock::now() - start <
+             std::chrono::seconds(10) * kSanitizerSlowdown) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     served = c->ExtractBytes(off, "a.off");
   }
   EXPECT_TRUE(served.ok()) << served.status();
-  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(3));
+  EXPECT_LT(std::chrono::steady_clock::now() - start,
+            std::chrono::seconds(3) * kSanitizerSlowdown);
   for (auto& upload : slow) {
     EXPECT_EQ(upload->Finish().error_code(),
               grpc::StatusCode::DEADLINE_EXCEEDED);
@@ -697,13 +721,23 @@ TEST(ExtractorBinaryTest, PeakMemoryStaysWithinTheBoundUnderHostileUploads) {
       "parsing; upload bound %.1f MiB",
       baseline / 1048576.0, (uploads_peak - baseline) / 1048576.0,
       (parse_peak - baseline) / 1048576.0, upload_bound / 1048576.0);
-  EXPECT_LE(uploads_peak - baseline, upload_bound) << figures;
-  // Parsing: the test finishes the held uploads one after another, so one
-  // is parsed while the others are still held. Intake documents no memory
-  // multiple of its input (only max_vertices / max_faces), so this is an
-  // allowance, not a guarantee: 16x the upload for the mesh being parsed
-  // (the issue measured 14x before intake refused lying counts early).
-  EXPECT_LE(parse_peak - baseline, upload_bound + 16 * kMaxMesh) << figures;
+  if (kAddressSanitizer) {
+    // ASan's allocator keeps freed memory in quarantine and adds redzones
+    // and shadow memory, so VmHWM measures ASan, not the server's buffers
+    // (seen: 167 MiB growth against a 129 MiB bound). The refusals above
+    // are still checked; the bound is checked by the plain build.
+    std::fprintf(stderr, "AddressSanitizer: memory bounds not checked; %s\n",
+                 figures.c_str());
+  } else {
+    EXPECT_LE(uploads_peak - baseline, upload_bound) << figures;
+    // Parsing: the test finishes the held uploads one after another, so
+    // one is parsed while the others are still held. Intake documents no
+    // memory multiple of its input (only max_vertices / max_faces), so this
+    // is an allowance, not a guarantee: 16x the upload for the mesh being
+    // parsed (the issue measured 14x before intake refused lying counts
+    // early).
+    EXPECT_LE(parse_peak - baseline, upload_bound + 16 * kMaxMesh) << figures;
+  }
   held.clear();
   stub.reset();
   channel.reset();

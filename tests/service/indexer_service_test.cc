@@ -12,6 +12,7 @@
 
 #include "gtest/gtest.h"
 #include "indexer/service/batch_writer.h"
+#include "tests/sanitizers/sanitizer_build.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
 #include "tests/service/ops_testing.h"
@@ -35,17 +36,7 @@ tpr::v1::SearchRequest BySignature(const tpr::index::Signature& s, int k) {
   return r;
 }
 
-#if defined(__SANITIZE_THREAD__)
-constexpr bool kThreadSanitizer = true;
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-constexpr bool kThreadSanitizer = true;
-#else
-constexpr bool kThreadSanitizer = false;
-#endif
-#else
-constexpr bool kThreadSanitizer = false;
-#endif
+using ::tpr::testing::kThreadSanitizer;
 
 class IndexerServiceTest : public ::testing::Test {
  protected:
