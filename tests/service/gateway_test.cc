@@ -6,8 +6,17 @@
 // the corpus, after deletes), and both against the brute-force oracle;
 // List pages, Stats sums, Get/Upsert/Delete errors; a stopped shard fails
 // the call with UNAVAILABLE naming it; search statistics are the shards'
-// sums; reads go to any serving replica and writes to the primary.
+// sums; reads go to any serving replica and writes to the primary; once k
+// neighbours are sent the other shards' streams are cancelled (seen by a
+// shard whose stream never ends).
 #include <gtest/gtest.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <mutex>
+#include <optional>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "indexer/gateway/gateway_service.h"
@@ -18,6 +27,7 @@ namespace tpr::gateway {
 namespace {
 
 using ::tpr::indexer::testing::BruteForce;
+using ::tpr::indexer::testing::Hit;
 using ::tpr::indexer::testing::InProcessIndexer;
 using ::tpr::indexer::testing::MakeModels;
 using ::tpr::indexer::testing::RunSearch;
@@ -586,6 +596,122 @@ TEST_F(GatewayTest, AStoppedShardFailsTheCallNamingIt) {
   tpr::v1::StatsResponse stats;
   EXPECT_EQ(gateway_->Stats(&stats_context, {}, &stats).error_code(),
             grpc::StatusCode::UNAVAILABLE);
+}
+
+// A shard whose search never runs out of neighbours: it streams neighbours
+// farther than any real one (distance 1e6 + i) until its call ends, then
+// records how many it sent and whether its call was cancelled. Once the
+// gateway stops reading, Write blocks (HTTP/2 flow control), so only a
+// cancellation, or the caller's deadline, ends the call.
+class EndlessShard final : public tpr::v1::Indexer::Service {
+ public:
+  // At most this many neighbours (about 300 MB on the wire), so that the
+  // handler ends even if nothing stops it.
+  static constexpr int64_t kMaxNeighbors = 10'000'000;
+  struct End {
+    int64_t sent = 0;
+    bool cancelled = false;
+  };
+
+  grpc::Status Search(
+      grpc::ServerContext* context, const tpr::v1::SearchRequest*,
+      grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override {
+    tpr::v1::SearchResponse response;
+    int64_t sent = 0;
+    for (; sent < kMaxNeighbors; ++sent) {
+      tpr::v1::Neighbor* n = response.mutable_neighbor();
+      n->set_id(absl::StrCat("far", sent));
+      n->set_rank(static_cast<int>(sent + 1));
+      n->set_distance(1e6 + static_cast<double>(sent));
+      if (!writer->Write(response)) break;
+    }
+    std::lock_guard<std::mutex> lock(mu_);
+    ends_.push_back({sent, context->IsCancelled()});
+    ended_.notify_all();
+    return grpc::Status::OK;
+  }
+
+  // Waits up to `timeout` for a search to have ended; returns its end, or
+  // nullopt.
+  std::optional<End> WaitForEnd(std::chrono::seconds timeout) {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (!ended_.wait_for(lock, timeout, [&] { return !ends_.empty(); }))
+      return std::nullopt;
+    return ends_.front();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable ended_;
+  std::vector<End> ends_;
+};
+
+// Issue 10: "shard streams are cancelled once k neighbours have been sent",
+// observed on the shard. Shard 0 (a real indexer) holds every near model;
+// shard 1 would stream neighbours for ever. The gateway sends shard 0's k
+// nearest (the oracle: brute force over shard 0's models) and must then
+// cancel shard 1's stream: the call ends OK long before its deadline, and
+// shard 1 sees its call cancelled with neighbours still to send. Without the
+// cancellation the gateway would wait for shard 1's end, which only the
+// deadline brings (the call would fail with DEADLINE_EXCEEDED).
+TEST(GatewaySearchTest, CancelsTheShardStreamsOnceKNeighboursAreSent) {
+  TempDir dir;
+  InProcessIndexer near(dir.path() + "/near");
+  ASSERT_TRUE(near.Start().ok());
+  const std::vector<TestModel> models = MakeModels(40, 4, 23);
+  tpr::v1::BatchUpsertResponse written;
+  ASSERT_TRUE(Ingest(near.stub(), models, &written).ok());
+  ASSERT_EQ(written.written(), static_cast<int64_t>(models.size()));
+
+  EndlessShard endless;
+  tpr::common::ServerOptions shard_options;
+  shard_options.listen_address = "127.0.0.1:0";
+  shard_options.shutdown_grace_ms = 2000;
+  absl::StatusOr<tpr::common::StartedServer> shard =
+      tpr::common::StartServer(shard_options, {&endless});
+  ASSERT_TRUE(shard.ok()) << shard.status();
+
+  GatewayOptions options;
+  options.shards.shards.push_back({near.address(), {}});
+  options.shards.shards.push_back(
+      {absl::StrCat("127.0.0.1:", shard->port), {}});
+  options.health_interval_ms = 0;
+  GatewayService gateway(options);
+  tpr::common::ServerOptions gateway_options;
+  gateway_options.listen_address = "127.0.0.1:0";
+  gateway_options.shutdown_grace_ms = 2000;
+  absl::StatusOr<tpr::common::StartedServer> front =
+      tpr::common::StartServer(gateway_options, {&gateway});
+  ASSERT_TRUE(front.ok()) << front.status();
+  auto stub = tpr::v1::Indexer::NewStub(
+      grpc::CreateChannel(absl::StrCat("127.0.0.1:", front->port),
+                          grpc::InsecureChannelCredentials()));
+
+  constexpr int kK = 10;
+  tpr::v1::SearchRequest request;
+  *request.mutable_signature() = ToWire(models[3].signature);
+  request.set_k(kK);
+  const SearchResult got = RunSearch(stub.get(), request);  // 60 s deadline
+  ASSERT_TRUE(got.status.ok()) << got.status.error_message();
+  const std::vector<Hit> want = BruteForce(models[3].signature, models, kK);
+  ASSERT_EQ(got.neighbors.size(), want.size());
+  for (size_t i = 0; i < want.size(); ++i) {
+    EXPECT_EQ(got.neighbors[i].id(), want[i].id) << "rank " << i + 1;
+    EXPECT_DOUBLE_EQ(got.neighbors[i].distance(), want[i].distance)
+        << "rank " << i + 1;
+  }
+
+  const std::optional<EndlessShard::End> end =
+      endless.WaitForEnd(std::chrono::seconds(30));
+  ASSERT_TRUE(end.has_value()) << "shard 1 still streams after the call ended";
+  EXPECT_TRUE(end->cancelled) << "shard 1's call ended without a cancellation";
+  EXPECT_LT(end->sent, EndlessShard::kMaxNeighbors)
+      << "shard 1 ran out instead of being stopped";
+  EXPECT_GE(end->sent, 1);  // its first neighbour was in the merge
+  std::printf("shard 1 was cancelled after sending %lld neighbours\n",
+              static_cast<long long>(end->sent));
+  tpr::common::ShutdownGracefully(*front->server, gateway_options);
+  tpr::common::ShutdownGracefully(*shard->server, shard_options);
 }
 
 }  // namespace
