@@ -5,7 +5,10 @@
 # haproxy and the gateway; `tpr stats` counting them over the shards; a
 # query by id; `status` listing every recorded process as running; `down`
 # stopping every recorded PID (each exits within its drain) and --purge
-# removing the state directory. Exit 77 (skipped) without haproxy.
+# removing the state directory. First, a failed start: with a stand-in
+# tpr-gateway that runs but never reports its port, `up` fails naming it and
+# leaves none of the processes it started running. Exit 77 (skipped)
+# without haproxy.
 #
 #   tests/integration/cluster_script_test.sh BUILD_DIR
 set -euo pipefail
@@ -18,9 +21,51 @@ WORK="$(mktemp -d "${TMPDIR:-/tmp}/tpr-cluster-script.XXXXXX")"
 export TPR_BUILD_DIR="$BUILD" TPR_CLUSTER_DIR="$WORK/state"
 CLUSTER="$ROOT/scripts/cluster"
 TPR="$BUILD/client/tpr"
-cleanup() { "$CLUSTER" down --purge >/dev/null 2>&1 || true; rm -rf "$WORK"; }
+cleanup() {
+  "$CLUSTER" down --purge >/dev/null 2>&1 || true
+  TPR_CLUSTER_DIR="$WORK/failing" "$CLUSTER" down >/dev/null 2>&1 || true
+  if [ -s "$WORK/stand-in.pid" ]; then kill "$(cat "$WORK/stand-in.pid")" 2>/dev/null || true; fi
+  rm -rf "$WORK"
+}
 trap cleanup EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
+# running PID: the process exists and is not a zombie its parent has not
+# reaped yet.
+running() { [ -d "/proc/$1" ] && ! grep -q '^State:.*Z' "/proc/$1/status" 2>/dev/null; }
+
+# A service that starts but fails its start check: a stand-in tpr-gateway
+# that runs but never reports its port. `up` must fail and stop every
+# process it started, the stand-in included (scripts/cluster records each
+# PID as soon as the process exists).
+FAKE="$WORK/stand-in-build"
+mkdir -p "$FAKE"
+ln -s "$BUILD/extractor/tpr-extractor" "$FAKE/tpr-extractor"
+ln -s "$BUILD/indexer/tpr-indexer" "$FAKE/tpr-indexer"
+cat >"$FAKE/tpr-gateway" <<EOF
+#!/usr/bin/env bash
+# Stand-in: notes its PID and those up recorded before it, then waits
+# without reporting a port.
+echo \$\$ >"$WORK/stand-in.pid"
+grep -v '^gateway ' "$WORK/failing/pids" >"$WORK/started-before" || true
+exec sleep 600
+EOF
+chmod +x "$FAKE/tpr-gateway"
+if TPR_BUILD_DIR="$FAKE" TPR_CLUSTER_DIR="$WORK/failing" TPR_CLUSTER_START_SECONDS=3 \
+    "$CLUSTER" up --shards 1 --extractors 1 >"$WORK/failing.log" 2>&1; then
+  fail "up succeeded with a gateway that never reports its port"
+fi
+cat "$WORK/failing.log"
+grep -q 'gateway did not report its port' "$WORK/failing.log" ||
+  fail "up did not say which service failed its start check"
+[ -s "$WORK/stand-in.pid" ] || fail "the stand-in gateway never ran"
+mapfile -t started < <(awk '{ print $2 }' "$WORK/started-before"; cat "$WORK/stand-in.pid")
+# haproxy, 1 extractor, 1 shard, the stand-in gateway
+[ "${#started[@]}" = 4 ] || fail "expected 4 started processes, got: ${started[*]}"
+for pid in "${started[@]}"; do
+  if running "$pid"; then fail "process $pid still runs after up failed"; fi
+done
+[ ! -e "$WORK/failing/pids" ] || fail "up failed but left its pids file"
+echo "cluster_script: a failed start check stopped all ${#started[@]} processes"
 
 up="$("$CLUSTER" up --shards 2 --replicas 1 --extractors 2)" || fail "up failed"
 echo "$up"
@@ -49,9 +94,7 @@ hits="$("$TPR" --json query --id "$first" -k 3)" || fail "tpr query failed"
 "$CLUSTER" down --purge || fail "down failed"
 # Gone, or a zombie its new parent has not reaped yet.
 for pid in "${pids[@]}"; do
-  if [ -d "/proc/$pid" ] && ! grep -q '^State:.*Z' "/proc/$pid/status" 2>/dev/null; then
-    fail "process $pid still runs after down"
-  fi
+  if running "$pid"; then fail "process $pid still runs after down"; fi
 done
 [ ! -e "$TPR_CLUSTER_DIR" ] || fail "--purge left $TPR_CLUSTER_DIR"
 echo "cluster_script: passed"
