@@ -105,31 +105,29 @@ double CentroidTable::LowerBound(const double* query_centroid, int query_bands,
   const unsigned char* row = rows_.data() + static_cast<size_t>(i) * row_bytes_;
   const float e = LoadFloat(row);
   if (std::isnan(e)) return 0.0;  // absent slot
-  // N(q - c~) as CentroidBound (emd.cc) computes N: a row is zero-padded
-  // to bands_ per block, and a zero band contributes exactly what a
-  // missing one does.
-  const int common = std::min(query_bands, bands_);
-  double result = std::abs(query_centroid[0] -
-                           static_cast<double>(LoadFloat(row + sizeof(float))));
+  // N(q - c~) by the arithmetic of CentroidBound (emd.h): a row is
+  // zero-padded to bands_ per block, and a zero band contributes exactly
+  // what a missing one does. Each stored value reads as scale x int16, a
+  // 24-bit by 16-bit product, exact in double.
+  const double g = static_cast<double>(LoadFloat(row + sizeof(float)));
+  double scale[3];
   for (int block = 0; block < 3; ++block) {
-    const double scale =
+    scale[block] =
         static_cast<double>(LoadFloat(row + (2 + block) * sizeof(float)));
-    const unsigned char* q = row + kHeaderBytes +
-                             static_cast<size_t>(block) *
-                                 static_cast<size_t>(bands_) * sizeof(int16_t);
-    const double* x = query_centroid + 1 + block * query_bands;
-    double s = 0.0;
-    for (int d = 0; d < common; ++d) {
-      const double diff = x[d] - scale * LoadInt16(q + d * sizeof(int16_t));
-      s += diff * diff;
-    }
-    for (int d = common; d < query_bands; ++d) s += x[d] * x[d];
-    for (int d = common; d < bands_; ++d) {
-      const double y = scale * LoadInt16(q + d * sizeof(int16_t));
-      s += y * y;
-    }
-    result += std::sqrt(s);
   }
+  const unsigned char* values = row + kHeaderBytes;
+  const size_t bands = static_cast<size_t>(bands_);
+  const double result = internal::CentroidNorm(
+      [query_centroid, query_bands](int block, int d) {
+        return query_centroid[block < 0 ? 0 : 1 + block * query_bands + d];
+      },
+      query_bands,
+      [g, &scale, values, bands](int block, int d) {
+        if (block < 0) return g;
+        const size_t at = static_cast<size_t>(block) * bands + d;
+        return scale[block] * LoadInt16(values + at * sizeof(int16_t));
+      },
+      bands_);
   const double bound = result - static_cast<double>(e);
   return bound > 0.0 ? bound : 0.0;
 }

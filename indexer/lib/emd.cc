@@ -290,6 +290,7 @@ struct EmdSolver::Impl {
   std::vector<int> stem_end;  // pivot: end of each stem node's old subtree
   std::vector<int> path1;
   std::vector<int> path2;
+  std::vector<unsigned char> closed;  // ConstrainedBound: entries used
 
   EmdStats stats;
   double max_cost = 0.0;  // upper bound of the cost entries
@@ -352,6 +353,7 @@ struct EmdSolver::Impl {
       queue.resize(nodes);
       path1.resize(nodes);
       path2.resize(nodes);
+      closed.resize(nodes);
     }
   }
 
@@ -727,13 +729,18 @@ EmdSolver& EmdSolver::operator=(EmdSolver&& other) noexcept {
   return *this;
 }
 
-double EmdSolver::Distance(const PreparedSignature& a,
-                           const PreparedSignature& b) {
+EmdSolver::Impl& EmdSolver::LoadPair(const PreparedSignature& a,
+                                     const PreparedSignature& b) {
   assert(a.size() >= 1 && a.size() <= kMaxFeatures);
   assert(b.size() >= 1 && b.size() <= kMaxFeatures);
   if (impl_ == nullptr) impl_ = new Impl;
   impl_->Load(a, b);
-  return impl_->Solve();
+  return *impl_;
+}
+
+double EmdSolver::Distance(const PreparedSignature& a,
+                           const PreparedSignature& b) {
+  return LoadPair(a, b).Solve();
 }
 
 // Relaxed transport bound (Kusner et al. 2015). Any feasible plan f has row
@@ -747,11 +754,7 @@ double EmdSolver::Distance(const PreparedSignature& a,
 // plans of the same problem.
 double EmdSolver::RelaxedBound(const PreparedSignature& a,
                                const PreparedSignature& b) {
-  assert(a.size() >= 1 && a.size() <= kMaxFeatures);
-  assert(b.size() >= 1 && b.size() <= kMaxFeatures);
-  if (impl_ == nullptr) impl_ = new Impl;
-  Impl& s = *impl_;
-  s.Load(a, b);
+  Impl& s = LoadPair(a, b);
   constexpr double kInfCost = std::numeric_limits<double>::infinity();
   // Column minima accumulate row by row (a row-major matrix: contiguous).
   double* col_min = s.rem_b.data();  // scratch of m entries, free here
@@ -768,6 +771,84 @@ double EmdSolver::RelaxedBound(const PreparedSignature& a,
   }
   double cols = 0.0;
   for (int j = 0; j < s.m; ++j) cols += s.demand[j] * col_min[j];
+  return std::max(rows, cols);
+}
+
+// Capacity-constrained relaxed transport bound (the "ICT" bound of Atasu
+// and Mittelholzer 2019, "Linear-complexity data-parallel Earth Mover's
+// Distance approximations", ICML). Any feasible plan f has, besides f_ij >=
+// 0 and row sums w_i, f_ij <= sum_i' f_i'j = w'_j. So row i of f is a
+// feasible point of
+//   R_i = min { sum_j g_j Dist(a_i, b_j) : sum_j g_j = w_i, 0 <= g_j <= w'_j }
+// and sum_ij f_ij Dist(a_i, b_j) >= sum_i R_i; likewise by columns, with
+// capacities w_i. Both hold for the optimal plan, whose cost is the EMD,
+// hence so does their maximum. R_i is a fractional knapsack: filling the
+// cheapest columns first, each up to its capacity, is optimal (moving mass
+// from a dearer column to a cheaper one with room never costs more). Each
+// unit of w_i costs at least the row's minimum, so R_i >= w_i min_j
+// Dist(a_i, b_j): the bound is never below the relaxed transport bound,
+// and it is its equal where every feature's nearest partner can take all
+// of its mass. Should the capacities run out first (the totals are 1 only
+// to about 1e-16), the rest is left unshipped, which only lowers the sum.
+namespace {
+
+// CheapestFirst returns the sum over `lines` lines of the cost matrix
+// (entry k of line l at cost[l * line_step + k * entry_step], k < entries)
+// of the cheapest way to ship mass[l] into the entries with capacities
+// cap[k], cheapest entry first (R_i above). closed: scratch of `entries`.
+double CheapestFirst(const double* cost, size_t line_step, size_t entry_step,
+                     int lines, int entries, const double* mass,
+                     const double* cap, unsigned char* closed) {
+  double total = 0.0;
+  for (int l = 0; l < lines; ++l) {
+    const double* line = cost + static_cast<size_t>(l) * line_step;
+    int best = 0;
+    double best_cost = line[0];
+    for (int k = 1; k < entries; ++k) {
+      const double c = line[static_cast<size_t>(k) * entry_step];
+      best = c < best_cost ? k : best;
+      best_cost = c < best_cost ? c : best_cost;
+    }
+    double left = mass[l];
+    if (left <= cap[best]) {  // the usual case: the nearest entry holds it
+      total += left * best_cost;
+      continue;
+    }
+    std::fill(closed, closed + entries, 0);
+    double sum = 0.0;
+    while (true) {
+      closed[best] = 1;
+      const double take = std::min(left, cap[best]);
+      sum += take * best_cost;
+      left -= take;
+      if (!(left > 0.0)) break;
+      best = -1;
+      best_cost = kInf;
+      for (int k = 0; k < entries; ++k) {
+        const double c = line[static_cast<size_t>(k) * entry_step];
+        if (closed[k] == 0 && c < best_cost) {
+          best = k;
+          best_cost = c;
+        }
+      }
+      if (best < 0) break;  // every capacity used: the rest is rounding
+    }
+    total += sum;
+  }
+  return total;
+}
+
+}  // namespace
+
+double EmdSolver::ConstrainedBound(const PreparedSignature& a,
+                                   const PreparedSignature& b) {
+  Impl& s = LoadPair(a, b);
+  const double rows =
+      CheapestFirst(s.cost.data(), static_cast<size_t>(s.cs), 1, s.n, s.m,
+                    s.supply.data(), s.demand.data(), s.closed.data());
+  const double cols =
+      CheapestFirst(s.cost.data(), 1, static_cast<size_t>(s.cs), s.m, s.n,
+                    s.demand.data(), s.supply.data(), s.closed.data());
   return std::max(rows, cols);
 }
 
@@ -803,6 +884,11 @@ double RelaxedTransportBound(const PreparedSignature& a,
   return ThreadSolver().RelaxedBound(a, b);
 }
 
+double ConstrainedTransportBound(const PreparedSignature& a,
+                                 const PreparedSignature& b) {
+  return ThreadSolver().ConstrainedBound(a, b);
+}
+
 // Centroid bound (Rubner et al. [22], section 4.3). With phi and the norm N
 // of ground_distance.h, Dist(x, y) = N(phi(x) - phi(y)). Let f be any
 // feasible plan: f_ij >= 0, sum_j f_ij = w_i, sum_i f_ij = w'_j, and
@@ -817,28 +903,6 @@ double RelaxedTransportBound(const PreparedSignature& a,
 // unequal totals the first equality fails.
 namespace {
 
-// N(x - y) for centroids given as row accessors x(r), y(r) (double values):
-// the one arithmetic behind every form of the centroid bound, so that they
-// agree bit for bit.
-template <typename X, typename Y>
-double CentroidNorm(const X& x, int ba, const Y& y, int bb) {
-  const int common = std::min(ba, bb);
-  double result = std::abs(x(0) - y(0));
-  for (int block = 0; block < 3; ++block) {
-    const int xr = 1 + block * ba;
-    const int yr = 1 + block * bb;
-    double s = 0.0;
-    for (int d = 0; d < common; ++d) {
-      const double diff = x(xr + d) - y(yr + d);
-      s += diff * diff;
-    }
-    for (int d = common; d < ba; ++d) s += x(xr + d) * x(xr + d);
-    for (int d = common; d < bb; ++d) s += y(yr + d) * y(yr + d);
-    result += std::sqrt(s);
-  }
-  return result;
-}
-
 // Row r of the centroid of p: sum_i w_i phi32(U_i)_r in double. The
 // products of a double weight and a float32 coordinate are summed in
 // feature order.
@@ -851,16 +915,35 @@ double CentroidRow(const PreparedSignature& p, int r) {
   return c;
 }
 
+// Accessors of internal::CentroidNorm (emd.h) over a raw centroid and
+// over one computed on the fly.
+auto RawCentroid(const double* c, int bands) {
+  return [c, bands](int block, int d) {
+    return c[block < 0 ? 0 : 1 + block * bands + d];
+  };
+}
+auto LiveCentroid(const PreparedSignature& p) {
+  return [&p](int block, int d) {
+    return CentroidRow(p, block < 0 ? 0 : 1 + block * p.bands() + d);
+  };
+}
+
 }  // namespace
 
 double CentroidBound(const double* ca, int ba, const double* cb, int bb) {
-  return CentroidNorm([ca](int r) { return ca[r]; }, ba,
-                      [cb](int r) { return cb[r]; }, bb);
+  return internal::CentroidNorm(RawCentroid(ca, ba), ba, RawCentroid(cb, bb),
+                                bb);
 }
 
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b) {
-  return CentroidNorm([&a](int r) { return CentroidRow(a, r); }, a.bands(),
-                      [&b](int r) { return CentroidRow(b, r); }, b.bands());
+  return internal::CentroidNorm(LiveCentroid(a), a.bands(), LiveCentroid(b),
+                                b.bands());
+}
+
+double EmdLowerBound(const double* a_centroid, int a_bands,
+                     const PreparedSignature& b) {
+  return internal::CentroidNorm(RawCentroid(a_centroid, a_bands), a_bands,
+                                LiveCentroid(b), b.bands());
 }
 
 std::vector<double> Centroid(const PreparedSignature& p) {

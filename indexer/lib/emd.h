@@ -13,6 +13,7 @@
 #ifndef TPR_INDEXER_LIB_EMD_H_
 #define TPR_INDEXER_LIB_EMD_H_
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -58,6 +59,14 @@ class EmdSolver {
   // warm-up.
   double RelaxedBound(const PreparedSignature& a, const PreparedSignature& b);
 
+  // ConstrainedBound returns ConstrainedTransportBound (below) of the pair
+  // and keeps its ground-distance matrix as RelaxedBound does. Same
+  // preconditions. Cost: the n x m matrix plus O(n m) (O(n m^2) at worst,
+  // when no feature's nearest partner can take its mass); no allocation
+  // after warm-up.
+  double ConstrainedBound(const PreparedSignature& a,
+                          const PreparedSignature& b);
+
   // Stats returns the work done by the last Distance call.
   const EmdStats& Stats() const;
 
@@ -72,6 +81,9 @@ class EmdSolver {
 
  private:
   struct Impl;
+  // Checks the preconditions (debug builds), then loads the pair's masses
+  // and, unless it holds it already, its ground-distance matrix.
+  Impl& LoadPair(const PreparedSignature& a, const PreparedSignature& b);
   Impl* impl_;
 };
 
@@ -86,6 +98,12 @@ double Emd(const PreparedSignature& a, const PreparedSignature& b);
 // and reads its items' from a CentroidTable instead).
 // Cost O((a.size() + b.size()) x bands), no allocation; thread-safe.
 double EmdLowerBound(const PreparedSignature& a, const PreparedSignature& b);
+
+// EmdLowerBound with a's centroid given (Centroid(a), a_bands bands), as a
+// search that computed its query's once calls it: equals EmdLowerBound(a,
+// b) bit for bit. Cost O(b.size() x bands), no allocation; thread-safe.
+double EmdLowerBound(const double* a_centroid, int a_bands,
+                     const PreparedSignature& b);
 
 // Centroid returns sum_i weight(i) phi32(U_i) of `p`, computed in double
 // from coords() in the order EmdLowerBound uses (so CentroidBound on two
@@ -106,12 +124,56 @@ std::vector<double> Centroid(const PreparedSignature& p);
 double RelaxedTransportBound(const PreparedSignature& a,
                              const PreparedSignature& b);
 
+// ConstrainedTransportBound returns the relaxed transport bound with
+// capacities (Atasu and Mittelholzer 2019, "ICT"): each feature of a ships
+// its mass w_i to b's features cheapest first, but at most w'_j to feature
+// j (the column sums are dropped, the capacities f_ij <= w'_j they imply
+// are kept), and the same from b's side; the maximum of the two costs.
+// RelaxedTransportBound <= it <= Emd(a, b) (proof in emd.cc); the two
+// are equal where every feature's nearest partner can take all its mass,
+// and it is tighter where masses differ (a feature split in two, a large
+// feature against small ones). This is the bound a search checks before
+// the EMD (signature_index.h). Uses the thread_local solver of Emd(), so a
+// following Emd(a, b) on the same thread reuses the ground-distance
+// matrix. Cost: that of RelaxedTransportBound plus a few O(m) scans per
+// feature whose nearest partner is too small; thread-safe.
+double ConstrainedTransportBound(const PreparedSignature& a,
+                                 const PreparedSignature& b);
+
 // CentroidBound returns N(ca - cb) for raw centroids laid out as Centroid
 // returns them ([g, K x ba, A x ba, H x ba] and the same for b with bb
 // bands; missing bands count as zero): EmdLowerBound for callers that keep
 // centroids apart from their signatures. O(bands), no allocation;
 // thread-safe.
 double CentroidBound(const double* ca, int ba, const double* cb, int bb);
+
+namespace internal {
+
+// CentroidNorm returns N(x - y) for two centroids given by accessors:
+// x(-1, 0) is row 0 (W1 G'), x(block, d) band d of block 0, 1, 2 (K, A,
+// H) for d < ba, and likewise y with bb bands; bands one side lacks count
+// as zero. The one arithmetic behind every form of the centroid bound
+// (EmdLowerBound, CentroidBound, CentroidTable), so that they agree bit
+// for bit. Per-block accessors keep the block out of the inner loops
+// (a per-row one would divide per value).
+template <typename X, typename Y>
+double CentroidNorm(const X& x, int ba, const Y& y, int bb) {
+  const int common = ba < bb ? ba : bb;
+  double result = std::abs(x(-1, 0) - y(-1, 0));
+  for (int block = 0; block < 3; ++block) {
+    double s = 0.0;
+    for (int d = 0; d < common; ++d) {
+      const double diff = x(block, d) - y(block, d);
+      s += diff * diff;
+    }
+    for (int d = common; d < ba; ++d) s += x(block, d) * x(block, d);
+    for (int d = common; d < bb; ++d) s += y(block, d) * y(block, d);
+    result += std::sqrt(s);
+  }
+  return result;
+}
+
+}  // namespace internal
 
 }  // namespace tpr::index
 

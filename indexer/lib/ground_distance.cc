@@ -266,42 +266,43 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // of an EMD, so it gets hand-written AVX2 and AVX-512 versions chosen once
 // at run time. Lanes run over 8 consecutive features of b (the
 // dimension-major layout of PreparedSignature); a's coordinates are
-// broadcast. Coordinates are stored in float32 without padding: each block
-// of 8 features of b is widened to double once (WidenBlock, features at or
-// past b.size() as 0), so the arithmetic is the scalar kernel's. Each lane
-// accumulates its bands in the same order, so the matrix is symmetric under
-// swapping a and b exactly: (x - y)^2 and (y - x)^2 are the same double and
+// broadcast. Coordinates are stored in float32 without padding: b's are
+// widened to double once per matrix (Widen, features at or past b.size()
+// as 0), so the arithmetic is the scalar kernel's. Each lane accumulates
+// its bands in the same order, so the matrix is symmetric under swapping a
+// and b exactly: (x - y)^2 and (y - x)^2 are the same double and
 // fma(d, d, s) depends on d only through d * d.
 
-// WidenBlock returns the columns j0 .. j0 + 7 of b's float32 coordinates
-// widened to double, row-major (row r at [8 r]), columns at or past
-// b.size() as 0: one conversion per value and block, instead of one per
-// row of a. The buffer is per thread and reused (no allocation after
-// warm-up).
-const double* WidenBlock(const PreparedSignature& b, int j0) {
-  thread_local std::vector<double> block;
-  const size_t rows = 1 + 3 * static_cast<size_t>(b.bands());
-  if (block.size() < rows * 8) block.resize(rows * 8);
-  const size_t bs = static_cast<size_t>(b.size());
-  const int valid = std::min(8, b.size() - j0);
-  const float* bc = b.coords() + j0;
-  if (valid ==
-      8) {  // a whole block: a fixed-length loop the compiler vectorizes
-    for (size_t r = 0; r < rows; ++r) {
-      double* out = block.data() + r * 8;
-      const float* in = bc + r * bs;
-      for (int c = 0; c < 8; ++c) out[c] = static_cast<double>(in[c]);
+// Widen returns b's float32 coordinates widened to double in a per-thread
+// buffer, block by block: columns 8k .. 8k + 7 of row r at [(k rows + r) 8]
+// (rows = b.rows()), columns at or past b.size() as 0. It reads b's
+// coordinates once, row after row in memory order, so that a signature
+// not in cache streams in behind the hardware prefetcher. Widening each
+// block of 8 features in its own strided pass, with a variable-length
+// zero fill per row, cost as much CPU as the distance arithmetic in a
+// 10-NN search (perf; docs/search-cost.md). No allocation after warm-up.
+const double* Widen(const PreparedSignature& b) {
+  thread_local std::vector<double> buffer;
+  const size_t rows = static_cast<size_t>(b.rows());
+  const size_t n = static_cast<size_t>(b.size());
+  const size_t blocks = static_cast<size_t>(b.stride()) / 8;
+  if (buffer.size() < rows * blocks * 8) buffer.resize(rows * blocks * 8);
+  const float* in = b.coords();
+  for (size_t r = 0; r < rows; ++r, in += n) {
+    for (size_t k = 0; k < blocks; ++k) {
+      double* out = buffer.data() + (k * rows + r) * 8;
+      const float* x = in + 8 * k;
+      if (8 * k + 8 <= n) {  // fixed length: vectorized
+        for (int c = 0; c < 8; ++c) out[c] = static_cast<double>(x[c]);
+      } else {
+        for (int c = 0; c < 8; ++c) out[c] = 0.0;
+        for (size_t c = 0; c < n - 8 * k; ++c) {
+          out[c] = static_cast<double>(x[c]);
+        }
+      }
     }
-    return block.data();
   }
-  for (size_t r = 0; r < rows; ++r) {
-    double* out = block.data() + r * 8;
-    int c = 0;
-    for (; c < valid; ++c)
-      out[c] = static_cast<double>(bc[r * bs + static_cast<size_t>(c)]);
-    for (; c < 8; ++c) out[c] = 0.0;
-  }
-  return block.data();
+  return buffer.data();
 }
 
 __attribute__((target("avx2,fma"))) double KernelAvx2(
@@ -312,8 +313,10 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
   const float* ac = a.coords();
   const __m256d sign = _mm256_set1_pd(-0.0);
   __m256d mx = _mm256_setzero_pd();
+  const double* wide = Widen(b);
+  const size_t rows = static_cast<size_t>(b.rows());
   for (int j0 = 0; j0 < b.stride(); j0 += 8) {
-    const double* blk = WidenBlock(b, j0);
+    const double* blk = wide + static_cast<size_t>(j0) * rows;
     for (int i = 0; i < a.size(); ++i) {
       double* row = out + static_cast<size_t>(i) * out_stride;
       __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
@@ -369,44 +372,72 @@ __attribute__((target("avx2,fma"))) double KernelAvx2(
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
-__attribute__((target("avx512f"))) double KernelAvx512(
-    const PreparedSignature& a, const PreparedSignature& b, double* out,
-    int out_stride) {
+// Avx512Blocks computes the columns of blocks k0 .. k0 + B - 1 of the
+// matrix from b's widened coordinates (Widen; `rows` rows per block): each
+// broadcast coordinate of a serves B blocks, and the 3 B accumulators are
+// independent chains. Every lane accumulates its bands in the one-block
+// order, so the values do not depend on B. Returns max(mx, what it wrote).
+template <int B>
+__attribute__((target("avx512f"))) inline __m512d Avx512Blocks(
+    const PreparedSignature& a, const double* wide, size_t rows, int k0,
+    double* out, int out_stride, __m512d mx) {
   const int bands = a.bands();
   const size_t as = static_cast<size_t>(a.size());
   const float* ac = a.coords();
-  __m512d mx = _mm512_setzero_pd();
-  for (int j0 = 0; j0 < b.stride(); j0 += 8) {
-    const double* blk = WidenBlock(b, j0);
-    for (int i = 0; i < a.size(); ++i) {
-      double* row = out + static_cast<size_t>(i) * out_stride;
-      __m512d k = _mm512_setzero_pd();
-      __m512d ar = _mm512_setzero_pd();
-      __m512d h = _mm512_setzero_pd();
-      for (int d = 0; d < bands; ++d) {
-        const size_t rk = static_cast<size_t>(1 + d);
-        const size_t ra = rk + static_cast<size_t>(bands);
-        const size_t rh = ra + static_cast<size_t>(bands);
+  const double* blk[B];
+  for (int b = 0; b < B; ++b) {
+    blk[b] = wide + static_cast<size_t>(k0 + b) * rows * 8;
+  }
+  for (int i = 0; i < a.size(); ++i) {
+    __m512d k[B], ar[B], h[B];
+    for (int b = 0; b < B; ++b) {
+      k[b] = _mm512_setzero_pd();
+      ar[b] = _mm512_setzero_pd();
+      h[b] = _mm512_setzero_pd();
+    }
+    for (int d = 0; d < bands; ++d) {
+      const size_t rk = static_cast<size_t>(1 + d);
+      const size_t ra = rk + static_cast<size_t>(bands);
+      const size_t rh = ra + static_cast<size_t>(bands);
+      const __m512d xk = _mm512_set1_pd(ac[rk * as + i]);
+      const __m512d xa = _mm512_set1_pd(ac[ra * as + i]);
+      const __m512d xh = _mm512_set1_pd(ac[rh * as + i]);
+      for (int b = 0; b < B; ++b) {
         __m512d t;
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rk * as + i]),
-                          _mm512_loadu_pd(blk + rk * 8));
-        k = _mm512_fmadd_pd(t, t, k);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[ra * as + i]),
-                          _mm512_loadu_pd(blk + ra * 8));
-        ar = _mm512_fmadd_pd(t, t, ar);
-        t = _mm512_sub_pd(_mm512_set1_pd(ac[rh * as + i]),
-                          _mm512_loadu_pd(blk + rh * 8));
-        h = _mm512_fmadd_pd(t, t, h);
+        t = _mm512_sub_pd(xk, _mm512_loadu_pd(blk[b] + rk * 8));
+        k[b] = _mm512_fmadd_pd(t, t, k[b]);
+        t = _mm512_sub_pd(xa, _mm512_loadu_pd(blk[b] + ra * 8));
+        ar[b] = _mm512_fmadd_pd(t, t, ar[b]);
+        t = _mm512_sub_pd(xh, _mm512_loadu_pd(blk[b] + rh * 8));
+        h[b] = _mm512_fmadd_pd(t, t, h[b]);
       }
-      __m512d g = _mm512_abs_pd(
-          _mm512_sub_pd(_mm512_set1_pd(ac[i]), _mm512_loadu_pd(blk)));
-      g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k)),
-                                      _mm512_sqrt_pd(ar)),
-                        _mm512_sqrt_pd(h));
-      _mm512_storeu_pd(row + j0, g);
+    }
+    const __m512d xg = _mm512_set1_pd(ac[i]);
+    double* row = out + static_cast<size_t>(i) * out_stride + 8 * k0;
+    for (int b = 0; b < B; ++b) {
+      __m512d g = _mm512_abs_pd(_mm512_sub_pd(xg, _mm512_loadu_pd(blk[b])));
+      g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k[b])),
+                                      _mm512_sqrt_pd(ar[b])),
+                        _mm512_sqrt_pd(h[b]));
+      _mm512_storeu_pd(row + 8 * b, g);
       mx = _mm512_max_pd(mx, g);
     }
   }
+  return mx;
+}
+
+__attribute__((target("avx512f"))) double KernelAvx512(
+    const PreparedSignature& a, const PreparedSignature& b, double* out,
+    int out_stride) {
+  const double* wide = Widen(b);
+  const size_t rows = static_cast<size_t>(b.rows());
+  const int blocks = b.stride() / 8;
+  __m512d mx = _mm512_setzero_pd();
+  int k = 0;
+  for (; k + 2 <= blocks; k += 2) {
+    mx = Avx512Blocks<2>(a, wide, rows, k, out, out_stride, mx);
+  }
+  if (k < blocks) mx = Avx512Blocks<1>(a, wide, rows, k, out, out_stride, mx);
   return _mm512_reduce_max_pd(mx);
 }
 #pragma GCC diagnostic pop

@@ -46,7 +46,7 @@ uint64_t Fingerprint(const PreparedSignature& p) {
   const int32_t shape[3] = {p.size(), p.bands(), p.stride()};
   uint64_t h = Fnv1a(shape, sizeof shape);
   h = Fnv1a(p.weights(), sizeof(double) * static_cast<size_t>(p.size()), h);
-  const size_t rows = 1 + 3 * static_cast<size_t>(p.bands());
+  const size_t rows = static_cast<size_t>(p.rows());
   h = Fnv1a(p.coords(), sizeof(float) * rows * static_cast<size_t>(p.size()),
             h);
   h = Fnv1a(p.spectral(),
@@ -219,15 +219,16 @@ class IndexCursor : public SignatureIndex::Cursor {
     // Tree items read the flat centroid table (one contiguous row, no
     // pointer chase); the small buffer is read directly.
     // The cascade of lower bounds (emd.h), cheapest first: the centroid
-    // bound (O(bands)), then the relaxed transport bound (the ground
-    // matrix, which the EMD that may follow reuses). Each adds the exact
-    // O(n) spectral term of the distance (metric.h; nothing when its
-    // weight is 0), so the spectrum is checked before any EMD.
+    // bound (O(bands)), then the relaxed transport bound with capacities
+    // (the ground matrix, which the EMD that may follow reuses). Each adds
+    // the exact O(n) spectral term of the distance (metric.h; nothing when
+    // its weight is 0), so the spectrum is checked before any EMD.
     const bool spectral = query_.spectral_size() > 0;
     spec.lower_bounds.push_back([this, t, spectral](uint32_t i) {
       if (i >= n_tree_) {
-        return DistanceLowerBound(query_,
-                                  *snapshot_->buffer[i - n_tree_].prepared);
+        const PreparedSignature& p = *snapshot_->buffer[i - n_tree_].prepared;
+        return EmdLowerBound(query_centroid_.data(), query_.bands(), p) +
+               SpectralDistance(query_, p);
       }
       const double centroid =
           t->centroids.LowerBound(query_centroid_.data(), query_.bands(), i);
@@ -238,7 +239,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       spec.lower_bounds.push_back([this](uint32_t i) {
         const PreparedSignature* p = Item(i);
         return p == nullptr ? 0.0
-                            : RelaxedTransportBound(query_, *p) +
+                            : ConstrainedTransportBound(query_, *p) +
                                   SpectralDistance(query_, *p);
       });
     }

@@ -60,8 +60,9 @@ struct IndexOptions {
   // VpTreeOptions. Default: VpTreeOptions{}.
   VpTreeOptions tree;
   // Whether searches refine the centroid bound with the relaxed transport
-  // bound (emd.h) before computing an EMD. Results are identical either
-  // way; off only to measure what it saves (bench_match). Default: true.
+  // bound with capacities (ConstrainedTransportBound, emd.h) before
+  // computing an EMD. Results are identical either way; off only to
+  // measure what it saves (bench_match). Default: true.
   bool relaxed_bound = true;
   // Threads one search may use for its bounds and EMDs (intra-query
   // parallelism, see QuerySpec::parallel_for): the index keeps a task arena

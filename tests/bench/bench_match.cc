@@ -14,6 +14,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <ctime>
 #include <fstream>
@@ -132,6 +133,7 @@ BENCHMARK(BM_EmdLowerBound)->Arg(30);
 namespace knn {
 
 using tpr::index::BruteForceIndex;
+using tpr::index::ConstrainedTransportBound;
 using tpr::index::Distance;
 using tpr::index::Emd;
 using tpr::index::GroundDistanceOptions;
@@ -263,13 +265,23 @@ Db& GetDb(const DbKey& key) {
   return *slot;
 }
 
+// The bound cascade of a query (QuerySpec::lower_bounds) before the EMD.
+enum class Cascade {
+  kCentroid,     // the centroid bound alone
+  kRelaxed,      // then the relaxed transport bound (RWMD)
+  kConstrained,  // then the relaxed bound with capacities (ICT): the index's
+};
+
+// Level-2 bound evaluations since the last reset (the `lbs2` counter:
+// `lbs` - `lbs2` are centroid bounds).
+std::atomic<int64_t> level2_bounds{0};
+
 // Spec is the query as SignatureIndex builds it: the cascade of lower
-// bounds (`bounds` of them: 1 = the centroid bound, 2 = then the relaxed
-// transport bound) before the EMD.
-// Distance is metric.h's (the EMD alone when the spectral weight is 0);
-// each bound adds the exact spectral term when it is on, as SignatureIndex
-// does.
-QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
+// bounds before the EMD. Distance is metric.h's (the EMD alone when the
+// spectral weight is 0); each bound adds the exact spectral term when it
+// is on, as SignatureIndex does.
+QuerySpec Spec(const Db& db, const PreparedSignature& q,
+               Cascade cascade = Cascade::kConstrained) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
   // The query's centroid, computed once per query as the index does.
@@ -285,9 +297,16 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q, int bounds = 2) {
              SpectralDistance(q, db.items[i]);
     });
   }
-  if (bounds >= 2) {
+  if (cascade == Cascade::kRelaxed) {
     spec.lower_bounds.push_back([&db, &q](uint32_t i) {
+      level2_bounds.fetch_add(1, std::memory_order_relaxed);
       return RelaxedTransportBound(q, db.items[i]) +
+             SpectralDistance(q, db.items[i]);
+    });
+  } else if (cascade == Cascade::kConstrained) {
+    spec.lower_bounds.push_back([&db, &q](uint32_t i) {
+      level2_bounds.fetch_add(1, std::memory_order_relaxed);
+      return ConstrainedTransportBound(q, db.items[i]) +
              SpectralDistance(q, db.items[i]);
     });
   }
@@ -320,6 +339,7 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["emd_share"] =
       static_cast<double>(total.emd_computations) * per / n;
   state.counters["lbs"] = static_cast<double>(total.lower_bounds) * per;
+  state.counters["lbs2"] = static_cast<double>(level2_bounds.load()) * per;
   state.counters["nodes"] = static_cast<double>(total.nodes_visited) * per;
   state.counters["build_s"] = db.build_seconds;
   state.counters["build_cpu_s"] = db.build_cpu_seconds;
@@ -331,14 +351,15 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 }
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
-             int bounds = 2, int threads = 1) {
+             Cascade cascade = Cascade::kConstrained, int threads = 1) {
   Db& db = GetDb(key);
   SearchStats total;
   int64_t queries = 0;
+  level2_bounds = 0;
   tbb::task_arena arena(std::max(threads, 1));
   for (auto _ : state) {
     SearchStats stats;
-    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], bounds);
+    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], cascade);
     if (threads > 1) {
       // As SignatureIndex does with IndexOptions::search_threads.
       spec.parallel_batch = 2 * static_cast<size_t>(threads);
@@ -374,12 +395,19 @@ BENCHMARK(BM_KnnVpTree)
     ->Args({100000, 10})
     ->Unit(benchmark::kMillisecond);
 
+// ExtractedKey is the database of the BM_KnnVpTreeExtracted* benchmarks
+// below: <n> = state.range(0) models from extracted prototypes.
+DbKey ExtractedKey(const benchmark::State& state) {
+  DbKey key{state.range(0), kClasses, kJitterPermille};
+  key.extracted = true;
+  return key;
+}
+
 // BM_KnnVpTreeExtracted/<n>/<k>: prototypes extracted from generated shapes
 // (10 synthetic classes x 10 poses = 100 prototypes, each perturbed by 5%
 // jitter), the realistic data the matching issue asks for.
 void BM_KnnVpTreeExtracted(benchmark::State& state) {
-  DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.extracted = true;
+  DbKey key = ExtractedKey(state);
   RunTree(state, key, static_cast<size_t>(state.range(1)));
 }
 // The 1M rows are for runs outside CI (docs/search-cost.md says how): the
@@ -393,14 +421,43 @@ BENCHMARK(BM_KnnVpTreeExtracted)
     ->Args({1000000, 10})
     ->Unit(benchmark::kMillisecond);
 
+// BM_KnnVpTreeExtractedSpectral/<n>/<k>: the same data and queries with the
+// default metric (metric.h: EMD + spectral term, w_s = 1, by_index, n = 20;
+// the extracted prototypes carry their 50-value spectra, which every member
+// jitters by 1%): the issue's million-model figure with the spectral term.
+void BM_KnnVpTreeExtractedSpectral(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  key.spectral_permille = 1000;
+  RunTree(state, key, static_cast<size_t>(state.range(1)));
+}
+BENCHMARK(BM_KnnVpTreeExtractedSpectral)
+    ->Args({10000, 10})
+    ->Args({100000, 1})
+    ->Args({100000, 10})
+    ->Args({1000000, 1})
+    ->Args({1000000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedRelaxed/<n>/<k>: BM_KnnVpTreeExtracted with the
+// relaxed transport bound without capacities (RWMD) at level 2, the
+// cascade before the capacity-constrained bound, for a side-by-side run.
+void BM_KnnVpTreeExtractedRelaxed(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  RunTree(state, key, static_cast<size_t>(state.range(1)), Cascade::kRelaxed);
+}
+BENCHMARK(BM_KnnVpTreeExtractedRelaxed)
+    ->Args({10000, 10})
+    ->Args({100000, 10})
+    ->Args({1000000, 10})
+    ->Unit(benchmark::kMillisecond);
+
 // BM_KnnVpTreeExtractedThreads/<n>/<k>/<threads>: intra-query parallelism
 // (QuerySpec::parallel_for over a oneTBB arena, batches of 2 x threads),
 // wall time.
 void BM_KnnVpTreeExtractedThreads(benchmark::State& state) {
-  DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.extracted = true;
-  RunTree(state, key, static_cast<size_t>(state.range(1)), /*bounds=*/2,
-          static_cast<int>(state.range(2)));
+  DbKey key = ExtractedKey(state);
+  RunTree(state, key, static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained, static_cast<int>(state.range(2)));
 }
 BENCHMARK(BM_KnnVpTreeExtractedThreads)
     ->Args({10000, 10, 1})
@@ -413,9 +470,8 @@ BENCHMARK(BM_KnnVpTreeExtractedThreads)
 // BM_KnnVpTreeExtractedCentroid/<n>/<k>: the same with the centroid bound
 // alone (no relaxed transport bound), to measure what the cascade saves.
 void BM_KnnVpTreeExtractedCentroid(benchmark::State& state) {
-  DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.extracted = true;
-  RunTree(state, key, static_cast<size_t>(state.range(1)), /*bounds=*/1);
+  DbKey key = ExtractedKey(state);
+  RunTree(state, key, static_cast<size_t>(state.range(1)), Cascade::kCentroid);
 }
 BENCHMARK(BM_KnnVpTreeExtractedCentroid)
     ->Args({1000, 10})
@@ -445,7 +501,7 @@ BENCHMARK(BM_KnnVpTreeSpectral)
 // BM_KnnVpTreeCentroid/<n>/<k>: BM_KnnVpTree with the centroid bound alone.
 void BM_KnnVpTreeCentroid(benchmark::State& state) {
   RunTree(state, {state.range(0), kClasses, kJitterPermille},
-          static_cast<size_t>(state.range(1)), /*bounds=*/1);
+          static_cast<size_t>(state.range(1)), Cascade::kCentroid);
 }
 BENCHMARK(BM_KnnVpTreeCentroid)
     ->Args({10000, 10})
@@ -467,8 +523,7 @@ BENCHMARK(BM_KnnVpTreeLeaf)
 // BM_KnnVpTreeExtractedLeaf/<n>/<k>/<leaf_size>: BM_KnnVpTreeExtracted with
 // another bucket size, to choose the default on realistic data.
 void BM_KnnVpTreeExtractedLeaf(benchmark::State& state) {
-  DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.extracted = true;
+  DbKey key = ExtractedKey(state);
   key.leaf_size = static_cast<size_t>(state.range(2));
   RunTree(state, key, static_cast<size_t>(state.range(1)));
 }
@@ -558,8 +613,7 @@ BENCHMARK(BM_KnnIndex)
 // data of BM_KnnVpTreeExtracted; its bytes_per_model counter is the memory
 // figure of the matching issue (index plus tree, 20 bands).
 void BM_KnnIndexExtracted(benchmark::State& state) {
-  DbKey key{state.range(0), kClasses, kJitterPermille};
-  key.extracted = true;
+  DbKey key = ExtractedKey(state);
   RunIndex(state, key);
 }
 BENCHMARK(BM_KnnIndexExtracted)

@@ -115,6 +115,8 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
       EXPECT_LE(EmdLowerBound(prepared[q], prepared[j]), d32[j] + tolerance);
       EXPECT_LE(RelaxedTransportBound(prepared[q], prepared[j]),
                 d32[j] + tolerance);
+      EXPECT_LE(ConstrainedTransportBound(prepared[q], prepared[j]),
+                d32[j] + tolerance);
       ++tally.bounds_checked;
       // The float32 bound plus LEMON's integer rounding (about 1e-12 of
       // the largest cost) and the solver's own tolerance.
