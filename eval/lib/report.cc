@@ -97,7 +97,13 @@ void AppendEscaped(unsigned char c, bool json, std::string* out) {
       break;
   }
   if (c < 0x20 || c == 0x7F) {
-    absl::StrAppendFormat(out, json ? "\\u%04x" : "\\x%02x", c);
+    // Two calls, not one with a chosen format: absl checks the format
+    // at compile time and clang refuses a format that is not a constant.
+    if (json) {
+      absl::StrAppendFormat(out, "\\u%04x", c);
+    } else {
+      absl::StrAppendFormat(out, "\\x%02x", c);
+    }
   } else {
     out->push_back(static_cast<char>(c));
   }
