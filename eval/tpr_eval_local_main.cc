@@ -155,7 +155,7 @@ struct Config {
 
 // Bump whenever the extraction code changes what it produces, so that
 // --cache never serves signatures of older feature code.
-constexpr char kFeatureCodeVersion[] = "features-2026-11-22b";
+constexpr char kFeatureCodeVersion[] = "features-2026-11-30a";
 
 // CacheKey names everything a cached description depends on.
 std::string CacheKey(const Model& model, const Config& config, size_t index) {
@@ -329,6 +329,10 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "phi of the spectral term: raw, by_index or log");
   app->add_option("--spectral-eigenvalues", c.ground.spectral.eigenvalues,
                   "eigenvalues the spectral term compares");
+  app->add_option(
+      "--extract-eigenvalues", c.extract.spectrum_eigenvalues,
+      "Laplace-Beltrami eigenvalues each signature stores (extraction; "
+      "the spectral term compares the first --spectral-eigenvalues)");
   app->add_option("--w1", c.ground.w1, "Eq. 7 weight of G'");
   app->add_option("--w2", c.ground.w2, "Eq. 7 weight of curvature");
   app->add_option("--w3", c.ground.w3, "Eq. 7 weight of area");

@@ -60,14 +60,19 @@ struct Options {
   GeodesicOptions geodesic;
   // Laplace-Beltrami eigenvalues stored in Signature::spectrum (not part
   // of the paper; issue 9's spectral term); 0 skips the stage. In
-  // [0, 1000]. Default 50.
-  int spectrum_eigenvalues = 50;
+  // [0, 1000]. Default 20: what the searched distance compares by default
+  // (index::SpectralOptions::eigenvalues), at a third of the cost of 50
+  // (see SpectrumOptions::eigenvalues); a search comparing more pads a
+  // shorter spectrum with its Weyl asymptote (indexer/lib/spectral.h).
+  int spectrum_eigenvalues = 20;
   // The rest of the spectrum's parameters (simplification bound, solver);
   // its `eigenvalues` is ignored in favour of spectrum_eigenvalues.
   // Defaults there.
   SpectrumOptions spectrum;
   // Threads for independent Dijkstra sweeps; <= 1 runs on the caller's
-  // thread. The result does not depend on it. Default 1.
+  // thread. With more than 1 the spectrum also runs on a thread of its
+  // own beside the TPR stages. The result does not depend on it.
+  // Default 1.
   int threads = 1;
   // Fill ExtractResult::explanation. Default false.
   bool explain = false;
@@ -99,7 +104,8 @@ struct Options {
 // 4); with threads > 1 the independent sweeps (the three analyses, the
 // per-feature geodesics) run in parallel, with identical results. The spectrum
 // adds one simplification and one sparse eigensolve (see
-// LaplaceBeltramiSpectrum), on the caller's thread.
+// LaplaceBeltramiSpectrum), on the caller's thread after the TPR stages, or
+// with threads > 1 on a thread of its own during them.
 absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
                                                const MeshStats& stats,
                                                const Options& options);

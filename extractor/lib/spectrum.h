@@ -23,17 +23,25 @@ namespace tpr::extract {
 // SpectrumOptions configures LaplaceBeltramiSpectrum.
 struct SpectrumOptions {
   // Non-zero eigenvalues to return (the N). Must be >= 1.
-  // Default 50.
-  int eigenvalues = 50;
+  // Default 20: the count the searched distance compares by default
+  // (index::SpectralOptions::eigenvalues, chosen by cross-validation over
+  // every dev set, docs/results.md). The cost grows much faster than
+  // linearly with it (more Lanczos steps, each orthogonalized against more
+  // vectors): BM_SpectrumEigenvalues compares 20 with 50 (figures in
+  // docs/benchmarks.md).
+  int eigenvalues = 20;
   // Meshes with more (referenced) vertices than this are first simplified
   // to this many vertices with OpenMesh's quadric decimater
-  // (SimplifyMesh). 0 never simplifies. Chosen by measurement
-  // (tests/extractor/spectrum_test.cc, DecimationIsStable, and BM_Spectrum):
-  // on the 10k-vertex biped the first 50 scaled eigenvalues computed at
-  // 3000 vertices differ from the full mesh's by at most a few percent,
-  // and the cost stays within the budget (BM_Spectrum against
-  // BM_SpectrumFullMesh; figures in docs/benchmarks.md). Default 3000.
-  int max_vertices = 3000;
+  // (SimplifyMesh). 0 never simplifies. The bound sits above the issue's
+  // 10k vertices because below it simplifying costs more than it saves:
+  // the decimater's collapses cost more than the eigensolve of the whole
+  // mesh (BM_SimplifyMesh against BM_SpectrumFullMesh), and it adds an
+  // error of its own (StableUnderSimplification in
+  // tests/extractor/spectrum_test.cc states it per eigenvalue, at this
+  // bound and at 3000, the former one). OpenMesh's faster McDecimaterT is
+  // not used: it draws from the global rand(), so the same mesh would not
+  // always give the same spectrum. Default 12000.
+  int max_vertices = 12000;
   // Shift sigma of the shift-invert Lanczos iteration, in the scaled units
   // of the result (lambda * A / (4 pi)); must be negative so that
   // L - sigma M is positive definite and the zero eigenvalues are found
@@ -41,8 +49,11 @@ struct SpectrumOptions {
   // unit sphere's first non-zero value is 2; elongated shapes go well
   // below 0.1. Default -0.01.
   double shift = -0.01;
-  // Relative accuracy of each Ritz value (Spectra's tol). Default 1e-10.
-  double tolerance = 1e-10;
+  // Relative accuracy of each Ritz value (Spectra's tol). The eigenvalue
+  // error is of the order of the squared residual, far below the
+  // discretization's (percent), and 1e-8 needs one Lanczos restart less
+  // than 1e-10 on 20 values. Default 1e-8.
+  double tolerance = 1e-8;
   // Restarts of the implicitly restarted Lanczos iteration before giving
   // up. Default 1000.
   int max_restarts = 1000;
@@ -82,9 +93,10 @@ struct Spectrum {
 // free) condition. Unreferenced vertices are ignored. Meshes with more than
 // options.max_vertices vertices are simplified first (see SimplifyMesh).
 // Solver: Spectra's SymGEigsShiftSolver in shift-invert mode around
-// options.shift, with a sparse Cholesky (Eigen::SimplicialLDLT) of
-// L - sigma M, checked by Sylvester's inertia (further deflated runs find
-// copies of multiple eigenvalues a single run missed); meshes of at most
+// options.shift, with a sparse Cholesky (Eigen::SimplicialLDLT, one
+// approximate-minimum-degree ordering per mesh) of L - sigma M, checked by
+// Sylvester's inertia (further deflated runs find copies of multiple
+// eigenvalues a single run missed); meshes of at most
 // options.dense_max_vertices vertices are solved densely. One zero eigenvalue
 // per connected component is skipped. Preconditions: a mesh that intake
 // validated (finite coordinates, indices in range, edge-manifold). Errors:

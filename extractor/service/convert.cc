@@ -52,7 +52,8 @@ absl::StatusOr<extract::Options> OptionsFromProto(
   if (proto.spectrum_eigenvalues() < 0 || proto.spectrum_eigenvalues() > 1000) {
     return absl::InvalidArgumentError(
         absl::StrCat("options.spectrum_eigenvalues must be in 1..1000 (0 for "
-                     "the default 50), got ",
+                     "the default ",
+                     extract::Options{}.spectrum_eigenvalues, "), got ",
                      proto.spectrum_eigenvalues()));
   }
   if (proto.spectrum_eigenvalues() != 0) {

@@ -66,7 +66,7 @@ struct SpectralOptions {
   // phi. Default kByIndex, see weight.
   SpectralTransform transform = SpectralTransform::kByIndex;
   // n: eigenvalues compared (the first n). Range 1..kMaxSpectrum. Default
-  // 20, see weight (the extractor computes 50; a longer spectrum is
+  // 20, see weight (the extractor computes 20 by default; a longer spectrum is
   // truncated, a shorter one padded).
   int eigenvalues = 20;
 };
