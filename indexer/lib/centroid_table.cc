@@ -100,6 +100,16 @@ CentroidTable CentroidTable::Build(
   return t;
 }
 
+void CentroidTable::Prefetch(uint32_t i) const {
+#if defined(__GNUC__)
+  const unsigned char* row = rows_.data() + static_cast<size_t>(i) * row_bytes_;
+  for (size_t at = 0; at < row_bytes_; at += 64) __builtin_prefetch(row + at);
+  __builtin_prefetch(row + row_bytes_ - 1);
+#else
+  (void)i;
+#endif
+}
+
 double CentroidTable::LowerBound(const double* query_centroid, int query_bands,
                                  uint32_t i) const {
   const unsigned char* row = rows_.data() + static_cast<size_t>(i) * row_bytes_;

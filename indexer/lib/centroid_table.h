@@ -58,6 +58,11 @@ class CentroidTable {
   double LowerBound(const double* query_centroid, int query_bands,
                     uint32_t i) const;
 
+  // Prefetch asks the CPU to start loading row i (LowerBound's only read)
+  // into cache, without waiting (QuerySpec::prefetch). Precondition: i <
+  // size(). No effect on any result; thread-safe.
+  void Prefetch(uint32_t i) const;
+
  private:
   int bands_ = 0;         // largest bands() over present items
   size_t row_bytes_ = 0;  // kHeaderBytes + 3 bands_ int16 values

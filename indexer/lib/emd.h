@@ -140,6 +140,16 @@ double RelaxedTransportBound(const PreparedSignature& a,
 double ConstrainedTransportBound(const PreparedSignature& a,
                                  const PreparedSignature& b);
 
+// PrefetchSignature asks the CPU to start loading p's stored values (its
+// one heap block: masses, spectral embedding, coordinates) into cache,
+// without waiting: a search calls it for the item it will likely bound
+// next (QuerySpec::prefetch), so that the misses of a signature not in
+// cache overlap the current item's work instead of stalling the ground
+// distance matrix. No effect on any result. Cost: one prefetch
+// instruction per 64 bytes (about 54 at 14 features, 20 bands); none on
+// compilers without __builtin_prefetch. Thread-safe.
+void PrefetchSignature(const PreparedSignature& p);
+
 // CentroidBound returns N(ca - cb) for raw centroids laid out as Centroid
 // returns them ([g, K x ba, A x ba, H x ba] and the same for b with bb
 // bands; missing bands count as zero): EmdLowerBound for callers that keep

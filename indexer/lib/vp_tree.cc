@@ -344,6 +344,7 @@ class VpCursor : public NeighborCursor {
             RefineBatch(e);
             break;
           }
+          if (spec_.prefetch) PrefetchNext();
           // e.level bounds of the cascade have been applied; apply the next
           // ones, then the metric. While the refined key stays strictly
           // below every other key the item would be popped next anyway, so
@@ -384,6 +385,19 @@ class VpCursor : public NeighborCursor {
   const SearchStats& stats() const override { return stats_; }
 
  private:
+  // Calls spec_.prefetch for the item under the smallest key left (an
+  // unrefined item, or a run's smallest item), if there is one: the item
+  // the search most likely refines after the current one.
+  void PrefetchNext() {
+    if (queue_.empty()) return;
+    const Entry& top = queue_.top();
+    if (top.kind == kItemBound) {
+      spec_.prefetch(top.index, top.level);
+    } else if (top.kind == kRun) {
+      spec_.prefetch(runs_[top.index].front().second, 0);
+    }
+  }
+
   // Pops the smallest entry; a run gives up its smallest item (the run's
   // smallest bound is the smallest key left) as an item entry.
   struct Entry;

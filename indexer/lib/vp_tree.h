@@ -121,6 +121,16 @@ struct QuerySpec {
   // cancelled or late caller stops within one distance (one batch of
   // parallel_batch distances with parallel_for). Default: none.
   std::function<bool()> stop;
+  // Optional: a hint, never needed for a correct answer. While the search
+  // refines one item it calls prefetch(item, level) for the item it will
+  // most likely refine next (the smallest key left), `level` being the
+  // first of lower_bounds that item still needs; the caller may start
+  // loading what those bounds and the distance will read (e.g. with
+  // __builtin_prefetch), so that its memory latency overlaps the current
+  // item's arithmetic. Must not change anything a bound or the distance
+  // returns; thread-safe when parallel_for is set (not called on that
+  // path). Default: none.
+  std::function<void(uint32_t item, size_t level)> prefetch;
 };
 
 // NeighborCursor yields results in ascending (distance, tie_less) order.

@@ -281,9 +281,15 @@ std::atomic<int64_t> level2_bounds{0};
 // spectral weight is 0); each bound adds the exact spectral term when it
 // is on, as SignatureIndex does.
 QuerySpec Spec(const Db& db, const PreparedSignature& q,
-               Cascade cascade = Cascade::kConstrained) {
+               Cascade cascade = Cascade::kConstrained, bool prefetch = true) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
+  if (prefetch) {  // as SignatureIndex does
+    spec.prefetch = [&db](uint32_t i, size_t level) {
+      if (level == 0) db.centroids.Prefetch(i);
+      tpr::index::PrefetchSignature(db.items[i]);
+    };
+  }
   // The query's centroid, computed once per query as the index does.
   auto qc =
       std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
@@ -351,7 +357,8 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 }
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
-             Cascade cascade = Cascade::kConstrained, int threads = 1) {
+             Cascade cascade = Cascade::kConstrained, int threads = 1,
+             bool prefetch = true) {
   Db& db = GetDb(key);
   SearchStats total;
   int64_t queries = 0;
@@ -359,7 +366,8 @@ void RunTree(benchmark::State& state, const DbKey& key, size_t k,
   tbb::task_arena arena(std::max(threads, 1));
   for (auto _ : state) {
     SearchStats stats;
-    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], cascade);
+    QuerySpec spec =
+        Spec(db, db.queries[queries % db.queries.size()], cascade, prefetch);
     if (threads > 1) {
       // As SignatureIndex does with IndexOptions::search_threads.
       spec.parallel_batch = 2 * static_cast<size_t>(threads);
@@ -447,6 +455,17 @@ void BM_KnnVpTreeExtractedRelaxed(benchmark::State& state) {
 }
 BENCHMARK(BM_KnnVpTreeExtractedRelaxed)
     ->Args({10000, 10})
+    ->Args({100000, 10})
+    ->Args({1000000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedNoPrefetch/<n>/<k>: BM_KnnVpTreeExtracted without
+// QuerySpec::prefetch, for a side-by-side run.
+void BM_KnnVpTreeExtractedNoPrefetch(benchmark::State& state) {
+  RunTree(state, ExtractedKey(state), static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained, /*threads=*/1, /*prefetch=*/false);
+}
+BENCHMARK(BM_KnnVpTreeExtractedNoPrefetch)
     ->Args({100000, 10})
     ->Args({1000000, 10})
     ->Unit(benchmark::kMillisecond);

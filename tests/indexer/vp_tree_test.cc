@@ -278,6 +278,49 @@ TEST(VpTreeTest, BoundCascadeKeepsResultsAndRefinesInOrder) {
   EXPECT_LE(two_levels, one_level);
 }
 
+// The prefetch hint changes nothing and tells the truth: answers and work
+// are those of the same search without it (and brute force), and each
+// hint names an item together with the number of bounds it has had so
+// far (the level it needs next); most hinted items are then refined.
+TEST(VpTreeTest, PrefetchHintNamesTheNextItemAndItsLevel) {
+  const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 85);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  int64_t hints = 0;
+  int64_t hinted_then_refined = 0;
+  for (const Point& query : Queries(points, 100, 86)) {
+    std::vector<int> applied(points.size(), 0);
+    std::vector<int> hinted(points.size(), -1);
+    QuerySpec spec = Spec(points, query, L2);
+    for (int level = 0; level < 2; ++level) {
+      spec.lower_bounds.push_back([&points, &query, &applied, &hinted,
+                                   &hinted_then_refined, level](uint32_t i) {
+        EXPECT_EQ(applied[i], level) << "item " << i;
+        if (hinted[i] == level) ++hinted_then_refined;
+        ++applied[i];
+        return level == 0 ? 0.5 * LInf(query, points[i])
+                          : LInf(query, points[i]);
+      });
+    }
+    const QuerySpec plain = spec;
+    SearchStats without;
+    const std::vector<ItemNeighbor> want = tree.Knn(plain, 10, &without);
+    std::fill(applied.begin(), applied.end(), 0);
+    spec.prefetch = [&applied, &hinted, &hints](uint32_t i, size_t level) {
+      ++hints;
+      EXPECT_EQ(static_cast<size_t>(applied[i]), level) << "item " << i;
+      hinted[i] = static_cast<int>(level);
+    };
+    SearchStats with;
+    ExpectSame(tree.Knn(spec, 10, &with), want, "prefetch");
+    ExpectSame(want, oracle.Knn(plain, 10), "brute force");
+    EXPECT_EQ(with.emd_computations, without.emd_computations);
+    EXPECT_EQ(with.lower_bounds, without.lower_bounds);
+  }
+  EXPECT_GT(hints, 0);
+  EXPECT_GT(hinted_then_refined, hints / 2);
+}
+
 TEST(VpTreeTest, LowerBoundFilterKeepsResultsAndSavesDistances) {
   const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 81);
   const VpTree tree = BuildTree(points, L2);
