@@ -21,7 +21,7 @@
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 #include <OpenMesh/Tools/Decimater/ModRoundnessT.hh>
 #pragma GCC diagnostic pop
-#include <Spectra/SymGEigsShiftSolver.h>
+#include <Spectra/SymEigsSolver.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
@@ -141,69 +141,66 @@ void Permute(SparseMatrix* stiffness, SparseMatrix* mass) {
   *mass = std::move(m);
 }
 
-// MassOp is Spectra's BOpType: y = M x with M stored in full (both
-// triangles), a plain sparse product (Spectra's SparseSymMatProd reads one
-// triangle through a self-adjoint view, measured 15% of the whole solve).
-class MassOp {
+// ShiftInvertOp is the generalized problem L x = lambda M x, shifted and
+// inverted, brought to standard symmetric form for Spectra's SymEigsSolver:
+// with K = L - sigma M = L_K D L_K^T (sparse LDL^T; K is symmetric positive
+// definite for sigma < 0, so D > 0) and R = D^(1/2) L_K^T,
+//
+//   A = R^-T M R^-1,   A y = mu y  <=>  L x = lambda M x,
+//   mu = 1 / (lambda - sigma),  y = R x.
+//
+// One product costs what Spectra's generalized shift-invert mode
+// (SymGEigsShiftSolver) pays per step for its operator (K^-1 M x: one
+// product with M, one forward and one backward substitution), but the
+// Lanczos basis is then orthogonal in the plain Euclidean inner product:
+// the generalized mode takes every inner product, norm and
+// re-orthogonalization in the M inner product, three to five more products
+// with M per step, which were about 40% of the whole solve at 10k vertices
+// (perf, docs/benchmarks.md). The eigenvalues are the same in exact
+// arithmetic; the convergence test (relative to mu) is Spectra's in either
+// mode. With deflation vectors Y (orthonormal eigenvectors of A already
+// found) it returns P A x, P = I - Y Y^T: still symmetric, maps Y to 0 and
+// keeps the other eigenpairs, so a further run finds what the first missed.
+class ShiftInvertOp {
  public:
   using Scalar = double;
-  explicit MassOp(const SparseMatrix& m) : m_(m) {}
+  ShiftInvertOp(const SparseMatrix& l, const SparseMatrix& m, double sigma)
+      : m_(m), work_(l.rows()) {
+    solver_.compute(SparseMatrix(l - sigma * m));
+    ok_ = solver_.info() == Eigen::Success;
+    if (ok_) {
+      const Eigen::VectorXd d = solver_.vectorD();
+      ok_ = (d.array() > 0.0).all();
+      inverse_sqrt_d_ = d.array().max(1e-300).rsqrt();
+    }
+  }
   Eigen::Index rows() const { return m_.rows(); }
   Eigen::Index cols() const { return m_.cols(); }
   void perform_op(const double* x_in, double* y_out) const {
     Eigen::Map<const Eigen::VectorXd> x(x_in, rows());
     Eigen::Map<Eigen::VectorXd> y(y_out, rows());
-    y.noalias() = m_ * x;
-  }
-
- private:
-  const SparseMatrix& m_;
-};
-
-// ShiftInvertOp is Spectra's OpType for SymGEigsShiftSolver: y = (L -
-// sigma M)^-1 x through a sparse LDL^T (L - sigma M is symmetric positive
-// definite for sigma < 0), cheaper than the SparseLU of Spectra's own
-// SymShiftInvert. With deflation vectors U (M-orthonormal eigenvectors
-// already found) it returns P y, P = I - U U^T M: the operator
-// P (L - sigma M)^-1 M is still M-self-adjoint, maps U to 0 and keeps the
-// other eigenpairs, so a further run finds what the first one missed.
-class ShiftInvertOp {
- public:
-  using Scalar = double;
-  ShiftInvertOp(const SparseMatrix& l, const SparseMatrix& m) : l_(l), m_(m) {}
-  Eigen::Index rows() const { return l_.rows(); }
-  Eigen::Index cols() const { return l_.cols(); }
-  void set_shift(double sigma) {
-    if (factored_ && sigma == sigma_) return;
-    const SparseMatrix shifted = l_ - sigma * m_;
-    solver_.compute(shifted);
-    factored_ = solver_.info() == Eigen::Success;
-    sigma_ = sigma;
-  }
-  void perform_op(const double* x_in, double* y_out) const {
-    Eigen::Map<const Eigen::VectorXd> x(x_in, rows());
-    Eigen::Map<Eigen::VectorXd> y(y_out, rows());
-    y.noalias() = solver_.solve(x);
+    work_ = inverse_sqrt_d_.cwiseProduct(x);
+    solver_.matrixU().solveInPlace(work_);  // L_K^-T
+    y.noalias() = m_ * work_;
+    solver_.matrixL().solveInPlace(y);  // L_K^-1
+    y.array() *= inverse_sqrt_d_.array();
     if (deflation_.cols() > 0) {
-      const Eigen::VectorXd coefficients = mass_deflation_.transpose() * y;
+      const Eigen::VectorXd coefficients = deflation_.transpose() * y;
       y.noalias() -= deflation_ * coefficients;
     }
   }
-  bool ok() const { return factored_; }
-  // Deflate replaces the deflation vectors (M-orthonormal columns).
-  void Deflate(Eigen::MatrixXd vectors) {
-    deflation_ = std::move(vectors);
-    mass_deflation_ = m_ * deflation_;
-  }
+  // ok is false when K was not factored as positive definite.
+  bool ok() const { return ok_; }
+  // Deflate replaces the deflation vectors (orthonormal columns).
+  void Deflate(Eigen::MatrixXd vectors) { deflation_ = std::move(vectors); }
 
  private:
-  const SparseMatrix& l_;
   const SparseMatrix& m_;
   Ldlt solver_;
-  bool factored_ = false;
-  double sigma_ = 0.0;
+  bool ok_ = false;
+  Eigen::VectorXd inverse_sqrt_d_;
   Eigen::MatrixXd deflation_;
-  Eigen::MatrixXd mass_deflation_;
+  mutable Eigen::VectorXd work_;
 };
 
 // EigenvaluesBelow returns how many eigenvalues of L x = lambda M x are
@@ -217,15 +214,16 @@ int64_t EigenvaluesBelow(const SparseMatrix& l, const SparseMatrix& m,
   return static_cast<int64_t>((d.array() < 0.0).count());
 }
 
-// Eigenpairs are the converged pairs of one Lanczos run, ascending.
+// Eigenpairs are the converged pairs of one Lanczos run: the eigenvalues
+// lambda ascending, and the matching eigenvectors of ShiftInvertOp's A
+// (orthonormal columns).
 struct Eigenpairs {
   Eigen::VectorXd values;
-  Eigen::MatrixXd vectors;  // M-orthonormal columns
+  Eigen::MatrixXd vectors;
   int64_t operations = 0;
 };
 
-absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op,
-                                      const SparseMatrix& mass, int64_t nev,
+absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, int64_t nev,
                                       double sigma,
                                       const SpectrumOptions& options) {
   // Spectra requires nev < ncv <= n and advises ncv >= 2 nev. Between
@@ -234,27 +232,22 @@ absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op,
   // 9.5k-vertex mesh, ncv 35, 43 (2 nev + 1), 55 and 70 took 71, 66, 73
   // and 71 solves and 2 nev + 1 was the fastest.
   const int64_t ncv = std::min<int64_t>(op.rows(), 2 * nev + 1);
-  MassOp mass_op(mass);
   Eigenpairs out;
   try {
-    Spectra::SymGEigsShiftSolver<ShiftInvertOp, MassOp,
-                                 Spectra::GEigsMode::ShiftInvert>
-        solver(op, mass_op, nev, ncv, sigma);
-    if (!op.ok()) {
-      return absl::InternalError(
-          "spectrum: sparse Cholesky of L - sigma M failed");
-    }
+    Spectra::SymEigsSolver<ShiftInvertOp> solver(op, nev, ncv);
     solver.init();
+    // The largest mu = 1 / (lambda - sigma) are the smallest lambda.
     const Eigen::Index converged =
-        solver.compute(Spectra::SortRule::LargestMagn, options.max_restarts,
-                       options.tolerance, Spectra::SortRule::SmallestAlge);
+        solver.compute(Spectra::SortRule::LargestAlge, options.max_restarts,
+                       options.tolerance, Spectra::SortRule::LargestAlge);
     out.operations = solver.num_operations();
     if (solver.info() != Spectra::CompInfo::Successful || converged < nev) {
       return absl::InternalError(absl::StrCat(
           "spectrum: Lanczos iteration did not converge (", converged, " of ",
           nev, " eigenvalues after ", solver.num_iterations(), " restarts)"));
     }
-    out.values = solver.eigenvalues();
+    const Eigen::VectorXd mu = solver.eigenvalues();  // descending
+    out.values = sigma + mu.array().inverse();        // ascending
     out.vectors = solver.eigenvectors();
   } catch (const std::exception& e) {
     return absl::InternalError(
@@ -413,7 +406,11 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
     return result;
   }
   Permute(&stiffness, &mass);
-  ShiftInvertOp op(stiffness, mass);
+  ShiftInvertOp op(stiffness, mass, sigma);
+  if (!op.ok()) {
+    return absl::InternalError(
+        "spectrum: sparse Cholesky of L - sigma M failed");
+  }
   std::vector<double> found;
   Eigen::MatrixXd vectors(result.vertices, 0);
   constexpr int kMaxRuns = 8;
@@ -427,7 +424,7 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
           "spectrum: no room left for a deflated Lanczos run");
     }
     TPR_ASSIGN_OR_RETURN(Eigenpairs pairs,
-                         RunLanczos(op, mass, request, sigma, options));
+                         RunLanczos(op, request, sigma, options));
     result.operations += pairs.operations;
     found.insert(found.end(), pairs.values.data(),
                  pairs.values.data() + pairs.values.size());

@@ -92,9 +92,12 @@ struct Spectrum {
 // consistent, not lumped, mass). Boundary edges get the natural (Neumann,
 // free) condition. Unreferenced vertices are ignored. Meshes with more than
 // options.max_vertices vertices are simplified first (see SimplifyMesh).
-// Solver: Spectra's SymGEigsShiftSolver in shift-invert mode around
-// options.shift, with a sparse Cholesky (Eigen::SimplicialLDLT, one
-// approximate-minimum-degree ordering per mesh) of L - sigma M, checked by
+// Solver: shift-invert around options.shift with a sparse Cholesky
+// (Eigen::SimplicialLDLT, one approximate-minimum-degree ordering per mesh)
+// of L - sigma M = L_K D L_K^T, the problem brought to the standard
+// symmetric form (D^-1/2 L_K^-1) M (L_K^-T D^-1/2) y = y / (lambda - sigma)
+// for Spectra's SymEigsSolver (Euclidean inner products, cheaper than the
+// generalized mode's M inner products; same eigenvalues), checked by
 // Sylvester's inertia (further deflated runs find copies of multiple
 // eigenvalues a single run missed); meshes of at most
 // options.dense_max_vertices vertices are solved densely. One zero eigenvalue
