@@ -9,6 +9,13 @@
 // bound (the triangle inequality of N, centroid_table.h). The bound loses
 // about 1e-4 of N(c) of pruning power; the row costs 140 bytes at 20 bands
 // instead of 488, and a model about 3.9 KB instead of 4.3 KB.
+//
+// The spectral embedding (metric.h) rides in the same row, 16 bits per
+// value with one step for the whole table, its radius subtracted likewise:
+// with the default metric the level-1 bound is the centroid bound plus the
+// spectral term, and reading the embedding through the item's signature
+// cost a dependent cache miss per bounded item (a third of the 1M 10-NN's
+// bounds, docs/search-cost.md). 44 bytes more per row at 20 eigenvalues.
 #include "indexer/lib/centroid_table.h"
 
 #include <algorithm>
@@ -20,8 +27,10 @@ namespace tpr::index {
 
 namespace {
 
-constexpr size_t kHeaderBytes = 5 * sizeof(float);  // e, g, s_K, s_A, s_H
-constexpr double kLevels = 32767.0;                 // int16 magnitude
+// e, g, s_K, s_A, s_H, e_s
+constexpr size_t kHeaderBytes = 6 * sizeof(float);
+constexpr size_t kSpectralRadiusAt = 5 * sizeof(float);  // e_s
+constexpr double kLevels = 32767.0;                      // int16 magnitude
 
 float LoadFloat(const unsigned char* p) {
   float x;
@@ -52,12 +61,27 @@ CentroidTable CentroidTable::Build(
     size_t n, const std::function<const PreparedSignature*(uint32_t)>& item) {
   CentroidTable t;
   std::vector<const PreparedSignature*> items(n);
+  int spectral = -1;  // the common spectral_size() so far; -1: none seen
+  double largest_spectral = 0.0;
   for (size_t i = 0; i < n; ++i) {
     items[i] = item(static_cast<uint32_t>(i));
-    if (items[i] != nullptr) t.bands_ = std::max(t.bands_, items[i]->bands());
+    const PreparedSignature* p = items[i];
+    if (p == nullptr) continue;
+    t.bands_ = std::max(t.bands_, p->bands());
+    if (spectral == -1) spectral = p->spectral_size();
+    if (p->spectral_size() != spectral) spectral = 0;  // mixed: keep none
+    for (int k = 0; k < std::min(spectral, p->spectral_size()); ++k) {
+      largest_spectral = std::max(
+          largest_spectral, std::abs(static_cast<double>(p->spectral()[k])));
+    }
   }
+  t.spectral_size_ = std::max(spectral, 0);
+  t.spectral_scale_ = RoundUp(largest_spectral / kLevels);
   const size_t table_bands = static_cast<size_t>(t.bands_);
-  t.row_bytes_ = kHeaderBytes + 3 * table_bands * sizeof(int16_t);
+  const size_t spectral_at =
+      kHeaderBytes + 3 * table_bands * sizeof(int16_t);  // its int16 values
+  t.row_bytes_ =
+      spectral_at + static_cast<size_t>(t.spectral_size_) * sizeof(int16_t);
   t.rows_.assign(n * t.row_bytes_, 0);
   for (size_t i = 0; i < n; ++i) {
     unsigned char* row = t.rows_.data() + i * t.row_bytes_;
@@ -96,6 +120,22 @@ CentroidTable CentroidTable::Build(
       e += std::sqrt(s);
     }
     StoreFloat(row, RoundUp(e * (1.0 + 1e-12)));
+    // The spectral embedding: E~_k = spectral_scale_ x int16, exact in
+    // double like the centroid's values; e_s = ||E - E~||_2 of the stored
+    // float32 embedding E, inflated and rounded up as e is.
+    double s = 0.0;
+    for (int k = 0; k < t.spectral_size_; ++k) {
+      const double x = static_cast<double>(p->spectral()[k]);
+      double level =
+          t.spectral_scale_ > 0.0 ? std::nearbyint(x / t.spectral_scale_) : 0.0;
+      level = std::clamp(level, -kLevels, kLevels);
+      const int16_t v = static_cast<int16_t>(level);
+      std::memcpy(row + spectral_at + static_cast<size_t>(k) * sizeof v, &v,
+                  sizeof v);
+      const double diff = x - t.spectral_scale_ * v;
+      s += diff * diff;
+    }
+    StoreFloat(row + kSpectralRadiusAt, RoundUp(std::sqrt(s) * (1.0 + 1e-12)));
   }
   return t;
 }
@@ -139,6 +179,28 @@ double CentroidTable::LowerBound(const double* query_centroid, int query_bands,
       },
       bands_);
   const double bound = result - static_cast<double>(e);
+  return bound > 0.0 ? bound : 0.0;
+}
+
+double CentroidTable::SpectralLowerBound(const float* query_spectral,
+                                         int query_spectral_size,
+                                         uint32_t i) const {
+  if (spectral_size_ == 0 || query_spectral_size != spectral_size_) return 0.0;
+  const unsigned char* row = rows_.data() + static_cast<size_t>(i) * row_bytes_;
+  if (std::isnan(LoadFloat(row))) return 0.0;  // absent slot
+  const double e_s = static_cast<double>(LoadFloat(row + kSpectralRadiusAt));
+  const unsigned char* values =
+      row + row_bytes_ - static_cast<size_t>(spectral_size_) * sizeof(int16_t);
+  // ||q - E~||_2 in double; each E~_k = spectral_scale_ x int16 is exact.
+  double s = 0.0;
+  for (int k = 0; k < spectral_size_; ++k) {
+    const double diff =
+        static_cast<double>(query_spectral[k]) -
+        spectral_scale_ *
+            LoadInt16(values + static_cast<size_t>(k) * sizeof(int16_t));
+    s += diff * diff;
+  }
+  const double bound = std::sqrt(s) - e_s;
   return bound > 0.0 ? bound : 0.0;
 }
 

@@ -10,6 +10,14 @@
 //   std::vector<double> q = Centroid(query);             // once per query
 //   double lb = table.LowerBound(q.data(), query.bands(), i);
 //   // lb <= EmdLowerBound(query, items[i]) <= Emd(query, items[i])
+//   double ls = table.SpectralLowerBound(query.spectral(),
+//                                        query.spectral_size(), i);
+//   // ls <= SpectralDistance(query, items[i]) (metric.h), so
+//   // lb + ls <= DistanceLowerBound(query, items[i]) <= Distance(...)
+//
+// The row also keeps the item's spectral embedding (quantized the same
+// way), so that the level-1 bound of the default metric (centroid bound
+// plus spectral term, metric.h) reads no signature at all.
 #ifndef TPR_INDEXER_LIB_CENTROID_TABLE_H_
 #define TPR_INDEXER_LIB_CENTROID_TABLE_H_
 
@@ -33,8 +41,12 @@ class CentroidTable {
 
   // Build returns the table of `n` slots; item(i) gives the signature of
   // slot i, or nullptr for an absent slot. item is called once per slot, in
-  // slot order, from the calling thread. Cost O(n x features x bands) time
-  // and (20 + 6 B) n bytes, B the largest bands() of the items; no EMD.
+  // slot order, from the calling thread. The spectral embeddings are kept
+  // when every present item has the same spectral_size() > 0 (items of one
+  // index are prepared with the same options); otherwise none is (then
+  // spectral_size() is 0). Cost O(n x features x bands) time and
+  // (24 + 6 B + 2 S) n bytes, B the largest bands() of the items and S
+  // their spectral_size(); no EMD.
   static CentroidTable Build(
       size_t n, const std::function<const PreparedSignature*(uint32_t)>& item);
 
@@ -42,6 +54,9 @@ class CentroidTable {
   size_t size() const {
     return row_bytes_ == 0 ? 0 : rows_.size() / row_bytes_;
   }
+  // spectral_size returns the length of the spectral embeddings the rows
+  // keep: the items' common spectral_size(), or 0 (none kept).
+  int spectral_size() const { return spectral_size_; }
   // MemoryBytes returns the heap bytes this table holds.
   size_t MemoryBytes() const { return rows_.capacity(); }
 
@@ -58,20 +73,47 @@ class CentroidTable {
   double LowerBound(const double* query_centroid, int query_bands,
                     uint32_t i) const;
 
-  // Prefetch asks the CPU to start loading row i (LowerBound's only read)
+  // SpectralLowerBound returns a lower bound of the spectral term
+  // SpectralDistance(query, s) = ||E(query) - E(s)||_2 (metric.h; both
+  // embeddings as PreparedSignature stores them, in float32) for the
+  // signature s of slot i, given the query's stored embedding
+  // `query_spectral` of `query_spectral_size` values; 0.0 when the slot is
+  // absent or the sizes differ from spectral_size() (no bound known, which
+  // includes a table that keeps no embeddings). With E~ the row's quantized
+  // embedding and e_s >= ||E(s) - E~|| its stored radius (centroid_table.cc)
+  // it is
+  //   max(0, ||E(query) - E~||_2 - e_s),
+  // which by the triangle inequality of the Euclidean norm never exceeds
+  // ||E(query) - E(s)||_2, and is below it by at most 2 e_s (about 1e-4
+  // of the largest embedding value of the table times sqrt(S)).
+  // Precondition: i < size(). Cost O(spectral_size()), no allocation;
+  // thread-safe.
+  double SpectralLowerBound(const float* query_spectral,
+                            int query_spectral_size, uint32_t i) const;
+
+  // Prefetch asks the CPU to start loading row i (the only read of
+  // LowerBound and SpectralLowerBound)
   // into cache, without waiting (QuerySpec::prefetch). Precondition: i <
   // size(). No effect on any result; thread-safe.
   void Prefetch(uint32_t i) const;
 
  private:
-  int bands_ = 0;         // largest bands() over present items
-  size_t row_bytes_ = 0;  // kHeaderBytes + 3 bands_ int16 values
+  int bands_ = 0;          // largest bands() over present items
+  int spectral_size_ = 0;  // see spectral_size()
+  // The step of every row's quantized spectral embedding (one for the
+  // table: the embeddings' values are of one size by construction,
+  // spectral.h).
+  double spectral_scale_ = 0.0;
+  // kHeaderBytes + (3 bands_ + spectral_size_) int16 values
+  size_t row_bytes_ = 0;
   // Row i (row_bytes_ bytes): float32 e (the radius above, rounded up; NaN
   // for an absent slot), float32 g (row 0 of the centroid, rounded to
-  // float32), float32 scales s_K, s_A, s_H, then the K, A and H blocks of
-  // the centroid as int16 multiples of their block's scale, each
-  // zero-padded to bands_ values. 140 bytes at 20 bands, against 488 for
-  // the centroid in double.
+  // float32), float32 scales s_K, s_A, s_H, float32 e_s (the spectral
+  // radius, rounded up), then the K, A and H blocks of the centroid as
+  // int16 multiples of their block's scale, each zero-padded to bands_
+  // values, then the spectral embedding as int16 multiples of
+  // spectral_scale_. 184 bytes at 20 bands and 20 eigenvalues, against 488
+  // + 80 for the centroid in double and the embedding in float32.
   std::vector<unsigned char> rows_;
 };
 

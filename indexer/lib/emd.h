@@ -150,6 +150,18 @@ double ConstrainedTransportBound(const PreparedSignature& a,
 // compilers without __builtin_prefetch. Thread-safe.
 void PrefetchSignature(const PreparedSignature& p);
 
+// PrefetchSignatureEarly is the search's policy for PrefetchSignature on
+// an item still at level 0 of the cascade (only its centroid row is
+// certain to be read): true while at least half of the items bounded at
+// level 1 so far went on to level 2 (and before any was bounded), given
+// the counts of level-1 and level-2 bounds computed so far. An item that
+// fails level 1 never reads its signature, and a prefetch of 3.5 KB that
+// is not read costs memory bandwidth and the miss queue. O(1).
+inline bool PrefetchSignatureEarly(int64_t level1_bounds,
+                                   int64_t level2_bounds) {
+  return 2 * level2_bounds >= level1_bounds;
+}
+
 // CentroidBound returns N(ca - cb) for raw centroids laid out as Centroid
 // returns them ([g, K x ba, A x ba, H x ba] and the same for b with bb
 // bands; missing bands count as zero): EmdLowerBound for callers that keep

@@ -221,10 +221,17 @@ class IndexCursor : public SignatureIndex::Cursor {
     // The cascade of lower bounds (emd.h), cheapest first: the centroid
     // bound (O(bands)), then the relaxed transport bound with capacities
     // (the ground matrix, which the EMD that may follow reuses). Each adds
-    // the exact O(n) spectral term of the distance (metric.h; nothing when
-    // its weight is 0), so the spectrum is checked before any EMD.
+    // the O(n) spectral term of the distance (metric.h; nothing when its
+    // weight is 0), so the spectrum is checked before any EMD: at level 1
+    // a lower bound of it from the table's row (CentroidTable::
+    // SpectralLowerBound), so that level 1 reads no signature, at level 2
+    // the exact term.
     const bool spectral = query_.spectral_size() > 0;
-    spec.lower_bounds.push_back([this, t, spectral](uint32_t i) {
+    const bool table_spectral =
+        spectral && t->centroids.spectral_size() == query_.spectral_size();
+    spec.lower_bounds.push_back([this, t, spectral,
+                                 table_spectral](uint32_t i) {
+      level1_.fetch_add(1, std::memory_order_relaxed);
       if (i >= n_tree_) {
         const PreparedSignature& p = *snapshot_->buffer[i - n_tree_].prepared;
         return EmdLowerBound(query_centroid_.data(), query_.bands(), p) +
@@ -232,24 +239,40 @@ class IndexCursor : public SignatureIndex::Cursor {
       }
       const double centroid =
           t->centroids.LowerBound(query_centroid_.data(), query_.bands(), i);
+      if (table_spectral) {
+        return centroid + t->centroids.SpectralLowerBound(
+                              query_.spectral(), query_.spectral_size(), i);
+      }
+      // A table without the embeddings (items of mixed spectral sizes,
+      // which one index never holds): read them from the signature.
       const PreparedSignature* p = spectral ? t->prepared[i].get() : nullptr;
       return p == nullptr ? centroid : centroid + SpectralDistance(query_, *p);
     });
     if (relaxed_bound) {
       spec.lower_bounds.push_back([this](uint32_t i) {
+        level2_.fetch_add(1, std::memory_order_relaxed);
         const PreparedSignature* p = Item(i);
         return p == nullptr ? 0.0
                             : ConstrainedTransportBound(query_, *p) +
                                   SpectralDistance(query_, *p);
       });
     }
-    // While one item is refined, the next one's centroid row and
-    // signature start loading (QuerySpec::prefetch): beyond a few
-    // thousand models they are not in cache, and waiting for them was
-    // about a quarter of a 10-NN query's CPU time (docs/search-cost.md).
+    // While one item is refined, the next one's data start loading
+    // (QuerySpec::prefetch): beyond a few thousand models they are not in
+    // cache, and waiting for them was about a quarter of a 10-NN query's
+    // CPU time (docs/search-cost.md). An item still at level 0 needs its
+    // centroid row; its signature (3.5 KB at 14 features) only if it
+    // passes level 1, so it is prefetched then only while most items so far
+    // did (PrefetchSignatureEarly).
     spec.prefetch = [this, t](uint32_t i, size_t level) {
       if (i >= n_tree_) return;
-      if (level == 0) t->centroids.Prefetch(i);
+      if (level == 0) {
+        t->centroids.Prefetch(i);
+        if (!PrefetchSignatureEarly(level1_.load(std::memory_order_relaxed),
+                                    level2_.load(std::memory_order_relaxed))) {
+          return;
+        }
+      }
       if (const PreparedSignature* p = t->prepared[i].get()) {
         PrefetchSignature(*p);
       }
@@ -297,6 +320,10 @@ class IndexCursor : public SignatureIndex::Cursor {
   std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
   PreparedSignature query_;
   std::vector<double> query_centroid_;  // Centroid(query_), for the table
+  // Level-1 and level-2 bounds computed so far (for the prefetch policy;
+  // atomic because a parallel search computes bounds on several threads).
+  std::atomic<int64_t> level1_{0};
+  std::atomic<int64_t> level2_{0};
   std::function<bool(const std::string&)> filter_;
   uint32_t n_tree_ = 0;
   // Last: its callbacks point into the members above.

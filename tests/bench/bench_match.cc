@@ -272,21 +272,50 @@ enum class Cascade {
   kConstrained,  // then the relaxed bound with capacities (ICT): the index's
 };
 
-// Level-2 bound evaluations since the last reset (the `lbs2` counter:
-// `lbs` - `lbs2` are centroid bounds).
+// When a search prefetches an item's signature (QuerySpec::prefetch).
+enum class Prefetch {
+  kNone,      // never
+  kAdaptive,  // as SignatureIndex does: at level 0 only while
+              // PrefetchSignatureEarly, at levels >= 1 always
+  kEarly,     // at level 0 always (the centroid row too)
+  kLate,      // at levels >= 1 only (level 0: the centroid row alone)
+};
+
+// Level-1 and level-2 bound evaluations since the last reset (the `lbs1`
+// and `lbs2` counters; `lbs` = lbs1 + lbs2).
+std::atomic<int64_t> level1_bounds{0};
 std::atomic<int64_t> level2_bounds{0};
 
 // Spec is the query as SignatureIndex builds it: the cascade of lower
 // bounds before the EMD. Distance is metric.h's (the EMD alone when the
-// spectral weight is 0); each bound adds the exact spectral term when it
-// is on, as SignatureIndex does.
+// spectral weight is 0); level 1 adds the table's bound of the spectral
+// term and level 2 the exact term, as SignatureIndex does
+// (`table_spectral` false: level 1 reads the exact term from the
+// signature instead, as before the table kept the embeddings).
 QuerySpec Spec(const Db& db, const PreparedSignature& q,
-               Cascade cascade = Cascade::kConstrained, bool prefetch = true) {
+               Cascade cascade = Cascade::kConstrained,
+               Prefetch prefetch = Prefetch::kAdaptive,
+               bool table_spectral = true) {
   QuerySpec spec;
   spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
-  if (prefetch) {  // as SignatureIndex does
-    spec.prefetch = [&db](uint32_t i, size_t level) {
-      if (level == 0) db.centroids.Prefetch(i);
+  // This query's bound counts, for the adaptive policy (as the index's
+  // cursor keeps them).
+  struct Counts {
+    std::atomic<int64_t> level1{0};
+    std::atomic<int64_t> level2{0};
+  };
+  auto counts = std::make_shared<Counts>();
+  if (prefetch != Prefetch::kNone) {
+    spec.prefetch = [&db, prefetch, counts](uint32_t i, size_t level) {
+      if (level == 0) {
+        db.centroids.Prefetch(i);
+        if (prefetch == Prefetch::kLate ||
+            (prefetch == Prefetch::kAdaptive &&
+             !tpr::index::PrefetchSignatureEarly(counts->level1.load(),
+                                                 counts->level2.load()))) {
+          return;
+        }
+      }
       tpr::index::PrefetchSignature(db.items[i]);
     };
   }
@@ -294,24 +323,38 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
   auto qc =
       std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
   if (q.spectral_size() == 0) {
-    spec.lower_bounds.push_back([&db, &q, qc](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
+      level1_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level1.fetch_add(1, std::memory_order_relaxed);
       return db.centroids.LowerBound(qc->data(), q.bands(), i);
     });
+  } else if (table_spectral) {
+    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
+      level1_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level1.fetch_add(1, std::memory_order_relaxed);
+      return db.centroids.LowerBound(qc->data(), q.bands(), i) +
+             db.centroids.SpectralLowerBound(q.spectral(), q.spectral_size(),
+                                             i);
+    });
   } else {
-    spec.lower_bounds.push_back([&db, &q, qc](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
+      level1_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level1.fetch_add(1, std::memory_order_relaxed);
       return db.centroids.LowerBound(qc->data(), q.bands(), i) +
              SpectralDistance(q, db.items[i]);
     });
   }
   if (cascade == Cascade::kRelaxed) {
-    spec.lower_bounds.push_back([&db, &q](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
       level2_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level2.fetch_add(1, std::memory_order_relaxed);
       return RelaxedTransportBound(q, db.items[i]) +
              SpectralDistance(q, db.items[i]);
     });
   } else if (cascade == Cascade::kConstrained) {
-    spec.lower_bounds.push_back([&db, &q](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
       level2_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level2.fetch_add(1, std::memory_order_relaxed);
       return ConstrainedTransportBound(q, db.items[i]) +
              SpectralDistance(q, db.items[i]);
     });
@@ -345,6 +388,7 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["emd_share"] =
       static_cast<double>(total.emd_computations) * per / n;
   state.counters["lbs"] = static_cast<double>(total.lower_bounds) * per;
+  state.counters["lbs1"] = static_cast<double>(level1_bounds.load()) * per;
   state.counters["lbs2"] = static_cast<double>(level2_bounds.load()) * per;
   state.counters["nodes"] = static_cast<double>(total.nodes_visited) * per;
   state.counters["build_s"] = db.build_seconds;
@@ -358,16 +402,18 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
              Cascade cascade = Cascade::kConstrained, int threads = 1,
-             bool prefetch = true) {
+             Prefetch prefetch = Prefetch::kAdaptive,
+             bool table_spectral = true) {
   Db& db = GetDb(key);
   SearchStats total;
   int64_t queries = 0;
+  level1_bounds = 0;
   level2_bounds = 0;
   tbb::task_arena arena(std::max(threads, 1));
   for (auto _ : state) {
     SearchStats stats;
-    QuerySpec spec =
-        Spec(db, db.queries[queries % db.queries.size()], cascade, prefetch);
+    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], cascade,
+                          prefetch, table_spectral);
     if (threads > 1) {
       // As SignatureIndex does with IndexOptions::search_threads.
       spec.parallel_batch = 2 * static_cast<size_t>(threads);
@@ -463,11 +509,46 @@ BENCHMARK(BM_KnnVpTreeExtractedRelaxed)
 // QuerySpec::prefetch, for a side-by-side run.
 void BM_KnnVpTreeExtractedNoPrefetch(benchmark::State& state) {
   RunTree(state, ExtractedKey(state), static_cast<size_t>(state.range(1)),
-          Cascade::kConstrained, /*threads=*/1, /*prefetch=*/false);
+          Cascade::kConstrained, /*threads=*/1, Prefetch::kNone);
 }
 BENCHMARK(BM_KnnVpTreeExtractedNoPrefetch)
     ->Args({100000, 10})
     ->Args({1000000, 10})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedSpectralPolicy/<n>/<k>/<policy>: the default metric
+// (BM_KnnVpTreeExtractedSpectral's data) under other prefetch policies and
+// level-1 forms, side by side: policy 0 = as SignatureIndex (adaptive,
+// spectral bound from the table), 1 = signature prefetched at level 0
+// always, 2 = at levels >= 1 only, 3 = adaptive with level 1 reading the
+// exact spectral term from the signature, 4 = policy 1 with level 1 from
+// the signature (the search before the table kept the embeddings).
+void BM_KnnVpTreeExtractedSpectralPolicy(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  key.spectral_permille = 1000;
+  const int policy = static_cast<int>(state.range(2));
+  const Prefetch prefetch[] = {Prefetch::kAdaptive, Prefetch::kEarly,
+                               Prefetch::kLate, Prefetch::kAdaptive,
+                               Prefetch::kEarly};
+  RunTree(state, key, static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained, /*threads=*/1, prefetch[policy],
+          /*table_spectral=*/policy < 3);
+}
+BENCHMARK(BM_KnnVpTreeExtractedSpectralPolicy)
+    ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1, 2, 3, 4}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedPolicy/<n>/<k>/<policy>: the same for Eq. 7 alone
+// (BM_KnnVpTreeExtracted's data), policies 0 to 2.
+void BM_KnnVpTreeExtractedPolicy(benchmark::State& state) {
+  const int policy = static_cast<int>(state.range(2));
+  const Prefetch prefetch[] = {Prefetch::kAdaptive, Prefetch::kEarly,
+                               Prefetch::kLate};
+  RunTree(state, ExtractedKey(state), static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained, /*threads=*/1, prefetch[policy]);
+}
+BENCHMARK(BM_KnnVpTreeExtractedPolicy)
+    ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1, 2}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedThreads/<n>/<k>/<threads>: intra-query parallelism

@@ -3,6 +3,8 @@
 // bound that never exceeds EmdLowerBound and is below it by no more than
 // the float32 rounding of the centroid allows, including across signatures
 // with different band counts (rows are zero-padded) and for absent slots.
+// Its spectral bound likewise against SpectralDistance (metric.h), the
+// exact spectral term, and the sum of both against the exact Distance.
 #include "indexer/lib/centroid_table.h"
 
 #include <gtest/gtest.h>
@@ -14,6 +16,7 @@
 
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "tests/indexer/signature_testing.h"
 
 namespace tpr::index {
@@ -22,21 +25,34 @@ namespace {
 using testing::SignatureGenerator;
 using testing::SignatureGeneratorOptions;
 
-std::vector<PreparedSignature> Draw(int bands, int count, uint64_t seed) {
+// PrepareAll returns `count` signatures of the generator `o`, prepared
+// with `ground`.
+std::vector<PreparedSignature> PrepareAll(const SignatureGeneratorOptions& o,
+                                          const GroundDistanceOptions& ground,
+                                          int count) {
+  SignatureGenerator gen(o);
+  std::vector<PreparedSignature> out;
+  for (int i = 0; i < count; ++i) {
+    absl::StatusOr<PreparedSignature> p = Prepare(gen.Next(), ground);
+    EXPECT_TRUE(p.ok()) << p.status();
+    out.push_back(*std::move(p));
+  }
+  return out;
+}
+
+// Draw prepares generated signatures with the default options, or with the
+// spectral term off (weight 0: no embedding at all) when `spectral` is
+// false.
+std::vector<PreparedSignature> Draw(int bands, int count, uint64_t seed,
+                                    bool spectral = true) {
   SignatureGeneratorOptions o;
   o.seed = seed;
   o.bands = bands;
   o.classes = 3;
   o.features = 8;
-  SignatureGenerator gen(o);
-  std::vector<PreparedSignature> out;
-  for (int i = 0; i < count; ++i) {
-    absl::StatusOr<PreparedSignature> p =
-        Prepare(gen.Next(), GroundDistanceOptions{});
-    EXPECT_TRUE(p.ok()) << p.status();
-    out.push_back(*std::move(p));
-  }
-  return out;
+  GroundDistanceOptions ground;
+  if (!spectral) ground.spectral.weight = 0.0;
+  return PrepareAll(o, ground, count);
 }
 
 bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
@@ -119,6 +135,108 @@ TEST(CentroidTableTest, AnItemIsAtBoundZeroFromItself) {
     const std::vector<double> c = Centroid(items[i]);
     EXPECT_EQ(table.LowerBound(c.data(), items[i].bands(), i), 0.0) << i;
   }
+}
+
+// Signatures with 50-value spectra, prepared with the spectral term on
+// (`transform`, weight 1, 20 eigenvalues: the index's default).
+std::vector<PreparedSignature> DrawWithSpectra(int count, uint64_t seed,
+                                               SpectralTransform transform) {
+  SignatureGeneratorOptions o;
+  o.seed = seed;
+  o.classes = 4;
+  o.features = 10;
+  o.spectrum = 50;
+  GroundDistanceOptions ground;
+  ground.spectral.transform = transform;
+  return PrepareAll(o, ground, count);
+}
+
+TEST(CentroidTableTest, SpectralBoundNeverAboveSpectralTermAndWithinRounding) {
+  // Every transform (raw values grow with the index, log ones are small):
+  // the table's one int16 step per table must stay a tight lower bound.
+  for (SpectralTransform transform :
+       {SpectralTransform::kByIndex, SpectralTransform::kRaw,
+        SpectralTransform::kLog}) {
+    std::vector<PreparedSignature> items = DrawWithSpectra(40, 11, transform);
+    auto present = [](uint32_t i) { return i % 5 != 2; };
+    const CentroidTable table = CentroidTable::Build(
+        items.size(), [&](uint32_t i) -> const PreparedSignature* {
+          return present(i) ? &items[i] : nullptr;
+        });
+    ASSERT_EQ(table.spectral_size(), 20);
+    // The oracle of the radius: half a step per value, the step being the
+    // table's largest |value| / 32767.
+    double largest = 0.0;
+    for (const PreparedSignature& p : items) {
+      for (int k = 0; k < p.spectral_size(); ++k)
+        largest = std::max(largest, std::abs(double{p.spectral()[k]}));
+    }
+    const double r = std::sqrt(20.0) * 0.5 * largest / 32767.0 * (1.0 + 1e-6);
+    int compared = 0;
+    double largest_gap = 0.0;
+    for (const PreparedSignature& q : DrawWithSpectra(8, 99, transform)) {
+      const std::vector<double> qc = Centroid(q);
+      for (uint32_t i = 0; i < items.size(); ++i) {
+        const double got =
+            table.SpectralLowerBound(q.spectral(), q.spectral_size(), i);
+        if (!present(i)) {
+          EXPECT_TRUE(SameBits(got, 0.0)) << i;
+          continue;
+        }
+        const double want = SpectralDistance(q, items[i]);
+        EXPECT_LE(got, want) << "slot " << i;
+        EXPECT_GE(got, want - 2.0 * r * (1.0 + 1e-9) - 1e-14 * want)
+            << "slot " << i;
+        // The whole level-1 bound of the index under the default metric.
+        const double level1 = table.LowerBound(qc.data(), q.bands(), i) + got;
+        EXPECT_LE(level1, DistanceLowerBound(q, items[i])) << "slot " << i;
+        EXPECT_LE(level1, Distance(q, items[i])) << "slot " << i;
+        EXPECT_GT(want, 0.0);
+        largest_gap = std::max(largest_gap, (want - got) / want);
+        ++compared;
+      }
+      // A query whose embedding has another length gets no bound.
+      EXPECT_EQ(table.SpectralLowerBound(q.spectral(), 19, 0), 0.0);
+    }
+    EXPECT_EQ(compared, 8 * 32);
+    // Relative to the distance, which between two poses of a class can be
+    // far below the table's largest value (log values).
+    EXPECT_LT(largest_gap, 1e-2) << SpectralTransformName(transform);
+    EXPECT_GT(largest_gap, 0.0);  // the radius is subtracted
+    // An item is at spectral bound 0 from itself (its radius covers its
+    // own quantization).
+    for (uint32_t i = 0; i < items.size(); ++i) {
+      EXPECT_EQ(table.SpectralLowerBound(items[i].spectral(),
+                                         items[i].spectral_size(), i),
+                0.0)
+          << i;
+    }
+  }
+}
+
+TEST(CentroidTableTest, NoSpectralBoundWithoutOrWithMixedEmbeddings) {
+  // Weight 0 (the paper's distance): no embedding, no bytes for it.
+  const std::vector<PreparedSignature> plain =
+      Draw(20, 6, 5, /*spectral=*/false);
+  const CentroidTable without = CentroidTable::Build(
+      plain.size(),
+      [&](uint32_t i) -> const PreparedSignature* { return &plain[i]; });
+  EXPECT_EQ(without.spectral_size(), 0);
+  EXPECT_EQ(without.SpectralLowerBound(nullptr, 0, 0), 0.0);
+  std::vector<PreparedSignature> with =
+      DrawWithSpectra(6, 5, SpectralTransform::kByIndex);
+  const CentroidTable table = CentroidTable::Build(
+      with.size(),
+      [&](uint32_t i) -> const PreparedSignature* { return &with[i]; });
+  EXPECT_EQ(table.MemoryBytes(),
+            without.MemoryBytes() + with.size() * (20 * sizeof(int16_t)));
+  // Items of two spectral sizes in one table (never in one index): the
+  // table keeps no embedding and bounds nothing, still a lower bound.
+  std::vector<const PreparedSignature*> mixed = {&plain[0], &with[0], &with[1]};
+  const CentroidTable m =
+      CentroidTable::Build(mixed.size(), [&](uint32_t i) { return mixed[i]; });
+  EXPECT_EQ(m.spectral_size(), 0);
+  EXPECT_EQ(m.SpectralLowerBound(with[2].spectral(), 20, 1), 0.0);
 }
 
 }  // namespace

@@ -543,5 +543,16 @@ TEST(EmdTest, ConcurrentCallsAgreeWithSequential) {
   EXPECT_EQ(mismatches.load(), 0);
 }
 
+TEST(EmdTest, SignaturesArePrefetchedEarlyWhileMostItemsPassLevelOne) {
+  // The search's prefetch policy: before any bound, and while at least half
+  // of the level-1 items went on to level 2, the signature is prefetched
+  // with the centroid row.
+  EXPECT_TRUE(PrefetchSignatureEarly(0, 0));
+  EXPECT_TRUE(PrefetchSignatureEarly(10, 5));
+  EXPECT_TRUE(PrefetchSignatureEarly(10, 9));
+  EXPECT_FALSE(PrefetchSignatureEarly(10, 4));
+  EXPECT_FALSE(PrefetchSignatureEarly(1, 0));
+}
+
 }  // namespace
 }  // namespace tpr::index

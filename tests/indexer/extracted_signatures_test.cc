@@ -8,8 +8,11 @@
 //   two models' double distances to a query differ by more than their two
 //   bounds, the float32 distances order them the same way. Also prints how
 //   many top-10 lists are identical.
-// - The lower-bound cascade (emd.h): the centroid bound and the relaxed
-//   transport bound never exceed the exact EMD.
+// - The lower-bound cascade (emd.h): the centroid bound (in double and from
+//   the index's quantized CentroidTable) and the relaxed transport bounds
+//   never exceed the exact EMD; with the spectral term on (generated shapes
+//   with their spectra), the table's level-1 bound (centroid + spectral)
+//   and the level-2 bound never exceed the exact distance of metric.h.
 #include <algorithm>
 #include <cstdio>
 #include <fstream>
@@ -24,8 +27,10 @@
 #include "extractor/lib/mesh_io.h"
 #include "extractor/synth/synth.h"
 #include "gtest/gtest.h"
+#include "indexer/lib/centroid_table.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/metric.h"
 #include "tests/indexer/emd_oracle.h"
 #include "tests/indexer/eq7_oracle.h"
 
@@ -97,11 +102,14 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
   const GroundDistanceOptions ground;
   std::vector<PreparedSignature> prepared;
   for (const Signature& s : set) prepared.push_back(*Prepare(s, ground));
+  const CentroidTable table = CentroidTable::Build(
+      prepared.size(), [&](uint32_t i) { return &prepared[i]; });
   LemonEmd lemon;
   Tally tally;
   const size_t n = set.size();
   const size_t step = std::max<size_t>(1, n / static_cast<size_t>(max_queries));
   for (size_t q = 0; q < n; q += step) {
+    const std::vector<double> qc = Centroid(prepared[q]);
     std::vector<double> d32(n), d64(n), slack(n);
     for (size_t j = 0; j < n; ++j) {
       std::vector<double> costs;
@@ -113,6 +121,9 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
       d32[j] = Emd(prepared[q], prepared[j]);
       const double tolerance = d32[j] * 1e-12 + 1e-15;
       EXPECT_LE(EmdLowerBound(prepared[q], prepared[j]), d32[j] + tolerance);
+      EXPECT_LE(table.LowerBound(qc.data(), prepared[q].bands(),
+                                 static_cast<uint32_t>(j)),
+                d32[j] + tolerance);
       EXPECT_LE(RelaxedTransportBound(prepared[q], prepared[j]),
                 d32[j] + tolerance);
       EXPECT_LE(ConstrainedTransportBound(prepared[q], prepared[j]),
@@ -168,25 +179,76 @@ void Report(const char* name, size_t models, const Tally& t) {
       std::to_string(t.identical_top10) + "/" + std::to_string(t.queries));
 }
 
-TEST(ExtractedSignaturesTest, GeneratedShapes) {
-  // 10 synthetic classes x 4 poses at 1500 vertices (always available).
+// GeneratedShapes returns the signatures of every synthetic class x
+// `poses` poses at 1500 vertices (always available), extracted with
+// `options`; a failure is a test failure (and leaves the shape out).
+std::vector<Signature> GeneratedShapes(int poses,
+                                       const extract::Options& options) {
   std::vector<Signature> set;
   synth::ShapeOptions shape;
   shape.target_vertices = 1500;
   for (const std::string& cls : synth::ClassNames()) {
-    for (int pose = 0; pose < 4; ++pose) {
+    for (int pose = 0; pose < poses; ++pose) {
       absl::StatusOr<extract::Mesh> mesh =
           synth::GenerateShape(cls, pose, shape);
-      ASSERT_TRUE(mesh.ok()) << mesh.status();
+      EXPECT_TRUE(mesh.ok()) << mesh.status();
+      if (!mesh.ok()) continue;
       absl::StatusOr<extract::ExtractResult> r = extract::ExtractSignature(
-          *mesh, extract::ComputeMeshStats(*mesh), NoSpectrum());
-      ASSERT_TRUE(r.ok()) << r.status();
-      set.push_back(eval::ToIndexSignature(r->signature));
+          *mesh, extract::ComputeMeshStats(*mesh), options);
+      EXPECT_TRUE(r.ok()) << r.status();
+      if (r.ok()) set.push_back(eval::ToIndexSignature(r->signature));
     }
   }
+  return set;
+}
+
+TEST(ExtractedSignaturesTest, GeneratedShapes) {
+  // 10 synthetic classes x 4 poses.
+  const std::vector<Signature> set = GeneratedShapes(4, NoSpectrum());
+  ASSERT_EQ(set.size(), synth::ClassNames().size() * 4);
   const Tally t = CheckSet(set, 40);
   Report("generated", set.size(), t);
   EXPECT_GT(t.pairs_checked, 0);
+}
+
+TEST(ExtractedSignaturesTest, GeneratedShapesWithSpectraUnderTheDefaultMetric) {
+  // 10 synthetic classes x 3 poses at 1500 vertices, extracted with their
+  // spectra (the extractor's default 20 eigenvalues), under the default
+  // metric (EMD + spectral term): every bound of the index's cascade stays
+  // below the exact distance, pair by pair.
+  std::vector<PreparedSignature> set;
+  for (const Signature& s : GeneratedShapes(3, extract::Options{})) {
+    ASSERT_FALSE(s.spectrum.empty());
+    set.push_back(*Prepare(s, GroundDistanceOptions{}));
+  }
+  ASSERT_EQ(set.size(), synth::ClassNames().size() * 3);
+  const CentroidTable table =
+      CentroidTable::Build(set.size(), [&](uint32_t i) { return &set[i]; });
+  ASSERT_EQ(table.spectral_size(), set[0].spectral_size());
+  int64_t spectral_positive = 0;
+  for (size_t q = 0; q < set.size(); ++q) {
+    const PreparedSignature& a = set[q];
+    const std::vector<double> qc = Centroid(a);
+    for (size_t j = 0; j < set.size(); ++j) {
+      const PreparedSignature& b = set[j];
+      const uint32_t slot = static_cast<uint32_t>(j);
+      const double d = Distance(a, b);
+      const double tolerance = d * 1e-12 + 1e-15;
+      const double spectral = SpectralDistance(a, b);
+      const double table_spectral =
+          table.SpectralLowerBound(a.spectral(), a.spectral_size(), slot);
+      EXPECT_LE(table_spectral, spectral) << q << " " << j;
+      const double level1 =
+          table.LowerBound(qc.data(), a.bands(), slot) + table_spectral;
+      EXPECT_LE(level1, DistanceLowerBound(a, b) + tolerance) << q << " " << j;
+      EXPECT_LE(level1, d + tolerance) << q << " " << j;
+      EXPECT_LE(ConstrainedTransportBound(a, b) + spectral, d + tolerance)
+          << q << " " << j;
+      spectral_positive += spectral > 0.0;
+    }
+  }
+  // The spectra differ between shapes, so the spectral bound is exercised.
+  EXPECT_GT(spectral_positive, static_cast<int64_t>(set.size() * 20));
 }
 
 TEST(ExtractedSignaturesTest, Shrec11Simplified) {
