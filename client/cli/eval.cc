@@ -4,12 +4,14 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
 #include <set>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -17,11 +19,13 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/cli/command.h"
+#include "eval/lib/d2.h"
 #include "eval/lib/dataset.h"
 #include "eval/lib/distance_matrix.h"
 #include "eval/lib/metrics.h"
 #include "eval/lib/plots.h"
 #include "eval/lib/report.h"
+#include "extractor/lib/mesh_io.h"
 
 namespace tpr::cli {
 namespace {
@@ -59,12 +63,13 @@ absl::StatusOr<eval::Query> SearchOne(
     const IndexerClient& indexer, const std::vector<Item>& items,
     const std::vector<int>& evaluated,
     const std::unordered_map<std::string, int>& index_of, int query, int k,
-    const tpr::client::CallOptions& call) {
+    const tpr::v1::Ranking* ranking, const tpr::client::CallOptions& call) {
   const std::string& id = items[evaluated[query]].id;
   tpr::v1::SearchRequest request;
   request.set_id(id);
   request.set_exclude_self(true);
   request.set_k(k);
+  if (ranking != nullptr) *request.mutable_ranking() = *ranking;
   std::unique_ptr<tpr::client::SearchStream> stream =
       indexer.Search(request, &call);
   eval::Query q;
@@ -80,6 +85,140 @@ absl::StatusOr<eval::Query> SearchOne(
   absl::Status status = stream->Finish();
   if (!status.ok()) return status;
   return q;
+}
+
+// RankAll runs SearchOne for every evaluated model (`jobs` at a time) under
+// `ranking` (null: the index's own distance). Failed queries are added to
+// `failures` with `what` in front; the model stays in the others' rankings.
+std::vector<eval::Query> RankAll(
+    const IndexerClient& indexer, const std::vector<Item>& items,
+    const std::vector<int>& evaluated,
+    const std::unordered_map<std::string, int>& index_of, int k,
+    const tpr::v1::Ranking* ranking, int jobs,
+    const tpr::client::CallOptions& call, const std::string& what,
+    Failures* failures) {
+  std::vector<absl::StatusOr<eval::Query>> results(evaluated.size());
+  Progress progress(evaluated.size(), absl::StrFormat("%-10s", what));
+  ParallelFor(evaluated.size(), jobs, [&](size_t e) {
+    results[e] = SearchOne(indexer, items, evaluated, index_of,
+                           static_cast<int>(e), k, ranking, call);
+    progress.Step(items[evaluated[e]].id,
+                  results[e].ok() ? "queried" : "FAILED");
+  });
+  std::vector<eval::Query> queries;
+  for (size_t e = 0; e < evaluated.size(); ++e) {
+    if (results[e].ok()) {
+      queries.push_back(std::move(*results[e]));
+    } else {
+      failures->emplace_back(
+          items[evaluated[e]].id,
+          absl::StrCat(what, ": ", results[e].status().ToString()));
+    }
+  }
+  return queries;
+}
+
+// D2Queries ranks the evaluated models by the D2 shape distribution
+// (Osada et al. 2001; eval/lib/d2.h, the options tpr-eval-local uses),
+// computed here from the mesh files, not by the services: the baseline of
+// issue 9's side-by-side tables. A file that cannot be read fails the
+// column (NOT_FOUND / INVALID_ARGUMENT naming it).
+absl::StatusOr<std::vector<eval::Query>> D2Queries(
+    const std::vector<Item>& items, const std::vector<int>& evaluated,
+    int jobs) {
+  std::vector<std::vector<double>> histograms(evaluated.size());
+  std::vector<absl::Status> errors(evaluated.size());
+  Progress progress(evaluated.size(), "D2        ");
+  ParallelFor(evaluated.size(), jobs, [&](size_t e) {
+    const Item& item = items[evaluated[e]];
+    absl::StatusOr<extract::LoadedMesh> loaded =
+        extract::LoadMeshFromFile(item.path, extract::IntakeOptions{});
+    if (loaded.ok()) {
+      histograms[e] = eval::D2Histogram(loaded->mesh, eval::D2Options{});
+    } else {
+      errors[e] = loaded.status();
+    }
+    progress.Step(item.id, loaded.ok() ? "D2" : "FAILED");
+  });
+  for (size_t e = 0; e < evaluated.size(); ++e) {
+    if (!errors[e].ok()) {
+      return absl::Status(
+          errors[e].code(),
+          absl::StrCat(items[evaluated[e]].id, ": ", errors[e].message()));
+    }
+  }
+  return eval::LeaveOneOutQueries(
+      eval::PairwiseDistances(evaluated.size(), jobs, [&] {
+        return [&](size_t i, size_t j) {
+          return eval::D2Distance(histograms[i], histograms[j]);
+        };
+      }));
+}
+
+// One column of `tpr eval --compare`: a way of ranking and its scores, or
+// why it could not be computed.
+struct Column {
+  std::string key;    // JSON key
+  std::string title;  // text heading
+  eval::Scores scores;
+  std::string unavailable;  // "" when scored
+};
+
+// CompareTableText prints the columns side by side: overall NN, FT, ST, E,
+// DCG and mAP per column, then NN and FT per class and column.
+std::string CompareTableText(const std::vector<Column>& columns,
+                             const eval::ClassSizes& sizes) {
+  std::string out =
+      absl::StrFormat("%-34s %6s %6s %6s %6s %6s %6s\n", "side by side", "NN",
+                      "FT", "ST", "E", "DCG", "mAP");
+  for (const Column& c : columns) {
+    if (!c.unavailable.empty()) {
+      absl::StrAppendFormat(&out, "%-34s unavailable: %s\n", c.title,
+                            c.unavailable);
+      continue;
+    }
+    const eval::Metrics& m = c.scores.overall;
+    absl::StrAppendFormat(&out, "%-34s %6.3f %6.3f %6.3f %6.3f %6.3f %6.3f\n",
+                          c.title, m.nn, m.ft, m.st, m.e, m.dcg, m.map);
+  }
+  out += "\nper class, NN / FT:\n";
+  absl::StrAppendFormat(&out, "%-16s", "class");
+  for (const Column& c : columns) absl::StrAppendFormat(&out, " %13s", c.key);
+  out += "\n";
+  for (const auto& [label, count] : sizes) {
+    absl::StrAppendFormat(&out, "%-16s", TextField(label));
+    for (const Column& c : columns) {
+      auto it = c.scores.per_class.find(label);
+      if (!c.unavailable.empty() || it == c.scores.per_class.end()) {
+        absl::StrAppendFormat(&out, " %13s", "-");
+      } else {
+        absl::StrAppendFormat(&out, "   %.3f/%.3f", it->second.nn,
+                              it->second.ft);
+      }
+    }
+    out += "\n";
+  }
+  return out;
+}
+
+// CompareJson returns {"<key>":{<metrics>,"per_class":{...}} or
+// {"unavailable":"why"},...}.
+std::string CompareJson(const std::vector<Column>& columns,
+                        const eval::ClassSizes& sizes) {
+  std::string out = "{";
+  for (const Column& c : columns) {
+    if (out.size() > 1) out += ",";
+    absl::StrAppend(&out, JsonString(c.key),
+                    ":{\"title\":", JsonString(c.title), ",");
+    if (!c.unavailable.empty()) {
+      absl::StrAppend(&out, "\"unavailable\":", JsonString(c.unavailable), "}");
+    } else {
+      absl::StrAppend(&out, eval::MetricsJsonFields(c.scores.overall),
+                      ",\"per_class\":", eval::PerClassJson(c.scores, sizes),
+                      "}");
+    }
+  }
+  return out + "}";
 }
 
 }  // namespace
@@ -123,6 +262,8 @@ int RunEval(const Globals& g, const std::string& dataset,
   // evaluated model is ranked even when the indexer holds other models too.
   std::vector<eval::Query> queries;
   double query_seconds = 0;
+  std::vector<Column> compare;  // with options.compare: the other columns
+  std::vector<std::pair<std::string, std::vector<eval::Query>>> compare_queries;
   if (evaluated.size() >= 2) {
     absl::StatusOr<tpr::v1::StatsResponse> stats = indexer->Stats(&call);
     if (!stats.ok()) return Fail("indexer stats", stats.status());
@@ -136,25 +277,51 @@ int RunEval(const Globals& g, const std::string& dataset,
     for (size_t e = 0; e < evaluated.size(); ++e) {
       index_of[(*items)[evaluated[e]].id] = static_cast<int>(e);
     }
-    std::vector<absl::StatusOr<eval::Query>> results(evaluated.size());
-    Progress query_progress(evaluated.size(), "querying  ");
-    ParallelFor(evaluated.size(), options.add.jobs, [&](size_t e) {
-      results[e] = SearchOne(*indexer, *items, evaluated, index_of,
-                             static_cast<int>(e), static_cast<int>(k), call);
-      query_progress.Step((*items)[evaluated[e]].id,
-                          results[e].ok() ? "queried" : "FAILED");
-    });
-    query_seconds = query_progress.Elapsed();
-    for (size_t e = 0; e < evaluated.size(); ++e) {
-      if (results[e].ok()) {
-        queries.push_back(std::move(*results[e]));
-      } else {
-        // The model stays in the others' rankings; only its own query is
-        // left out.
-        failures.emplace_back(
-            (*items)[evaluated[e]].id,
-            absl::StrCat("query: ", results[e].status().ToString()));
+    const auto start = std::chrono::steady_clock::now();
+    queries =
+        RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
+                nullptr, options.add.jobs, call, "query", &failures);
+    query_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+            .count();
+    if (options.compare) {
+      // The side-by-side columns of issue 9: the paper's distance and the
+      // spectrum alone ranked by the indexer (SearchRequest.ranking), D2
+      // here.
+      tpr::v1::Ranking paper, spectrum;
+      paper.set_emd_weight(1.0);
+      spectrum.set_spectral_weight(1.0);
+      for (const auto& [key, title, ranking] :
+           {std::tuple<std::string, std::string, const tpr::v1::Ranking*>{
+                "paper", "paper TPR (EMD of Eq. 7 alone)", &paper},
+            {"spectrum", "spectrum alone (ShapeDNA)", &spectrum}}) {
+        Failures column_failures;
+        std::vector<eval::Query> q =
+            RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
+                    ranking, options.add.jobs, call, key, &column_failures);
+        Column c;
+        c.key = key;
+        c.title = title;
+        if (q.empty() && !column_failures.empty()) {
+          c.unavailable = column_failures.front().second;
+        } else {
+          compare_queries.emplace_back(key, std::move(q));
+          failures.insert(failures.end(), column_failures.begin(),
+                          column_failures.end());
+        }
+        compare.push_back(std::move(c));
       }
+      absl::StatusOr<std::vector<eval::Query>> d2 =
+          D2Queries(*items, evaluated, options.add.jobs);
+      Column c;
+      c.key = "d2";
+      c.title = "D2 (Osada et al. 2001, L1; local)";
+      if (d2.ok()) {
+        compare_queries.emplace_back("d2", std::move(*d2));
+      } else {
+        c.unavailable = d2.status().ToString();
+      }
+      compare.push_back(std::move(c));
     }
   }
   std::sort(failures.begin(), failures.end());
@@ -166,6 +333,18 @@ int RunEval(const Globals& g, const std::string& dataset,
   // Issue 9's measure of class separation under the served distance.
   const eval::ClassSeparation separation = eval::Separation(labels, queries);
   const bool evaluable = scores.overall.queries > 0;
+  if (options.compare) {
+    for (Column& c : compare) {
+      for (const auto& [key, q] : compare_queries) {
+        if (key == c.key) c.scores = eval::Evaluate(labels, q);
+      }
+    }
+    Column own;
+    own.key = "default";
+    own.title = "default (the index's distance)";
+    own.scores = scores;
+    compare.insert(compare.begin(), std::move(own));
+  }
 
   // 3. Pictures.
   std::string written;
@@ -203,15 +382,20 @@ int RunEval(const Globals& g, const std::string& dataset,
         "{\"models\":%zu,\"classes\":%zu,%s,\"per_class\":%s,\"files\":%zu,"
         "\"added\":%d,\"updated\":%d,\"skipped\":%d,\"failed\":%zu,"
         "\"failures\":%s,"
-        "\"within_between\":%s,"
+        "\"within_between\":%s,%s"
         "\"extract_seconds\":%.3f,\"query_seconds\":%.3f,\"out\":%s}\n",
         evaluated.size(), models_per_class.size(),
         eval::MetricsJsonFields(scores.overall).c_str(),
         eval::PerClassJson(scores, models_per_class).c_str(), items->size(),
         added, updated, skipped, failures.size(),
         FailuresJson(failures).c_str(),
-        eval::JsonNumber(separation.Ratio()).c_str(), add_seconds,
-        query_seconds,
+        eval::JsonNumber(separation.Ratio()).c_str(),
+        options.compare
+            ? absl::StrCat(
+                  "\"compare\":", CompareJson(compare, models_per_class), ",")
+                  .c_str()
+            : "",
+        add_seconds, query_seconds,
         evaluable && pictures.ok() ? JsonString(out_dir).c_str() : "null");
   } else {
     std::printf(
@@ -226,6 +410,10 @@ int RunEval(const Globals& g, const std::string& dataset,
           "mean distance within classes %.4g, between %.4g, ratio %.4f (the "
           "indexer's distance)\n",
           separation.within, separation.between, separation.Ratio());
+      if (options.compare) {
+        std::printf("\n%s",
+                    CompareTableText(compare, models_per_class).c_str());
+      }
     }
     PrintFailures(failures);
     if (evaluable && pictures.ok())
@@ -270,6 +458,12 @@ const bool kRegistered = RegisterCommand(
                       "parallel uploads and queries")
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
+       sub.add_flag("--compare", flags->options.compare,
+                    "also rank by the paper's distance alone and by the "
+                    "spectrum alone (the indexer ranks every model: about "
+                    "N^2 more EMDs) and by D2 (computed here from the "
+                    "files), and print the four side by side, overall and "
+                    "per class");
        sub.add_flag("--update", flags->options.add.update,
                     "re-extract ids already in the indexer (default: use them "
                     "as they are)");

@@ -30,6 +30,11 @@ struct EvalOptions {
   // temporary folder (mkdtemp under $TMPDIR, else /tmp), named in the
   // output, so that a run never litters the working tree.
   std::string out_dir;
+  // Also score, side by side with the index's distance: the paper's
+  // distance alone and the spectrum alone (SearchRequest.ranking, ranked
+  // exhaustively by the indexer) and D2 (eval/lib/d2.h, computed by the
+  // client from the files). Default false.
+  bool compare = false;
 };
 
 // RunEval evaluates `dataset` (a folder of class subfolders, or a manifest
@@ -39,7 +44,10 @@ struct EvalOptions {
 // listed with their reasons and left out of the metrics. Prints a table per
 // class and overall (models, NN, FT, ST, E, DCG, mAP), or with g.json one
 // object {"models", "classes", "nn", "ft", "st", "e", "dcg", "map", "pr",
-// "per_class": {class: {...}}, "failures": [...], ...}, and writes
+// "per_class": {class: {...}}, "failures": [...], ...; with
+// options.compare also "compare": {"default"|"paper"|"spectrum"|"d2":
+// {"title", metrics, "per_class"} or {"title", "unavailable": why}}}, and
+// writes
 // OUT/precision_recall.svg and OUT/similarity.svg (OUT: options.out_dir,
 // or a fresh temporary folder).
 // Returns the exit code: 0 when metrics were computed (even if some models

@@ -48,7 +48,13 @@ int main(int argc, char** argv) {
     sub->footer(footer);
     actions.emplace_back(sub, command.setup(*sub));
   }
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // CLI11 prints the message (or the help, which exits 0); every usage
+    // error (unknown flag, bad or missing value) exits 2, as documented.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
   for (const auto& [sub, action] : actions) {
     if (*sub) return action(g);
   }

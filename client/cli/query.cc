@@ -18,6 +18,10 @@ struct QueryFlags {
   int k = 10;
   double radius = 0;
   bool exclude_self = false;
+  // --rank-by: "" or "default" (the index's distance, the VP-tree),
+  // "paper" (the EMD of Eq. 7 alone) or "spectrum" (the spectrum alone);
+  // the last two rank every model (SearchRequest.ranking).
+  std::string rank_by;
 };
 
 int RunQuery(const Globals& g, const QueryFlags& flags) {
@@ -42,6 +46,11 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
   request.set_k(flags.k);
   request.set_radius(flags.radius);
   request.set_label(flags.label);
+  if (flags.rank_by == "paper") {
+    request.mutable_ranking()->set_emd_weight(1.0);
+  } else if (flags.rank_by == "spectrum") {
+    request.mutable_ranking()->set_spectral_weight(1.0);
+  }
   std::unique_ptr<tpr::client::SearchStream> stream = indexer->Search(request);
   bool header = false;
   for (tpr::v1::Neighbor n; stream->Next(&n);) {
@@ -88,6 +97,11 @@ const bool kRegistered = RegisterCommand(
        sub.add_option("--label", flags->label, "only models with this label");
        sub.add_flag("--exclude-self", flags->exclude_self,
                     "with --id, leave the query model out");
+       sub.add_option("--rank-by", flags->rank_by,
+                      "default: the index's distance (VP-tree); paper: the "
+                      "EMD of Eq. 7 alone; spectrum: the spectrum alone "
+                      "(these two compare the query with every model)")
+           ->check(CLI::IsMember({"default", "paper", "spectrum"}));
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});
 

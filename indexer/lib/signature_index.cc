@@ -523,6 +523,126 @@ absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
           : 2 * static_cast<size_t>(std::max(options_.search_threads, 1))));
 }
 
+namespace {
+
+// ExhaustiveCursor: SearchExhaustive's cursor. Ranks every live entry of
+// its snapshot under d_w on the first Next() (so that the caller's locks,
+// held while the search starts, are not held for O(n) EMDs), then streams.
+class ExhaustiveCursor final : public SignatureIndex::Cursor {
+ public:
+  ExhaustiveCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
+                   PreparedSignature query, double emd_weight,
+                   double spectral_factor, double radius,
+                   std::function<bool(const std::string&)> filter,
+                   std::function<bool()> stop)
+      : snapshot_(std::move(snapshot)),
+        query_(std::move(query)),
+        emd_weight_(emd_weight),
+        spectral_factor_(spectral_factor),
+        radius_(radius),
+        filter_(std::move(filter)),
+        stop_(std::move(stop)) {}
+
+  std::optional<Neighbor> Next() override {
+    if (!ranked_) Rank();
+    if (stopped_ || next_ >= ranked_list_.size()) return std::nullopt;
+    return ranked_list_[next_++];
+  }
+  const SearchStats& stats() const override { return stats_; }
+
+ private:
+  // Returns false once `stop_` asked to end.
+  bool Consider(const std::string& id, const PreparedSignature& p) {
+    if (stop_ && stop_()) {
+      stopped_ = true;
+      return false;
+    }
+    if (filter_ && !filter_(id)) return true;
+    double d = 0.0;
+    if (emd_weight_ > 0.0) {
+      d += emd_weight_ * Emd(query_, p);
+      ++stats_.emd_computations;
+    }
+    if (spectral_factor_ > 0.0)
+      d += spectral_factor_ * SpectralDistance(query_, p);
+    if (std::isnan(d) || (radius_ > 0.0 && d > radius_)) return true;
+    ranked_list_.push_back({id, d});
+    return true;
+  }
+
+  void Rank() {
+    ranked_ = true;
+    const SignatureIndex::Snapshot& s = *snapshot_;
+    const TreePart& t = *s.tree;
+    for (uint32_t i = 0; i < t.ids.size(); ++i) {
+      if (t.prepared[i] == nullptr || s.Dead(i)) continue;
+      if (!Consider(t.ids[i], *t.prepared[i])) return;
+    }
+    for (const BufferEntry& e : s.buffer) {
+      if (!Consider(e.id, *e.prepared)) return;
+    }
+    std::sort(ranked_list_.begin(), ranked_list_.end(),
+              [](const Neighbor& a, const Neighbor& b) {
+                return a.distance != b.distance ? a.distance < b.distance
+                                                : a.id < b.id;
+              });
+  }
+
+  std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
+  PreparedSignature query_;
+  const double emd_weight_;
+  // The weighting's spectral factor over the index's own spectral weight:
+  // the prepared embeddings already carry w_s (spectral.h).
+  const double spectral_factor_;
+  const double radius_;
+  std::function<bool(const std::string&)> filter_;
+  std::function<bool()> stop_;
+  bool ranked_ = false;
+  bool stopped_ = false;
+  std::vector<Neighbor> ranked_list_;
+  size_t next_ = 0;
+  SearchStats stats_;
+};
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>>
+SignatureIndex::SearchExhaustive(
+    const Signature& query, const Weighting& weighting, double radius,
+    std::function<bool(const std::string& id)> filter,
+    std::function<bool()> stop) const {
+  for (const auto& [name, w] :
+       {std::pair<const char*, double>{"emd weight", weighting.emd},
+        {"spectral weight", weighting.spectral}}) {
+    if (!std::isfinite(w) || w < 0.0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(name, " is ", w, "; it must be finite and >= 0"));
+    }
+  }
+  if (weighting.emd == 0.0 && weighting.spectral == 0.0) {
+    return absl::InvalidArgumentError(
+        "emd weight and spectral weight are both 0; at least one must be "
+        "positive");
+  }
+  const double own = options_.ground.spectral.weight;
+  if (weighting.spectral > 0.0 && own == 0.0) {
+    return absl::FailedPreconditionError(
+        "a spectral weight needs the index's spectral term, but this index "
+        "ranks with spectral weight 0 and keeps no spectra");
+  }
+  if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
+  absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
+  if (!prepared.ok()) {
+    return absl::Status(
+        prepared.status().code(),
+        absl::StrCat("query signature: ", prepared.status().message()));
+  }
+  return std::unique_ptr<Cursor>(std::make_unique<ExhaustiveCursor>(
+      snapshot(), *std::move(prepared), weighting.emd,
+      own > 0.0 ? weighting.spectral / own : 0.0, radius, std::move(filter),
+      std::move(stop)));
+}
+
 std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,
                                           SearchStats* stats) const {
   std::vector<Neighbor> out;

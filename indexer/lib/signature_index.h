@@ -151,6 +151,35 @@ class SignatureIndex {
       const Signature& query, double radius,
       std::function<bool(const std::string& id)> filter,
       std::function<bool()> stop = nullptr) const;
+  // Weighting: another distance over the index's two terms, for one search
+  // (proto tpr.v1.Ranking):
+  //   d_w(A, B) = emd * EMD(A, B) + spectral * S1(A, B),
+  // EMD the paper's distance (Eq. 7) and S1 the spectral term of metric.h
+  // at weight 1 (the index's own phi and length). With emd, spectral >= 0
+  // d_w is a sum of two scaled pseudometrics, hence a pseudometric (the
+  // proof of metric.h, term by term). {1, 0} is the paper's TPR distance;
+  // {0, 1} the spectrum alone (ShapeDNA).
+  struct Weighting {
+    double emd = 1.0;
+    double spectral = 0.0;
+  };
+
+  // SearchExhaustive is Search under `weighting` instead of the index's own
+  // distance. The VP-tree's pruning holds only for the distance it was
+  // built with, so this computes d_w to every live entry that passes
+  // `filter` (the EMD only where weighting.emd > 0), drops NaN and those
+  // beyond `radius` (<= 0: unlimited), sorts by (distance, id) and streams:
+  // exact for any weighting, as BruteForceIndex is. The work is done on the
+  // first Next(), from the calling thread; `stop` is polled before each
+  // distance, and once it returns true the cursor ends. Returns
+  // INVALID_ARGUMENT for a malformed query or weights that are negative,
+  // not finite or both 0; FAILED_PRECONDITION when weighting.spectral > 0
+  // and the index's spectral weight is 0 (it keeps no spectra). Cost: O(n)
+  // distances and O(n log n) on the first Next(), O(n) memory.
+  absl::StatusOr<std::unique_ptr<Cursor>> SearchExhaustive(
+      const Signature& query, const Weighting& weighting, double radius,
+      std::function<bool(const std::string& id)> filter,
+      std::function<bool()> stop = nullptr) const;
   // Knn returns the min(k, size()) nearest neighbours in ascending
   // (distance, id) order; empty for k == 0 or a malformed query. `stats`,
   // when set, receives the work done.

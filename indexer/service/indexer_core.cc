@@ -431,6 +431,12 @@ tpr::v1::StatsResponse IndexerCore::Stats() const {
 // ---------------------------------------------------------------------------
 // Search.
 
+bool IndexerCore::UsesOwnDistance(const tpr::v1::SearchRequest& request) const {
+  return !request.has_ranking() || (request.ranking().emd_weight() == 1.0 &&
+                                    request.ranking().spectral_weight() ==
+                                        options_.index.ground.spectral.weight);
+}
+
 absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     const tpr::v1::SearchRequest& request,
     std::function<bool()> cancelled) const {
@@ -503,8 +509,19 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     // Cancellation is polled between EMDs inside the ranked search: one
     // cursor step may otherwise run many EMDs (a filtered or far-reaching
     // search), which kept the server busy after the client's deadline.
-    TPR_ASSIGN_OR_RETURN(
-        cursor, index_->Search(query, request.radius(), filter, cancelled));
+    if (UsesOwnDistance(request)) {
+      TPR_ASSIGN_OR_RETURN(
+          cursor, index_->Search(query, request.radius(), filter, cancelled));
+    } else {
+      // Another weighting of the two terms: exact, but over every model
+      // (the tree prunes only for its own distance); the ranking runs on
+      // the first Next(), outside view_mu_.
+      TPR_ASSIGN_OR_RETURN(cursor, index_->SearchExhaustive(
+                                       query,
+                                       {request.ranking().emd_weight(),
+                                        request.ranking().spectral_weight()},
+                                       request.radius(), filter, cancelled));
+    }
   }
   return MakeSearchSession(std::move(cursor), request.k(), std::move(cancelled),
                            std::move(labels));

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <limits>
 #include <map>
 #include <random>
 #include <string>
@@ -412,6 +413,151 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
                  "radius " + std::to_string(q));
     }
   }
+}
+
+// DrainExhaustive returns every neighbour SearchExhaustive yields.
+std::vector<Neighbor> DrainExhaustive(
+    const SignatureIndex& index, const Signature& query,
+    SignatureIndex::Weighting w, double radius = 0.0,
+    std::function<bool(const std::string&)> filter = nullptr) {
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
+      index.SearchExhaustive(query, w, radius, std::move(filter));
+  EXPECT_TRUE(cursor.ok()) << cursor.status();
+  std::vector<Neighbor> got;
+  if (!cursor.ok()) return got;
+  while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
+  return got;
+}
+
+TEST(SignatureIndexTest, ExhaustiveRankingsEqualAnIndependentBruteForce) {
+  // Another weighting of the two terms (proto Ranking): the paper's EMD
+  // alone, the spectrum alone and a mix, against an oracle that prepares
+  // every signature itself with the spectral term at weight 1 and sums the
+  // terms. The index keeps its embedding at weight 0.6 in float32, so the
+  // spectral parts agree to float rounding, not bit for bit; the EMD alone
+  // and the index's own weighting (the VP-tree's answers) agree exactly.
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 33;
+  gopt.classes = 8;
+  gopt.spectrum = 30;
+  SignatureGenerator gen(gopt);
+  IndexOptions options = ManualOptions();
+  options.ground.spectral.weight = 0.6;
+  SignatureIndex index(options);
+  GroundDistanceOptions unit = options.ground;
+  unit.spectral.weight = 1.0;
+  std::map<std::string, PreparedSignature> live;
+  std::vector<Signature> stored;
+  for (int i = 0; i < 150; ++i) {
+    const Signature s = i % 10 == 9 ? stored[static_cast<size_t>(i - 4)]
+                                    : gen.Next();  // some exact copies
+    stored.push_back(s);
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    live.insert_or_assign(Id(i), *Prepare(s, unit));
+  }
+  index.Rebuild();
+  for (int i = 150; i < 170; ++i) {  // buffer entries and a tombstone
+    const Signature s = gen.Next();
+    ASSERT_TRUE(index.Upsert(Id(i), s).ok());
+    live.insert_or_assign(Id(i), *Prepare(s, unit));
+  }
+  ASSERT_TRUE(index.Remove(Id(7)));
+  live.erase(Id(7));
+  auto brute = [&](const Signature& query, SignatureIndex::Weighting w,
+                   double radius, const std::string& skip) {
+    const PreparedSignature q = *Prepare(query, unit);
+    std::vector<Neighbor> all;
+    for (const auto& [id, p] : live) {
+      if (id == skip) continue;
+      const double d = w.emd * Emd(q, p) + w.spectral * SpectralDistance(q, p);
+      if (radius > 0.0 && d > radius) continue;
+      all.push_back({id, d});
+    }
+    std::sort(all.begin(), all.end(), [](const Neighbor& a, const Neighbor& b) {
+      return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
+    });
+    return all;
+  };
+  std::vector<Signature> queries = Queries(&gen, 6);
+  queries.push_back(stored[9]);  // has a copy at distance 0
+  const SignatureIndex::Weighting weightings[] = {{1, 0}, {0, 1}, {0.5, 2}};
+  for (size_t q = 0; q < queries.size(); ++q) {
+    for (const SignatureIndex::Weighting& w : weightings) {
+      const std::string ctx = "query " + std::to_string(q) + " w " +
+                              std::to_string(w.emd) + "/" +
+                              std::to_string(w.spectral);
+      const std::vector<Neighbor> want = brute(queries[q], w, 0.0, Id(3));
+      const std::vector<Neighbor> got =
+          DrainExhaustive(index, queries[q], w, 0.0,
+                          [](const std::string& id) { return id != Id(3); });
+      ASSERT_EQ(got.size(), want.size()) << ctx;
+      for (size_t i = 0; i < got.size(); ++i) {
+        EXPECT_EQ(got[i].id, want[i].id) << ctx << " rank " << i;
+        if (w.spectral == 0.0) {
+          EXPECT_EQ(got[i].distance, want[i].distance) << ctx << " rank " << i;
+        } else {
+          EXPECT_NEAR(got[i].distance, want[i].distance,
+                      1e-6 * (1.0 + want[i].distance))
+              << ctx << " rank " << i;
+        }
+      }
+      // Radius: exactly the oracle's ids within it. It lies halfway between
+      // two ranks that are not tied, so that float rounding of the spectral
+      // part cannot move an item across it.
+      size_t m = want.size() / 3;
+      while (m + 2 < want.size() && want[m + 1].distance - want[m].distance <
+                                        1e-5 * (1.0 + want[m].distance)) {
+        ++m;
+      }
+      const double radius = 0.5 * (want[m].distance + want[m + 1].distance);
+      std::vector<Neighbor> in = DrainExhaustive(index, queries[q], w, radius);
+      std::vector<Neighbor> want_in = brute(queries[q], w, radius, "");
+      ASSERT_EQ(in.size(), want_in.size()) << ctx << " radius";
+      for (size_t i = 0; i < in.size(); ++i)
+        EXPECT_EQ(in[i].id, want_in[i].id) << ctx << " radius rank " << i;
+    }
+    // The index's own weighting, ranked exhaustively, is the tree's answer
+    // bit for bit (same terms, same order of summation).
+    ExpectSame(DrainExhaustive(index, queries[q], {1.0, 0.6}),
+               Drain(index, queries[q], 0.0), "own " + std::to_string(q));
+  }
+}
+
+TEST(SignatureIndexTest, ExhaustiveRankingRefusesBadWeightsAndStops) {
+  SignatureGeneratorOptions gopt;
+  gopt.seed = 5;
+  gopt.spectrum = 20;
+  SignatureGenerator gen(gopt);
+  SignatureIndex index(ManualOptions());  // spectral weight 1 by default
+  for (int i = 0; i < 20; ++i)
+    ASSERT_TRUE(index.Upsert(Id(i), gen.Next()).ok());
+  const Signature q = gen.Next();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (SignatureIndex::Weighting w : std::vector<SignatureIndex::Weighting>{
+           {-1, 0}, {0, -0.5}, {nan, 1}, {1, inf}, {0, 0}}) {
+    absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> c =
+        index.SearchExhaustive(q, w, 0.0, nullptr);
+    EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument)
+        << w.emd << " " << w.spectral;
+  }
+  IndexOptions no_spectra = ManualOptions();
+  no_spectra.ground.spectral.weight = 0.0;
+  SignatureIndex paper(no_spectra);
+  ASSERT_TRUE(paper.Upsert("a", gen.Next()).ok());
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> c =
+      paper.SearchExhaustive(q, {0, 1}, 0.0, nullptr);
+  EXPECT_EQ(c.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_TRUE(paper.SearchExhaustive(q, {1, 0}, 0.0, nullptr).ok());
+  // stop: polled before each distance; once true, nothing more is computed
+  // and the cursor ends.
+  int polls = 0;
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> stopped =
+      index.SearchExhaustive(q, {1, 0}, 0.0, nullptr,
+                             [&polls] { return ++polls > 5; });
+  ASSERT_TRUE(stopped.ok());
+  EXPECT_FALSE((*stopped)->Next().has_value());
+  EXPECT_EQ((*stopped)->stats().emd_computations, 5);
 }
 
 TEST(SignatureIndexTest, PrunesOnClusteredData) {

@@ -124,6 +124,45 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
     EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << "query " << id;
   }
 
+  // --rank-by: the paper's EMD alone and the spectrum alone, over every
+  // model, against the brute force under that distance.
+  {
+    const auto& [id, signature] = models.front();
+    const std::pair<const char*,
+                    std::function<double(const index::PreparedSignature&,
+                                         const index::PreparedSignature&)>>
+        rankings[] = {{"paper",
+                       [](const index::PreparedSignature& a,
+                          const index::PreparedSignature& b) {
+                         return index::Emd(a, b);
+                       }},
+                      {"spectrum", [](const index::PreparedSignature& a,
+                                      const index::PreparedSignature& b) {
+                         return index::SpectralDistance(a, b);
+                       }}};
+    for (const auto& [name, distance] : rankings) {
+      CommandResult q = RunTpr(
+          cluster_,
+          absl::StrCat("--json query -k 6 --rank-by ", name, " --id ", id));
+      ASSERT_EQ(q.exit_code, 0) << q.err;
+      std::vector<Ranked> streamed;
+      for (const std::string& line : Lines(q.out)) {
+        int rank;
+        std::string got_id, label;
+        double d;
+        ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &d)) << line;
+        streamed.push_back({d, got_id});
+      }
+      absl::StatusOr<std::vector<Ranked>> expected =
+          testing::BruteForceRanking(signature, models, distance);
+      ASSERT_TRUE(expected.ok()) << expected.status();
+      ASSERT_EQ(streamed.size(), 6u);
+      EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << name;
+    }
+    EXPECT_EQ(RunTpr(cluster_, "query --rank-by nonsense --id " + id).exit_code,
+              2);
+  }
+
   // Query by mesh file, with a label filter and k.
   const testing::GeneratedFile& f = files->back();
   CommandResult by_mesh =

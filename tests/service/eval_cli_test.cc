@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "eval/lib/d2.h"
 #include "eval/lib/metrics.h"
 #include "eval/lib/tpr_descriptor.h"
 #include "extractor/lib/extract.h"
@@ -90,13 +91,22 @@ std::vector<LabelledMesh> ReadSynthManifest(const std::string& dir) {
 // default ground distance (as the indexer does), EMD between every pair.
 using Matrix = std::vector<std::vector<double>>;
 
-absl::StatusOr<Matrix> InProcessDistances(
+// Besides the index's distance (tpr): the paper's EMD alone, the spectral
+// term at weight 1 alone, and D2 from the same loaded meshes, the columns
+// of `tpr eval --compare`.
+struct Matrices {
+  Matrix tpr, paper, spectrum, d2;
+};
+
+absl::StatusOr<Matrices> InProcessMatrices(
     const std::vector<LabelledMesh>& meshes) {
   std::vector<index::PreparedSignature> prepared;
+  std::vector<std::vector<double>> d2;
   for (const LabelledMesh& m : meshes) {
     absl::StatusOr<extract::LoadedMesh> loaded =
         extract::LoadMeshFromFile(m.path, {});
     if (!loaded.ok()) return loaded.status();
+    d2.push_back(eval::D2Histogram(loaded->mesh, eval::D2Options{}));
     absl::StatusOr<extract::ExtractResult> r = extract::ExtractSignature(
         loaded->mesh, loaded->stats, extract::Options{});
     if (!r.ok()) return r.status();
@@ -106,12 +116,28 @@ absl::StatusOr<Matrix> InProcessDistances(
     prepared.push_back(std::move(*p));
   }
   const size_t n = prepared.size();
-  Matrix d(n, std::vector<double>(n, 0.0));
+  const Matrix zero(n, std::vector<double>(n, 0.0));
+  Matrices d{zero, zero, zero, zero};
+  // The index's default spectral weight is 1, so its spectral term is the
+  // term at weight 1 (what Ranking{spectral_weight: 1} ranks by).
+  EXPECT_EQ(index::GroundDistanceOptions{}.spectral.weight, 1.0);
   for (size_t i = 0; i < n; ++i) {
-    for (size_t j = i + 1; j < n; ++j)
-      d[i][j] = d[j][i] = index::Distance(prepared[i], prepared[j]);
+    for (size_t j = i + 1; j < n; ++j) {
+      d.tpr[i][j] = d.tpr[j][i] = index::Distance(prepared[i], prepared[j]);
+      d.paper[i][j] = d.paper[j][i] = index::Emd(prepared[i], prepared[j]);
+      d.spectrum[i][j] = d.spectrum[j][i] =
+          index::SpectralDistance(prepared[i], prepared[j]);
+      d.d2[i][j] = d.d2[j][i] = eval::D2Distance(d2[i], d2[j]);
+    }
   }
   return d;
+}
+
+absl::StatusOr<Matrix> InProcessDistances(
+    const std::vector<LabelledMesh>& meshes) {
+  absl::StatusOr<Matrices> d = InProcessMatrices(meshes);
+  if (!d.ok()) return d.status();
+  return d->tpr;
 }
 
 // The oracle's scores: each model ranked against all the others by `d`,
@@ -196,6 +222,30 @@ void ExpectSvg(const std::string& path) {
   EXPECT_EQ(svg.substr(svg.size() - 6), "</svg>") << path;
 }
 
+// MixedManifest returns the manifest text ("<path relative to `dir`>
+// <label>" lines) that labels the last pose ("_2") of each synthetic class
+// as the next class, and those labels in `labels`. The synthetic classes
+// separate perfectly; mixed, retrieval is imperfect and every metric a
+// non-trivial function of the exact ranking.
+std::string MixedManifest(const std::vector<LabelledMesh>& meshes,
+                          const std::string& dir,
+                          std::vector<std::string>* labels) {
+  std::map<std::string, int> class_index;
+  for (const LabelledMesh& m : meshes)
+    class_index.emplace(m.label, class_index.size());
+  std::string manifest;
+  for (const LabelledMesh& m : meshes) {
+    const std::string stem = fs::path(m.path).stem().string();
+    const bool last_pose = stem.substr(stem.rfind('_') + 1) == "2";
+    labels->push_back(
+        absl::StrCat("mix_", (class_index[m.label] + last_pose) % 3));
+    absl::StrAppend(&manifest,
+                    fs::path(m.path).lexically_relative(dir).string(), " ",
+                    labels->back(), "\n");
+  }
+  return manifest;
+}
+
 class EvalCliTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -251,20 +301,9 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
   // separate perfectly, so this manifest mixes them: the last pose of each
   // class is labelled as the next class. Retrieval is then imperfect and
   // every metric a non-trivial function of the exact ranking.
-  std::string manifest;
   std::vector<std::string> mixed_labels;
-  std::map<std::string, int> class_index;
-  for (const LabelledMesh& m : meshes_)
-    class_index.emplace(m.label, class_index.size());
-  for (const LabelledMesh& m : meshes_) {
-    const std::string stem = fs::path(m.path).stem().string();
-    const bool last_pose = stem.substr(stem.rfind('_') + 1) == "2";
-    mixed_labels.push_back(
-        absl::StrCat("mix_", (class_index[m.label] + last_pose) % 3));
-    absl::StrAppend(
-        &manifest, fs::path(m.path).lexically_relative(cluster_.dir()).string(),
-        " ", mixed_labels.back(), "\n");
-  }
+  const std::string manifest =
+      MixedManifest(meshes_, cluster_.dir(), &mixed_labels);
   const Oracle mixed = Score(*d, mixed_labels);
   EXPECT_LT(mixed.scores.overall.ft, 0.9);  // the check below is not trivial
   EXPECT_GT(mixed.scores.overall.ft, 0.0);
@@ -289,6 +328,56 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
     EXPECT_NE(again.out.find(cls), std::string::npos) << again.out;
   }
   EXPECT_NE(again.out.find("ALL"), std::string::npos) << again.out;
+}
+
+TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
+  // `tpr eval --compare`: the paper's distance and the spectrum alone as
+  // the indexer ranks them (SearchRequest.ranking), and D2 computed by the
+  // client, each scored as the in-process oracle scores its own matrix.
+  // The classes are mixed as in the manifest test above (the last pose of
+  // each class labelled as the next class), so that no metric is 1.
+  absl::StatusOr<Matrices> d = InProcessMatrices(meshes_);
+  ASSERT_TRUE(d.ok()) << d.status();
+  std::vector<std::string> labels;
+  const std::string manifest = MixedManifest(meshes_, cluster_.dir(), &labels);
+  testing::WriteFile(cluster_.dir() + "/MANIFEST.txt", manifest);
+  CommandResult r =
+      RunTpr(cluster_, "--json eval --compare --out " + cluster_.dir() + "/o " +
+                           cluster_.dir() + "/MANIFEST.txt");
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  SCOPED_TRACE(r.out);
+  const size_t compare = r.out.find("\"compare\":{");
+  ASSERT_NE(compare, std::string::npos);
+  const std::pair<const char*, const Matrix*> columns[] = {
+      {"default", &d->tpr},
+      {"paper", &d->paper},
+      {"spectrum", &d->spectrum},
+      {"d2", &d->d2}};
+  for (const auto& [key, matrix] : columns) {
+    const Oracle oracle = Score(*matrix, labels);
+    const size_t at = r.out.find(absl::StrCat("\"", key, "\":{"), compare);
+    ASSERT_NE(at, std::string::npos) << key;
+    ExpectMetrics(r.out, at, oracle.scores.overall, key);
+    const std::string cls = oracle.scores.per_class.begin()->first;
+    const size_t class_at = r.out.find("\"" + cls + "\":{", at);
+    ASSERT_NE(class_at, std::string::npos) << key << " " << cls;
+    ExpectMetrics(r.out, class_at, oracle.scores.per_class.begin()->second,
+                  absl::StrCat(key, " ", cls));
+  }
+  // The four columns rank differently here, so the check above tells them
+  // apart: the paper's and the spectrum's rankings are not the default's.
+  EXPECT_NE(Score(d->paper, labels).scores.overall.map,
+            Score(d->spectrum, labels).scores.overall.map);
+
+  // The text report prints them side by side, per class too.
+  CommandResult text =
+      RunTpr(cluster_, "eval --compare --out " + cluster_.dir() + "/o " +
+                           cluster_.dir() + "/MANIFEST.txt");
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  for (const char* want : {"side by side", "paper TPR", "spectrum alone", "D2",
+                           "per class, NN / FT", "mix_0"}) {
+    EXPECT_NE(text.out.find(want), std::string::npos) << want << text.out;
+  }
 }
 
 // Without --out, the pictures go to a new temporary folder (under $TMPDIR)

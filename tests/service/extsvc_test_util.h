@@ -30,6 +30,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -353,10 +354,17 @@ struct Ranked {
 // BruteForceRanking returns every model of `models` (id -> signature) ranked
 // by exact distance (indexer/lib/metric.h: EMD plus spectral term, default
 // options, which the indexer uses) to `query`, ascending, ties by id. The
-// oracle the services' VP-tree answers are compared with.
+// oracle the services' VP-tree answers are compared with. `distance`
+// replaces that distance (e.g. index::Emd alone, for SearchRequest.ranking).
 inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     const v1::Signature& query,
-    const std::vector<std::pair<std::string, v1::Signature>>& models) {
+    const std::vector<std::pair<std::string, v1::Signature>>& models,
+    const std::function<double(const index::PreparedSignature&,
+                               const index::PreparedSignature&)>& distance =
+        [](const index::PreparedSignature& a,
+           const index::PreparedSignature& b) {
+          return index::Distance(a, b);
+        }) {
   const index::GroundDistanceOptions options;
   absl::StatusOr<index::Signature> query_signature =
       indexer::ToIndexSignature(query);
@@ -372,7 +380,7 @@ inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     absl::StatusOr<index::PreparedSignature> m =
         index::Prepare(*model_signature, options);
     if (!m.ok()) return m.status();
-    ranked.push_back({index::Distance(*q, *m), id});
+    ranked.push_back({distance(*q, *m), id});
   }
   std::sort(ranked.begin(), ranked.end(), [](const Ranked& a, const Ranked& b) {
     return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;

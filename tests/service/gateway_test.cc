@@ -247,6 +247,28 @@ TEST_F(GatewayTest, SearchEqualsOneIndexerIncludingTiesRadiusLabelsAndLargeK) {
   EXPECT_GT(total, 1000u);
 }
 
+TEST_F(GatewayTest, RankingsOtherThanTheIndexsPassThroughAndMergeExactly) {
+  // SearchRequest.ranking reaches every shard; each ranks its models
+  // exhaustively under it, and the merge equals one indexer's answer (and
+  // the EMD oracle: these models carry no spectrum, so every spectral term
+  // is 0 and both rankings below are the EMD).
+  const int n = static_cast<int>(models_.size());
+  size_t total = 0;
+  for (const char* id : {"m00003", "dup9_b"}) {
+    for (int k : {5, n + 10}) {
+      tpr::v1::SearchRequest request;
+      request.set_id(id);
+      request.set_k(k);
+      request.set_exclude_self(k == 5);
+      request.mutable_ranking()->set_emd_weight(1.0);
+      total += ExpectSameAnswer(request);
+      request.mutable_ranking()->set_spectral_weight(3.0);
+      total += ExpectSameAnswer(request);
+    }
+  }
+  EXPECT_GT(total, static_cast<size_t>(2 * n));
+}
+
 TEST_F(GatewayTest, TiesAcrossShardsComeInIdOrder) {
   // m00009 and its three copies are at distance 0 from each other; their ids
   // lie on different shards, and the merge must order them as one indexer.

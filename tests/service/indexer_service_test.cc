@@ -255,6 +255,61 @@ TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
   }
 }
 
+TEST_F(IndexerServiceTest, RankingOverridesTheDistanceExactly) {
+  // SearchRequest.ranking: the paper's EMD alone, ranked over every model,
+  // equals the brute-force EMD (these models carry no spectrum, so their
+  // spectral terms are all 0 and the spectrum alone ties everything: the
+  // ranking is then the id order). Bad weights are INVALID_ARGUMENT.
+  const std::vector<TestModel> models = MakeModels(60, 4, 5);
+  AddAll(models);
+  auto* stub = server_->stub();
+  const TestModel& m = models[11];
+  tpr::v1::SearchRequest req = ById(m.id, 500);
+  req.set_exclude_self(true);
+  req.mutable_ranking()->set_emd_weight(1.0);
+  SearchResult r = RunSearch(stub, req);
+  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+  TPR_EXPECT_SAME_RANKING(r.neighbors,
+                          BruteForce(m.signature, models, 500, 0, "", m.id));
+  // Exhaustive: one EMD per other model, no tree.
+  EXPECT_EQ(r.stats.emd_computations(), 59);
+  EXPECT_EQ(r.stats.nodes_visited(), 0);
+
+  req.set_k(4);
+  req.set_label("class1");
+  const std::vector<Hit> all = BruteForce(m.signature, models, 500);
+  const double radius = all[all.size() / 2].distance;
+  req.set_radius(radius);
+  r = RunSearch(stub, req);
+  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+  TPR_EXPECT_SAME_RANKING(
+      r.neighbors, BruteForce(m.signature, models, 4, radius, "class1", m.id));
+
+  tpr::v1::SearchRequest spectrum = ById(m.id, 5);
+  spectrum.mutable_ranking()->set_spectral_weight(1.0);
+  r = RunSearch(stub, spectrum);
+  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+  ASSERT_EQ(r.neighbors.size(), 5u);
+  for (int i = 0; i < 5; ++i) {
+    EXPECT_EQ(r.neighbors[static_cast<size_t>(i)].id(),
+              models[static_cast<size_t>(i)].id);
+    EXPECT_EQ(r.neighbors[static_cast<size_t>(i)].distance(), 0.0);
+  }
+  EXPECT_EQ(r.stats.emd_computations(), 0);
+
+  for (auto [emd, spectral] : std::vector<std::pair<double, double>>{
+           {-1, 0}, {0, 0}, {1, std::nan("")}}) {
+    tpr::v1::SearchRequest bad = ById(m.id, 5);
+    bad.mutable_ranking()->set_emd_weight(emd);
+    bad.mutable_ranking()->set_spectral_weight(spectral);
+    r = RunSearch(stub, bad);
+    EXPECT_EQ(r.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << emd << " " << spectral;
+    EXPECT_NE(r.status.error_message().find("weight"), std::string::npos)
+        << r.status.error_message();
+  }
+}
+
 TEST_F(IndexerServiceTest, SearchIsExactAfterDeletesAndOverwrites) {
   std::vector<TestModel> models = MakeModels(60, 3, 31);
   AddAll(models);
