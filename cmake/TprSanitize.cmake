@@ -6,8 +6,10 @@
 #
 # TPR_SANITIZE instruments every target of ours (the Debian libraries are not
 # instrumented: ASan still sees their heap through its malloc; TSan may report
-# races inside them, hence tests/sanitizers/tsan.supp). UBSan findings abort
-# (-fno-sanitize-recover), so a test that trips one fails.
+# races inside them, hence tests/sanitizers/tsan.supp). Under thread, the
+# indexer's own locks become standard-library ones (TPR_SYNC_STD,
+# common/mutex.h). UBSan findings abort (-fno-sanitize-recover), so a test
+# that trips one fails.
 #
 # TPR_FUZZ builds the libFuzzer targets of tests/fuzz/ (clang only): our code
 # gets -fsanitize=fuzzer-no-link (coverage) plus ASan and UBSan unless
@@ -46,5 +48,11 @@ if(NOT TPR_SANITIZE STREQUAL "")
   list(REMOVE_ITEM TPR_WARNINGS -Werror)
   add_compile_options(${_tpr_san_flags})
   add_link_options(-fsanitize=${TPR_SANITIZE})
+  if(TPR_SANITIZE MATCHES "thread")
+    # tpr::common::Mutex (common/mutex.h) is then std::shared_mutex and
+    # std::condition_variable_any instead of absl::Mutex: Debian's libabsl is
+    # not instrumented, so TSan cannot see an absl::Mutex's lock.
+    add_compile_definitions(TPR_SYNC_STD=1)
+  endif()
   message(STATUS "TPR_SANITIZE=${TPR_SANITIZE}")
 endif()

@@ -10,7 +10,7 @@ namespace tpr::indexer {
 BatchWriter::~BatchWriter() {
   Wait().IgnoreError();
   {
-    absl::MutexLock lock(&mu_);
+    tpr::common::MutexLock lock(&mu_);
     stopping_ = true;
   }
   if (worker_.joinable()) worker_.join();
@@ -32,16 +32,15 @@ absl::Status BatchWriter::Add(tpr::v1::UpsertRequest request) {
 }
 
 absl::Status BatchWriter::Wait() {
-  absl::MutexLock lock(&mu_);
-  mu_.Await(absl::Condition(
-      +[](bool* busy) { return !*busy; }, &busy_));
+  tpr::common::MutexLock lock(&mu_);
+  mu_.Await([this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) { return !busy_; });
   return error_;
 }
 
 absl::Status BatchWriter::FlushAsync() {
   TPR_RETURN_IF_ERROR(Wait());
   if (pending_.requests.empty()) return absl::OkStatus();
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   handed_ = std::move(pending_);
   pending_ = Group();
   busy_ = true;
@@ -52,7 +51,7 @@ absl::Status BatchWriter::FlushAsync() {
 void BatchWriter::WriteGroup(Group group) {
   absl::StatusOr<std::vector<WriteOutcome>> outcome =
       core_->WriteGroup(group.requests, group.signatures);
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   if (!outcome.ok()) {
     error_ = outcome.status();
     return;
@@ -67,13 +66,11 @@ void BatchWriter::WriteGroup(Group group) {
 }
 
 void BatchWriter::WorkerLoop() {
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   while (true) {
-    mu_.Await(absl::Condition(
-        +[](BatchWriter* w) ABSL_EXCLUSIVE_LOCKS_REQUIRED(w->mu_) {
-          return w->handed_.has_value() || w->stopping_;
-        },
-        this));
+    mu_.Await([this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+      return handed_.has_value() || stopping_;
+    });
     if (!handed_.has_value()) return;  // stopping, nothing left
     Group group = std::move(*handed_);
     handed_.reset();
@@ -93,7 +90,7 @@ absl::StatusOr<tpr::v1::BatchUpsertResponse> BatchWriter::Finish() {
     pending_ = Group();
     WriteGroup(std::move(group));
   }
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   if (!error_.ok()) return error_;
   return counts_;
 }

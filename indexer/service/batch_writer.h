@@ -18,7 +18,7 @@
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "absl/synchronization/mutex.h"
+#include "common/mutex.h"
 #include "indexer/lib/signature.h"
 #include "tpr/v1/indexer.pb.h"
 
@@ -77,7 +77,7 @@ class BatchWriter {
   IndexerCore* const core_;
   Group pending_;  // the caller's thread only
 
-  absl::Mutex mu_;
+  tpr::common::Mutex mu_;
   std::optional<Group> handed_ ABSL_GUARDED_BY(mu_);  // waiting for the worker
   bool busy_ ABSL_GUARDED_BY(mu_) = false;  // a group handed, not yet written
   bool stopping_ ABSL_GUARDED_BY(mu_) = false;

@@ -123,7 +123,7 @@ absl::Status IndexerCore::LoadIndex() {
     // Parsing and converting the stored signatures is most of the open's
     // CPU; two threads do it (the machine has two cores), and only the
     // cheap bookkeeping is serialized.
-    absl::Mutex items_mu;
+    tpr::common::Mutex items_mu;
     std::vector<std::pair<std::string, ModelInfo>> infos;
     std::set<std::string> outdated;
     TPR_RETURN_IF_ERROR(storage_->ForEachModel(
@@ -132,7 +132,7 @@ absl::Status IndexerCore::LoadIndex() {
               ToIndexSignature(model.signature());
           if (absl::IsFailedPrecondition(sig.status())) {
             // Another signature version: kept, listed, not indexed.
-            absl::MutexLock items_lock(&items_mu);
+            tpr::common::MutexLock items_lock(&items_mu);
             infos.push_back(
                 {model.id(), {model.label(), model.added_unix_micros()}});
             outdated.insert(model.id());
@@ -142,7 +142,7 @@ absl::Status IndexerCore::LoadIndex() {
             return absl::DataLossError(absl::StrCat(
                 "stored model '", model.id(), "': ", sig.status().message()));
           }
-          absl::MutexLock items_lock(&items_mu);
+          tpr::common::MutexLock items_lock(&items_mu);
           if (seq > marker) ++after_marker;
           infos.push_back(
               {model.id(), {model.label(), model.added_unix_micros()}});
@@ -159,13 +159,13 @@ absl::Status IndexerCore::LoadIndex() {
           "') have an older signature version; they are kept but not searched "
           "until re-extracted with `tpr add --update`"));
     }
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     outdated_ = std::move(outdated);
   }
   {
     // The label map searches use, built whole (no copy-on-write needed yet).
     LabelMap labels(table_.IdLabels());
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     labels_ = std::move(labels);
   }
 
@@ -268,7 +268,7 @@ absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
 absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroup(
     std::vector<tpr::v1::UpsertRequest>& requests,
     std::vector<tpr::index::Signature>& signatures) {
-  absl::MutexLock lock(&write_mu_);
+  tpr::common::MutexLock lock(&write_mu_);
   return WriteGroupLocked(requests, signatures);
 }
 
@@ -317,7 +317,7 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
     infos.push_back({model.id(), {model.label(), model.added_unix_micros()}});
   }
   {
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     absl::Status st = index_->UpsertBatch(entries);
     if (!st.ok()) {
       // CheckModel validated the signatures already; this is a bug, not data.
@@ -349,14 +349,14 @@ absl::StatusOr<bool> IndexerCore::Upsert(
 
 absl::Status IndexerCore::Delete(const std::string& id) {
   TPR_RETURN_IF_ERROR(CheckId(id));
-  absl::MutexLock lock(&write_mu_);
+  tpr::common::MutexLock lock(&write_mu_);
   TPR_RETURN_IF_ERROR(CheckWritable());
   if (!table_.AddedTime(id).has_value()) {
     return absl::NotFoundError(absl::StrCat("no model with id '", id, "'"));
   }
   TPR_RETURN_IF_ERROR(storage_->Write({{id, nullptr}}));
   {
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     index_->Remove(id);
     labels_.Apply({{id, std::nullopt}});
     outdated_.erase(id);
@@ -489,7 +489,7 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     // The index snapshot and the label map are taken together (writers
     // update both under view_mu_), so filter and results use the labels that
     // went with the ranked signatures, whatever is written meanwhile.
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     if (!outdated_.empty()) {
       return absl::FailedPreconditionError(absl::StrCat(
           outdated_.size(), " stored models (e.g. '", *outdated_.begin(),

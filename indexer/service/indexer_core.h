@@ -36,7 +36,7 @@
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "absl/synchronization/mutex.h"
+#include "common/mutex.h"
 #include "indexer/lib/signature.h"
 #include "indexer/lib/signature_index.h"
 #include "indexer/service/batch_writer.h"
@@ -269,15 +269,15 @@ class IndexerCore {
 
   // Serializes writes: storage write, then index, label map and table
   // updates. Order: write_mu_, then view_mu_.
-  absl::Mutex write_mu_;
+  tpr::common::Mutex write_mu_;
   // The primary's address while a follower (CoreOptions::follow), else "".
-  mutable absl::Mutex follow_mu_;
+  mutable tpr::common::Mutex follow_mu_;
   std::string follow_ ABSL_GUARDED_BY(follow_mu_);
   // The refusal of a write while following, or OK.
   absl::Status CheckWritable() const;
   // Pairs index updates with label map updates: writers hold it across
   // both, a search start across taking both snapshots.
-  mutable absl::Mutex view_mu_;
+  mutable tpr::common::Mutex view_mu_;
   LabelMap labels_ ABSL_GUARDED_BY(view_mu_);
   // Stored models whose signature is of an older version (convert.h,
   // kSignatureVersion): kept in the store and the table (Get, List, Delete

@@ -14,12 +14,12 @@
 namespace tpr::indexer {
 
 std::string IndexerCore::following() const {
-  absl::MutexLock lock(&follow_mu_);
+  tpr::common::MutexLock lock(&follow_mu_);
   return follow_;
 }
 
 absl::Status IndexerCore::CheckWritable() const {
-  absl::MutexLock lock(&follow_mu_);
+  tpr::common::MutexLock lock(&follow_mu_);
   if (follow_.empty()) return absl::OkStatus();
   return absl::FailedPreconditionError(absl::StrCat(
       "this indexer is a read-only follower of ", follow_,
@@ -28,7 +28,7 @@ absl::Status IndexerCore::CheckWritable() const {
 
 absl::StatusOr<uint64_t> IndexerCore::ApplyReplicated(const std::string& data,
                                                       uint64_t sequence) {
-  absl::MutexLock lock(&write_mu_);
+  tpr::common::MutexLock lock(&write_mu_);
   if (following().empty()) {
     return absl::FailedPreconditionError(
         "not a follower (promoted): replication stopped");
@@ -72,7 +72,7 @@ absl::StatusOr<uint64_t> IndexerCore::ApplyReplicated(const std::string& data,
     infos.push_back({change.id, {model.label(), model.added_unix_micros()}});
   }
   {
-    absl::MutexLock view(&view_mu_);
+    tpr::common::MutexLock view(&view_mu_);
     for (const std::string& id : removed) {
       index_->Remove(id);
       outdated_.erase(id);
@@ -95,11 +95,11 @@ absl::StatusOr<uint64_t> IndexerCore::ApplyReplicated(const std::string& data,
 }
 
 absl::StatusOr<std::string> IndexerCore::Promote() {
-  absl::MutexLock lock(&write_mu_);
+  tpr::common::MutexLock lock(&write_mu_);
   const std::string former = following();
   if (former.empty()) return former;
   TPR_RETURN_IF_ERROR(ClearAppliedSequence(*storage_));
-  absl::MutexLock follow(&follow_mu_);
+  tpr::common::MutexLock follow(&follow_mu_);
   follow_.clear();
   return former;
 }

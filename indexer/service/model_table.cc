@@ -6,7 +6,7 @@
 namespace tpr::indexer {
 
 std::optional<int64_t> ModelTable::AddedTime(const std::string& id) const {
-  absl::ReaderMutexLock lock(&mu_);
+  tpr::common::ReaderMutexLock lock(&mu_);
   auto it = models_.find(id);
   if (it == models_.end()) return std::nullopt;
   return it->second.added_unix_micros;
@@ -14,7 +14,7 @@ std::optional<int64_t> ModelTable::AddedTime(const std::string& id) const {
 
 void ModelTable::Put(
     const std::vector<std::pair<std::string, ModelInfo>>& models) {
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   for (const auto& [id, info] : models) {
     auto [it, created] = models_.try_emplace(id);
     if (!created) {
@@ -27,7 +27,7 @@ void ModelTable::Put(
 }
 
 bool ModelTable::Erase(const std::string& id) {
-  absl::MutexLock lock(&mu_);
+  tpr::common::MutexLock lock(&mu_);
   auto it = models_.find(id);
   if (it == models_.end()) return false;
   if (--label_counts_[it->second.label] == 0)
@@ -41,7 +41,7 @@ std::vector<std::string> ModelTable::Page(const std::string& after,
                                           size_t page_size, bool* more) const {
   std::vector<std::string> ids;
   *more = false;
-  absl::ReaderMutexLock lock(&mu_);
+  tpr::common::ReaderMutexLock lock(&mu_);
   auto it = after.empty() ? models_.begin() : models_.upper_bound(after);
   for (; it != models_.end(); ++it) {
     if (!label.empty() && it->second.label != label) continue;
@@ -55,7 +55,7 @@ std::vector<std::string> ModelTable::Page(const std::string& after,
 }
 
 size_t ModelTable::size() const {
-  absl::ReaderMutexLock lock(&mu_);
+  tpr::common::ReaderMutexLock lock(&mu_);
   return models_.size();
 }
 
@@ -63,7 +63,7 @@ std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(
     size_t max) const {
   std::vector<std::pair<std::string, int64_t>> out;
   {
-    absl::ReaderMutexLock lock(&mu_);
+    tpr::common::ReaderMutexLock lock(&mu_);
     out.assign(label_counts_.begin(), label_counts_.end());
   }
   auto more_models = [](const auto& a, const auto& b) {
@@ -81,7 +81,7 @@ std::vector<std::pair<std::string, int64_t>> ModelTable::TopLabels(
 }
 
 std::vector<std::pair<std::string, std::string>> ModelTable::IdLabels() const {
-  absl::ReaderMutexLock lock(&mu_);
+  tpr::common::ReaderMutexLock lock(&mu_);
   std::vector<std::pair<std::string, std::string>> out;
   out.reserve(models_.size());
   for (const auto& [id, info] : models_) out.emplace_back(id, info.label);

@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-#include "absl/synchronization/mutex.h"
+#include "common/mutex.h"
 
 namespace tpr::indexer {
 
@@ -66,7 +66,7 @@ class ModelTable {
   std::vector<std::pair<std::string, std::string>> IdLabels() const;
 
  private:
-  mutable absl::Mutex mu_;
+  mutable tpr::common::Mutex mu_;
   std::map<std::string, ModelInfo> models_ ABSL_GUARDED_BY(mu_);
   std::map<std::string, int64_t> label_counts_ ABSL_GUARDED_BY(mu_);
 };

@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
+#include "common/mutex.h"
 #include "common/status_macros.h"
 #include "indexer/service/ack_file.h"
 #include "rocksdb/db.h"
@@ -299,11 +300,11 @@ struct Storage::Impl {
   // RocksDB's statistics and our listener (EngineStats), read-write open.
   std::shared_ptr<rocksdb::Statistics> statistics;
   std::shared_ptr<EngineListener> listener;
-  // The mutexes here are std::mutex, not absl::Mutex with ABSL_GUARDED_BY
-  // as elsewhere in the indexer, on purpose: this layer is what the
-  // ThreadSanitizer pass checks (README, "Testing"), and Debian's libabsl
-  // is not instrumented, so TSan would see no lock around an absl::Mutex.
-  // What each guards is written beside it.
+  // The mutexes here are std::mutex, which TSan sees (Debian's libabsl is
+  // not instrumented, so TSan would see no lock around an absl::Mutex; the
+  // rest of the indexer uses tpr::common::Mutex, common/mutex.h, which is a
+  // standard-library lock in TSan builds). What each guards is written
+  // beside it.
   //
   // Sequence numbers are assigned under this mutex so that the order of
   // numbers equals the order of the RocksDB writes that carry them; the
@@ -669,6 +670,16 @@ absl::Status Storage::SaveTree(const std::string& tree_bytes, uint64_t seq) {
   batch.Put(impl_->meta, kTreeSeqKey, EncodeSeq(seq));
   rocksdb::WriteOptions w;
   w.sync = true;
+  // In ThreadSanitizer builds only, the tree save waits for the model
+  // writes (write_mu), so that RocksDB never groups two of our threads'
+  // batches into one write: the group's leader copies the other threads'
+  // WriteBatch bytes after a hand-off through RocksDB's uninstrumented
+  // atomics, which TSan reports as a race on those bytes with our frames on
+  // top (seen: TreePersister::PersistNow against IndexerCore::
+  // WriteGroupLocked). Normal builds keep saves and writes apart: a save of
+  // a large tree must not stall writers.
+  std::unique_lock<std::mutex> serialized(impl_->write_mu, std::defer_lock);
+  if (tpr::common::kStdSync) serialized.lock();
   absl::Status st = FromRocks(impl_->db->Write(w, &batch),
                               "cannot persist the VP-tree", impl_->dir);
   if (absl::IsResourceExhausted(st)) impl_->MarkNoSpace(st);

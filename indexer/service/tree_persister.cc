@@ -16,7 +16,7 @@ TreePersister::TreePersister(Storage* storage,
 TreePersister::~TreePersister() { Stop(); }
 
 void TreePersister::MarkSaved(const std::string& bytes) {
-  absl::MutexLock lock(&save_mu_);
+  tpr::common::MutexLock lock(&save_mu_);
   saved_hash_ = std::hash<std::string>()(bytes);
   saved_indexed_ = index_->indexed();
   saved_buffered_ = index_->buffered();
@@ -27,11 +27,12 @@ void TreePersister::Start() {
 }
 
 void TreePersister::Loop() {
-  absl::MutexLock lock(&stop_mu_);
+  tpr::common::MutexLock lock(&stop_mu_);
   while (!stopping_) {
     // Sleeps for the interval unless Stop() sets stopping_.
-    stop_mu_.AwaitWithTimeout(absl::Condition(&stopping_),
-                              absl::Milliseconds(options_.interval_ms));
+    stop_mu_.AwaitWithTimeout(
+        [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(stop_mu_) { return stopping_; },
+        absl::Milliseconds(options_.interval_ms));
     if (stopping_) break;
     stop_mu_.Unlock();
     absl::Status st = PersistNow();
@@ -43,7 +44,7 @@ void TreePersister::Loop() {
 }
 
 absl::Status TreePersister::PersistNow() {
-  absl::MutexLock lock(&save_mu_);
+  tpr::common::MutexLock lock(&save_mu_);
   const size_t indexed = index_->indexed();
   const size_t buffered = index_->buffered();
   // The tree only changes with a rebuild, which shows in these counts or
@@ -71,7 +72,7 @@ absl::Status TreePersister::PersistNow() {
 
 void TreePersister::Stop() {
   {
-    absl::MutexLock lock(&stop_mu_);
+    tpr::common::MutexLock lock(&stop_mu_);
     if (stopped_) return;
     stopped_ = true;
     stopping_ = true;

@@ -19,7 +19,7 @@
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
-#include "absl/synchronization/mutex.h"
+#include "common/mutex.h"
 #include "indexer/lib/signature_index.h"
 #include "indexer/service/storage.h"
 
@@ -77,13 +77,13 @@ class TreePersister {
   std::atomic<uint64_t> writes_since_save_{0};
 
   // Serializes saves; remembers what the last one saved.
-  absl::Mutex save_mu_;
+  tpr::common::Mutex save_mu_;
   size_t saved_hash_ ABSL_GUARDED_BY(save_mu_) = 0;
   size_t saved_indexed_ ABSL_GUARDED_BY(save_mu_) = 0;
   size_t saved_buffered_ ABSL_GUARDED_BY(save_mu_) = 0;
 
   // Wakes and stops the background thread.
-  absl::Mutex stop_mu_;
+  tpr::common::Mutex stop_mu_;
   bool stopping_ ABSL_GUARDED_BY(stop_mu_) = false;
   bool stopped_ ABSL_GUARDED_BY(stop_mu_) = false;
   std::thread thread_;

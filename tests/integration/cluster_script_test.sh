@@ -5,7 +5,8 @@
 # haproxy and the gateway; `tpr stats` counting them over the shards; a
 # query by id; `status` listing every recorded process as running; `down`
 # stopping every recorded PID (each exits within its drain) and --purge
-# removing the state directory. First, a failed start: with a stand-in
+# removing the state directory. First, `--help` prints the usage and an
+# unknown command fails; then a failed start: with a stand-in
 # tpr-gateway that runs but never reports its port, `up` fails naming it and
 # leaves none of the processes it started running. Exit 77 (skipped)
 # without haproxy.
@@ -32,6 +33,19 @@ fail() { echo "FAIL: $*" >&2; exit 1; }
 # running PID: the process exists and is not a zombie its parent has not
 # reaped yet.
 running() { [ -d "/proc/$1" ] && ! grep -q '^State:.*Z' "/proc/$1/status" 2>/dev/null; }
+
+# Usage: --help (and `help`) print it and succeed; an unknown command prints
+# it and fails.
+for h in --help -h help; do
+  "$CLUSTER" "$h" >"$WORK/help.txt" || fail "cluster $h failed"
+  grep -q 'scripts/cluster up \[--shards N\]' "$WORK/help.txt" ||
+    fail "cluster $h printed no usage"
+done
+if "$CLUSTER" no-such-command >"$WORK/help.txt" 2>&1; then
+  fail "an unknown command succeeded"
+fi
+grep -q "unknown command 'no-such-command'" "$WORK/help.txt" ||
+  fail "an unknown command was not named"
 
 # A service that starts but fails its start check: a stand-in tpr-gateway
 # that runs but never reports its port. `up` must fail and stop every

@@ -770,14 +770,6 @@ TEST_F(IndexerServiceTest, ConcurrentWritersAndSearchersStayExact) {
 // torn read), in ascending order; afterwards searches equal brute force
 // over the final state.
 TEST(IndexerCoreConcurrencyTest, WritersBatchesDeletesAndSearchersStayExact) {
-  if (kThreadSanitizer) {
-    // IndexerCore guards its state with absl::Mutex, whose Lock and Unlock
-    // live in Debian's uninstrumented libabsl_synchronization: TSan sees no
-    // lock and reports every guarded access (seen: outdated_, read in
-    // StartSearch and erased in WriteGroupLocked, both under view_mu_).
-    GTEST_SKIP()
-        << "absl::Mutex (Debian, not instrumented) is invisible to TSan";
-  }
   TempDir dir;
   CoreOptions options;
   options.data_dir = dir.path() + "/data";
