@@ -291,6 +291,7 @@ struct EmdSolver::Impl {
   std::vector<int> path1;
   std::vector<int> path2;
   std::vector<unsigned char> closed;  // ConstrainedBound: entries used
+  std::vector<float> cost32;  // ConstrainedBound32's matrix (not `cost`)
 
   EmdStats stats;
   double max_cost = 0.0;  // upper bound of the cost entries
@@ -796,12 +797,15 @@ namespace {
 // (entry k of line l at cost[l * line_step + k * entry_step], k < entries)
 // of the cheapest way to ship mass[l] into the entries with capacities
 // cap[k], cheapest entry first (R_i above). closed: scratch of `entries`.
-double CheapestFirst(const double* cost, size_t line_step, size_t entry_step,
+// T: double, or float for the float32 matrix (ConstrainedBound32); the
+// sums are in double either way.
+template <typename T>
+double CheapestFirst(const T* cost, size_t line_step, size_t entry_step,
                      int lines, int entries, const double* mass,
                      const double* cap, unsigned char* closed) {
   double total = 0.0;
   for (int l = 0; l < lines; ++l) {
-    const double* line = cost + static_cast<size_t>(l) * line_step;
+    const T* line = cost + static_cast<size_t>(l) * line_step;
     int best = 0;
     double best_cost = line[0];
     for (int k = 1; k < entries; ++k) {
@@ -852,6 +856,39 @@ double EmdSolver::ConstrainedBound(const PreparedSignature& a,
   return std::max(rows, cols);
 }
 
+// The float32 form. With c~ the float32 matrix and theta =
+// Float32MatrixError(bands), every entry has c~ <= (1 + theta) c
+// (ground_distance.h). The bound is a minimum over the same feasible
+// plans g >= 0 of the linear cost sum g c (a maximum of two such minima),
+// with coefficients g >= 0, so it is monotone in the entries and
+// positively homogeneous: ICT(c~) <= ICT((1 + theta) c) = (1 + theta)
+// ICT(c). Hence ICT(c~) / (1 + theta) <= ICT(c) <= EMD; and it is below
+// ICT(c) by at most 2 theta / (1 + theta) of it (c~ >= (1 - theta) c).
+// The greedy sums run in double on the float32 entries, as the double form
+// does on its entries.
+double EmdSolver::ConstrainedBound32(const PreparedSignature& a,
+                                     const PreparedSignature& b) {
+  assert(a.size() >= 1 && a.size() <= kMaxFeatures);
+  assert(b.size() >= 1 && b.size() <= kMaxFeatures);
+  if (impl_ == nullptr) impl_ = new Impl;
+  Impl& s = *impl_;
+  const int stride = internal::Stride32(b);
+  const size_t cells = static_cast<size_t>(a.size()) * stride;
+  if (s.cost32.size() < cells) s.cost32.resize(cells);
+  const size_t lines = static_cast<size_t>(std::max(a.size(), b.size()));
+  if (s.closed.size() < lines) s.closed.resize(lines);
+  if (!internal::GroundDistanceMatrix32(a, b, s.cost32.data(), stride)) {
+    return ConstrainedBound(a, b);
+  }
+  const double rows =
+      CheapestFirst(s.cost32.data(), static_cast<size_t>(stride), 1, a.size(),
+                    b.size(), a.weights(), b.weights(), s.closed.data());
+  const double cols =
+      CheapestFirst(s.cost32.data(), 1, static_cast<size_t>(stride), b.size(),
+                    a.size(), b.weights(), a.weights(), s.closed.data());
+  return std::max(rows, cols) / (1.0 + internal::Float32MatrixError(a.bands()));
+}
+
 const EmdStats& EmdSolver::Stats() const { return impl_->stats; }
 
 std::vector<EmdSolver::FlowEntry> EmdSolver::LastFlow() const {
@@ -887,6 +924,11 @@ double RelaxedTransportBound(const PreparedSignature& a,
 double ConstrainedTransportBound(const PreparedSignature& a,
                                  const PreparedSignature& b) {
   return ThreadSolver().ConstrainedBound(a, b);
+}
+
+double ConstrainedTransportBound32(const PreparedSignature& a,
+                                   const PreparedSignature& b) {
+  return ThreadSolver().ConstrainedBound32(a, b);
 }
 
 void PrefetchSignature(const PreparedSignature& p) {

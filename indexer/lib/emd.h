@@ -67,6 +67,14 @@ class EmdSolver {
   double ConstrainedBound(const PreparedSignature& a,
                           const PreparedSignature& b);
 
+  // ConstrainedBound32 returns ConstrainedTransportBound32 (below) of the
+  // pair. It keeps no double matrix: a following Distance(a, b) computes
+  // its own (the float32 path), unless the float32 kernel is unavailable
+  // and this fell back to ConstrainedBound. Same preconditions. Cost: the
+  // float32 n x m matrix plus O(n m); no allocation after warm-up.
+  double ConstrainedBound32(const PreparedSignature& a,
+                            const PreparedSignature& b);
+
   // Stats returns the work done by the last Distance call.
   const EmdStats& Stats() const;
 
@@ -139,6 +147,23 @@ double RelaxedTransportBound(const PreparedSignature& a,
 // feature whose nearest partner is too small; thread-safe.
 double ConstrainedTransportBound(const PreparedSignature& a,
                                  const PreparedSignature& b);
+
+// ConstrainedTransportBound32 returns ConstrainedTransportBound computed on
+// a float32 ground-distance matrix (internal::GroundDistanceMatrix32, 16
+// AVX-512 lanes, no widening) and divided by 1 + theta, theta =
+// internal::Float32MatrixError(bands) (about 2e-6 at 20 bands), the
+// rounding margin that keeps it a lower bound (proof in emd.cc):
+//   (1 - 2 theta) ConstrainedTransportBound <= it
+//                                           <= ConstrainedTransportBound
+//                                           <= Emd(a, b).
+// A search's level-2 bound: most items it bounds never reach the EMD,
+// which then computes its own double matrix. Where the float32 kernel is
+// unavailable (no AVX-512F, or band counts that differ) it is
+// ConstrainedTransportBound itself. Uses the thread_local solver of Emd().
+// Cost: about half the arithmetic of the double matrix plus O(n m);
+// thread-safe.
+double ConstrainedTransportBound32(const PreparedSignature& a,
+                                   const PreparedSignature& b);
 
 // PrefetchSignature asks the CPU to start loading p's stored values (its
 // one heap block: masses, spectral embedding, coordinates) into cache,

@@ -440,6 +440,65 @@ __attribute__((target("avx512f"))) double KernelAvx512(
   if (k < blocks) mx = Avx512Blocks<1>(a, wide, rows, k, out, out_stride, mx);
   return _mm512_reduce_max_pd(mx);
 }
+
+// Avx512Rows32 computes rows i0 .. i0 + I - 1 of the float32 matrix
+// (GroundDistanceMatrix32), all of b's 16-feature blocks: per block, each
+// row of b's coordinates is one masked load straight from the stored
+// float32 values (no widening; lanes past b.size() read as 0), shared by
+// the I rows of a, whose 3 I accumulators are independent chains.
+template <int I>
+__attribute__((target("avx512f"))) inline void Avx512Rows32(
+    const PreparedSignature& a, const PreparedSignature& b, int i0, float* out,
+    int out_stride) {
+  const int bands = a.bands();
+  const size_t as = static_cast<size_t>(a.size());
+  const size_t bs = static_cast<size_t>(b.size());
+  const float* ac = a.coords() + i0;
+  for (int j0 = 0; j0 < b.size(); j0 += 16) {
+    const int lanes = std::min(16, b.size() - j0);
+    const __mmask16 mask = static_cast<__mmask16>((1u << lanes) - 1u);
+    const float* bc = b.coords() + j0;
+    __m512 k[I], ar[I], h[I];
+    for (int r = 0; r < I; ++r) {
+      k[r] = _mm512_setzero_ps();
+      ar[r] = _mm512_setzero_ps();
+      h[r] = _mm512_setzero_ps();
+    }
+    for (int d = 0; d < bands; ++d) {
+      const size_t rk = static_cast<size_t>(1 + d);
+      const size_t ra = rk + static_cast<size_t>(bands);
+      const size_t rh = ra + static_cast<size_t>(bands);
+      const __m512 yk = _mm512_maskz_loadu_ps(mask, bc + rk * bs);
+      const __m512 ya = _mm512_maskz_loadu_ps(mask, bc + ra * bs);
+      const __m512 yh = _mm512_maskz_loadu_ps(mask, bc + rh * bs);
+      for (int r = 0; r < I; ++r) {
+        __m512 t;
+        t = _mm512_sub_ps(_mm512_set1_ps(ac[rk * as + r]), yk);
+        k[r] = _mm512_fmadd_ps(t, t, k[r]);
+        t = _mm512_sub_ps(_mm512_set1_ps(ac[ra * as + r]), ya);
+        ar[r] = _mm512_fmadd_ps(t, t, ar[r]);
+        t = _mm512_sub_ps(_mm512_set1_ps(ac[rh * as + r]), yh);
+        h[r] = _mm512_fmadd_ps(t, t, h[r]);
+      }
+    }
+    const __m512 yg = _mm512_maskz_loadu_ps(mask, bc);
+    for (int r = 0; r < I; ++r) {
+      __m512 g = _mm512_abs_ps(_mm512_sub_ps(_mm512_set1_ps(ac[r]), yg));
+      g = _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(g, _mm512_sqrt_ps(k[r])),
+                                      _mm512_sqrt_ps(ar[r])),
+                        _mm512_sqrt_ps(h[r]));
+      _mm512_storeu_ps(out + static_cast<size_t>(i0 + r) * out_stride + j0, g);
+    }
+  }
+}
+
+__attribute__((target("avx512f"))) void KernelAvx512Float(
+    const PreparedSignature& a, const PreparedSignature& b, float* out,
+    int out_stride) {
+  int i = 0;
+  for (; i + 4 <= a.size(); i += 4) Avx512Rows32<4>(a, b, i, out, out_stride);
+  for (; i < a.size(); ++i) Avx512Rows32<1>(a, b, i, out, out_stride);
+}
 #pragma GCC diagnostic pop
 #endif
 
@@ -497,6 +556,24 @@ int ChosenKernel() {
     return 0;
   }();
   return chosen;
+}
+
+bool GroundDistanceMatrix32(const PreparedSignature& a,
+                            const PreparedSignature& b, float* out,
+                            int out_stride) {
+  assert(out_stride >= Stride32(b) && out_stride % 16 == 0);
+#ifdef TPR_HAVE_X86_KERNELS
+  static const bool supported = KernelSupported(2);
+  if (!supported || a.bands() != b.bands()) return false;
+  KernelAvx512Float(a, b, out, out_stride);
+  return true;
+#else
+  (void)a;
+  (void)b;
+  (void)out;
+  (void)out_stride;
+  return false;
+#endif
 }
 
 bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,

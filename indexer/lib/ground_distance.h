@@ -251,6 +251,42 @@ int ChosenKernel();
 bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
                                     const PreparedSignature& b, double* out,
                                     int out_stride);
+
+// Stride32 returns the row length of GroundDistanceMatrix32's output for
+// b as the column side: b.size() rounded up to a multiple of 16 (whole
+// 16-lane registers).
+inline int Stride32(const PreparedSignature& b) {
+  return (b.size() + 15) / 16 * 16;
+}
+
+// Float32MatrixError returns theta(bands) = (bands + 12) 2^-24, the
+// relative error bound of GroundDistanceMatrix32's entries. Why it holds,
+// with u = 2^-24 (float32 rounding) and c = |g - g'| + sqrt(S_K) +
+// sqrt(S_A) + sqrt(S_H) the entry in exact arithmetic on the stored
+// float32 coordinates, S_X the sum of B = bands squared differences: each
+// difference is rounded once (t = (x - y)(1 + d), |d| <= u) and each fused
+// multiply-add once, so the computed S~ = sum_k t_k^2 prod (1 + d_j) lies
+// within (1 + u)^(B + 2) - 1 <= (B + 2) u (1 + 1e-5) of S relatively (all
+// terms >= 0); the correctly rounded sqrt halves that and adds u; |g - g'|
+// is rounded once; the three additions of non-negative terms add u each.
+// So |c~ - c| <= ((B + 2) / 2 + 5) u (1 + 1e-5) c <= theta c. O(1).
+inline double Float32MatrixError(int bands) { return (bands + 12) * 0x1p-24; }
+
+// GroundDistanceMatrix32 writes the a.size() x b.size() ground distances,
+// computed in float32 arithmetic, into `out`: row i at out[i * out_stride],
+// out_stride a multiple of 16 and >= Stride32(b); entries past b.size() in
+// a row (up to Stride32(b)) are written with finite values. Each entry c~
+// of the exact entry c (Eq. 7 in exact arithmetic on the stored float32
+// coordinates; GroundDistance computes it in double, within about 1e-15)
+// satisfies |c~ - c| <= Float32MatrixError(a.bands()) c. The AVX-512
+// kernel: 16 features of b per register, read straight from the stored
+// float32 values, about half the arithmetic of GroundDistanceMatrix and no
+// widening. Returns false, writing nothing, when this CPU or build has no
+// AVX-512F or the band counts differ (callers then use
+// GroundDistanceMatrix). Cost O(a.size() x b.size() x bands); thread-safe.
+bool GroundDistanceMatrix32(const PreparedSignature& a,
+                            const PreparedSignature& b, float* out,
+                            int out_stride);
 }  // namespace internal
 
 }  // namespace tpr::index

@@ -220,7 +220,9 @@ class IndexCursor : public SignatureIndex::Cursor {
     // pointer chase); the small buffer is read directly.
     // The cascade of lower bounds (emd.h), cheapest first: the centroid
     // bound (O(bands)), then the relaxed transport bound with capacities
-    // (the ground matrix, which the EMD that may follow reuses). Each adds
+    // on a float32 ground matrix (ConstrainedTransportBound32: half the
+    // arithmetic of the double one; the few items that go on to the EMD
+    // pay a double matrix of their own). Each adds
     // the O(n) spectral term of the distance (metric.h; nothing when its
     // weight is 0), so the spectrum is checked before any EMD: at level 1
     // a lower bound of it from the table's row (CentroidTable::
@@ -253,7 +255,7 @@ class IndexCursor : public SignatureIndex::Cursor {
         level2_.fetch_add(1, std::memory_order_relaxed);
         const PreparedSignature* p = Item(i);
         return p == nullptr ? 0.0
-                            : ConstrainedTransportBound(query_, *p) +
+                            : ConstrainedTransportBound32(query_, *p) +
                                   SpectralDistance(query_, *p);
       });
     }

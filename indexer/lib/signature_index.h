@@ -60,7 +60,7 @@ struct IndexOptions {
   // VpTreeOptions. Default: VpTreeOptions{}.
   VpTreeOptions tree;
   // Whether searches refine the centroid bound with the relaxed transport
-  // bound with capacities (ConstrainedTransportBound, emd.h) before
+  // bound with capacities (ConstrainedTransportBound32, emd.h) before
   // computing an EMD. Results are identical either way; off only to
   // measure what it saves (bench_match). Default: true.
   bool relaxed_bound = true;

@@ -267,9 +267,11 @@ Db& GetDb(const DbKey& key) {
 
 // The bound cascade of a query (QuerySpec::lower_bounds) before the EMD.
 enum class Cascade {
-  kCentroid,     // the centroid bound alone
-  kRelaxed,      // then the relaxed transport bound (RWMD)
-  kConstrained,  // then the relaxed bound with capacities (ICT): the index's
+  kCentroid,       // the centroid bound alone
+  kRelaxed,        // then the relaxed transport bound (RWMD)
+  kConstrained,    // then the relaxed bound with capacities (ICT)
+  kConstrained32,  // the same on a float32 matrix
+                   // (ConstrainedTransportBound32): the index's
 };
 
 // When a search prefetches an item's signature (QuerySpec::prefetch).
@@ -293,7 +295,7 @@ std::atomic<int64_t> level2_bounds{0};
 // (`table_spectral` false: level 1 reads the exact term from the
 // signature instead, as before the table kept the embeddings).
 QuerySpec Spec(const Db& db, const PreparedSignature& q,
-               Cascade cascade = Cascade::kConstrained,
+               Cascade cascade = Cascade::kConstrained32,
                Prefetch prefetch = Prefetch::kAdaptive,
                bool table_spectral = true) {
   QuerySpec spec;
@@ -358,6 +360,13 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
       return ConstrainedTransportBound(q, db.items[i]) +
              SpectralDistance(q, db.items[i]);
     });
+  } else if (cascade == Cascade::kConstrained32) {
+    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
+      level2_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level2.fetch_add(1, std::memory_order_relaxed);
+      return tpr::index::ConstrainedTransportBound32(q, db.items[i]) +
+             SpectralDistance(q, db.items[i]);
+    });
   }
   return spec;
 }
@@ -401,7 +410,7 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 }
 
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
-             Cascade cascade = Cascade::kConstrained, int threads = 1,
+             Cascade cascade = Cascade::kConstrained32, int threads = 1,
              Prefetch prefetch = Prefetch::kAdaptive,
              bool table_spectral = true) {
   Db& db = GetDb(key);
@@ -509,7 +518,7 @@ BENCHMARK(BM_KnnVpTreeExtractedRelaxed)
 // QuerySpec::prefetch, for a side-by-side run.
 void BM_KnnVpTreeExtractedNoPrefetch(benchmark::State& state) {
   RunTree(state, ExtractedKey(state), static_cast<size_t>(state.range(1)),
-          Cascade::kConstrained, /*threads=*/1, Prefetch::kNone);
+          Cascade::kConstrained32, /*threads=*/1, Prefetch::kNone);
 }
 BENCHMARK(BM_KnnVpTreeExtractedNoPrefetch)
     ->Args({100000, 10})
@@ -531,11 +540,26 @@ void BM_KnnVpTreeExtractedSpectralPolicy(benchmark::State& state) {
                                Prefetch::kLate, Prefetch::kAdaptive,
                                Prefetch::kEarly};
   RunTree(state, key, static_cast<size_t>(state.range(1)),
-          Cascade::kConstrained, /*threads=*/1, prefetch[policy],
+          Cascade::kConstrained32, /*threads=*/1, prefetch[policy],
           /*table_spectral=*/policy < 3);
 }
 BENCHMARK(BM_KnnVpTreeExtractedSpectralPolicy)
     ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1, 2, 3, 4}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedLevel2/<n>/<k>/<spectral>/<level 2>: the level-2
+// bound on the double matrix (0: ConstrainedTransportBound, before) or on
+// the float32 one (1: ConstrainedTransportBound32, the index's), with Eq. 7
+// alone (spectral 0) or the default metric (1), side by side.
+void BM_KnnVpTreeExtractedLevel2(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  if (state.range(2) != 0) key.spectral_permille = 1000;
+  RunTree(
+      state, key, static_cast<size_t>(state.range(1)),
+      state.range(3) == 0 ? Cascade::kConstrained : Cascade::kConstrained32);
+}
+BENCHMARK(BM_KnnVpTreeExtractedLevel2)
+    ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedPolicy/<n>/<k>/<policy>: the same for Eq. 7 alone
@@ -545,7 +569,7 @@ void BM_KnnVpTreeExtractedPolicy(benchmark::State& state) {
   const Prefetch prefetch[] = {Prefetch::kAdaptive, Prefetch::kEarly,
                                Prefetch::kLate};
   RunTree(state, ExtractedKey(state), static_cast<size_t>(state.range(1)),
-          Cascade::kConstrained, /*threads=*/1, prefetch[policy]);
+          Cascade::kConstrained32, /*threads=*/1, prefetch[policy]);
 }
 BENCHMARK(BM_KnnVpTreeExtractedPolicy)
     ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1, 2}})
@@ -557,7 +581,7 @@ BENCHMARK(BM_KnnVpTreeExtractedPolicy)
 void BM_KnnVpTreeExtractedThreads(benchmark::State& state) {
   DbKey key = ExtractedKey(state);
   RunTree(state, key, static_cast<size_t>(state.range(1)),
-          Cascade::kConstrained, static_cast<int>(state.range(2)));
+          Cascade::kConstrained32, static_cast<int>(state.range(2)));
 }
 BENCHMARK(BM_KnnVpTreeExtractedThreads)
     ->Args({10000, 10, 1})

@@ -458,6 +458,14 @@ TEST(EmdTest, ConstrainedBoundMatchesItsDualAndLiesBetweenRelaxedAndEmd) {
         ASSERT_GE(cb, rb * (1 - 1e-12)) << t;
         const double d = solver.Distance(a, b);
         ASSERT_LE(cb, d * (1 + 1e-12) + 1e-15) << t;
+        // The float32 form: below the double one (hence the EMD) by its
+        // rounding margin, at most 2 theta of it (emd.cc).
+        const double cb32 = solver.ConstrainedBound32(a, b);
+        EXPECT_EQ(ConstrainedTransportBound32(a, b), cb32);
+        const double theta = internal::Float32MatrixError(a.bands());
+        ASSERT_LE(cb32, cb * (1 + 1e-12) + 1e-15) << t;
+        ASSERT_GE(cb32, cb * (1 - 2 * theta) - 1e-15) << t;
+        ASSERT_LE(cb32, d * (1 + 1e-12) + 1e-15) << t;
         constrained_sum += cb;
         relaxed_sum += rb;
       });
@@ -488,6 +496,11 @@ TEST(EmdTest, DistanceAfterRelaxedBoundEqualsFreshDistance) {
     solver.ConstrainedBound(a, b);
     EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
     solver.ConstrainedBound(b, a);
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
+    solver.ConstrainedBound(a, b);
+    solver.ConstrainedBound32(a, c);  // another pair, float32 matrix
+    EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
+    solver.ConstrainedBound32(a, b);
     EXPECT_EQ(solver.Distance(a, b), fresh.Distance(a, b));
     std::swap(a, b);
   }

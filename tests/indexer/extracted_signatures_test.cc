@@ -10,7 +10,8 @@
 //   many top-10 lists are identical.
 // - The lower-bound cascade (emd.h): the centroid bound (in double and from
 //   the index's quantized CentroidTable) and the relaxed transport bounds
-//   never exceed the exact EMD; with the spectral term on (generated shapes
+//   (the capacity one on the double and on the float32 matrix) never
+//   exceed the exact EMD; with the spectral term on (generated shapes
 //   with their spectra), the table's level-1 bound (centroid + spectral)
 //   and the level-2 bound never exceed the exact distance of metric.h.
 #include <algorithm>
@@ -128,6 +129,8 @@ Tally CheckSet(const std::vector<Signature>& set, int max_queries) {
                 d32[j] + tolerance);
       EXPECT_LE(ConstrainedTransportBound(prepared[q], prepared[j]),
                 d32[j] + tolerance);
+      EXPECT_LE(ConstrainedTransportBound32(prepared[q], prepared[j]),
+                d32[j] + tolerance);
       ++tally.bounds_checked;
       // The float32 bound plus LEMON's integer rounding (about 1e-12 of
       // the largest cost) and the solver's own tolerance.
@@ -243,6 +246,8 @@ TEST(ExtractedSignaturesTest, GeneratedShapesWithSpectraUnderTheDefaultMetric) {
       EXPECT_LE(level1, DistanceLowerBound(a, b) + tolerance) << q << " " << j;
       EXPECT_LE(level1, d + tolerance) << q << " " << j;
       EXPECT_LE(ConstrainedTransportBound(a, b) + spectral, d + tolerance)
+          << q << " " << j;
+      EXPECT_LE(ConstrainedTransportBound32(a, b) + spectral, d + tolerance)
           << q << " " << j;
       spectral_positive += spectral > 0.0;
     }
