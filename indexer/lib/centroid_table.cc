@@ -7,8 +7,8 @@
 // short: 16 bits per band value, with one scale per band block, and the
 // quantization error subtracted from the bound so that it stays a lower
 // bound (the triangle inequality of N, centroid_table.h). The bound loses
-// about 1e-4 of N(c) of pruning power; the row costs 140 bytes at 20 bands
-// instead of 488, and a model about 3.9 KB instead of 4.3 KB.
+// about 1e-4 of N(c) of pruning power; the centroid costs 140 bytes at 20
+// bands instead of 488, and a model about 3.9 KB instead of 4.3 KB.
 //
 // The spectral embedding (metric.h) rides in the same row, 16 bits per
 // value with one step for the whole table, its radius subtracted likewise:

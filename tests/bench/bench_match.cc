@@ -126,7 +126,8 @@ BENCHMARK(BM_EmdLowerBound)->Arg(30);
 // the same run. Databases are realistic signatures (about 30 features, 20
 // bands) drawn from class prototypes (SignatureGenerator); queries are new
 // members of the same classes. Counters per query: emds (full EMDs),
-// emd_share (emds / database size), lbs (centroid bounds), nodes; build_s
+// emd_share (emds / database size), lbs (lower bounds, all levels; lbs1
+// and lbs2 those of levels 1 and 2 in the tree benchmarks), nodes; build_s
 // and build_cpu_s are the one-off tree build time of that database (wall
 // and CPU; on a shared machine CPU is the figure to compare). Databases are
 // built once per process and kept in memory (nothing is cached on disk).
@@ -559,7 +560,24 @@ void BM_KnnVpTreeExtractedLevel2(benchmark::State& state) {
       state.range(3) == 0 ? Cascade::kConstrained : Cascade::kConstrained32);
 }
 BENCHMARK(BM_KnnVpTreeExtractedLevel2)
-    ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1}, {0, 1}})
+    ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedBefore/<n>/<k>/<spectral>: the search as it was
+// before session 5's last changes (level 1 reads the spectral term from
+// the signature, the signature prefetched with the centroid row always,
+// level 2 on the double matrix), on the data of BM_KnnVpTreeExtractedLevel2
+// (same <spectral> meaning), to run beside it: `Level2/<n>/<k>/<s>/1` is
+// the search now.
+void BM_KnnVpTreeExtractedBefore(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  if (state.range(2) != 0) key.spectral_permille = 1000;
+  RunTree(state, key, static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained, /*threads=*/1, Prefetch::kEarly,
+          /*table_spectral=*/false);
+}
+BENCHMARK(BM_KnnVpTreeExtractedBefore)
+    ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedPolicy/<n>/<k>/<policy>: the same for Eq. 7 alone
