@@ -155,7 +155,7 @@ struct Config {
 
 // Bump whenever the extraction code changes what it produces, so that
 // --cache never serves signatures of older feature code.
-constexpr char kFeatureCodeVersion[] = "features-2026-11-30a";
+constexpr char kFeatureCodeVersion[] = "features-2026-11-30b";
 
 // CacheKey names everything a cached description depends on.
 std::string CacheKey(const Model& model, const Config& config, size_t index) {
