@@ -26,6 +26,19 @@
 
 namespace tpr::common {
 
+// kSearchProgressHeader is the metadata key with which a Search call asks for
+// each neighbour's cumulative statistics (value "1"; tpr.v1.Neighbor.progress).
+// tpr-gateway sends it to its shards; tpr-indexer and tpr-gateway honour it.
+inline constexpr char kSearchProgressHeader[] = "tpr-search-progress";
+
+// WantsSearchProgress returns whether the call carries kSearchProgressHeader
+// with the value "1". Thread-safe for the call's handler. Cost: O(metadata).
+inline bool WantsSearchProgress(const grpc::ServerContext& context) {
+  const auto& metadata = context.client_metadata();
+  auto it = metadata.find(kSearchProgressHeader);
+  return it != metadata.end() && it->second == "1";
+}
+
 // CallObserver receives every finished call (health and reflection
 // included). Called on a gRPC thread; must be thread-safe and quick.
 using CallObserver = std::function<void(const CallRecord&)>;

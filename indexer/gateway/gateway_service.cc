@@ -149,6 +149,7 @@ std::unique_ptr<grpc::ClientContext> ShardContext(
 constexpr size_t kMaxListPageBytes = 2 << 20;
 constexpr size_t kMaxStatsLabels = 1000;
 
+// AddStats adds the counts of `from` to `to` (not the milliseconds).
 void AddStats(const tpr::v1::SearchStats& from, tpr::v1::SearchStats* to) {
   to->set_emd_computations(to->emd_computations() + from.emd_computations());
   to->set_lower_bounds(to->lower_bounds() + from.lower_bounds());
@@ -233,6 +234,8 @@ void Shards::Log(const std::string& line) const {
 }
 
 std::vector<Endpoint*> Shards::ReadOrder(int shard) {
+  if (options_.reads_from_primary)
+    return {primaries_[static_cast<size_t>(shard)]};
   const std::vector<Endpoint*>& all = by_shard_[static_cast<size_t>(shard)];
   std::vector<Endpoint*> serving;
   const size_t start =
@@ -564,7 +567,10 @@ struct ShardStream {
   bool received = false;  // anything read from the current address
   bool ended = false;     // stream finished (stats read or error)
   bool has_head = false;
-  tpr::v1::Neighbor head;
+  tpr::v1::Neighbor head;  // its progress moved to `last`
+  // The shard's cumulative statistics as last read: the progress of the
+  // last neighbour read, or its final SearchStats (tpr.v1.Neighbor.progress).
+  tpr::v1::SearchStats last;
 };
 
 // The merge heap's order: the smallest (distance, id) on top.
@@ -623,15 +629,19 @@ grpc::Status GatewayService::Search(
     st.endpoint = st.candidates.front();
     st.candidates.erase(st.candidates.begin());
     st.context = ShardContext(context);
+    // Each neighbour carries the shard's statistics so far, so that a
+    // stream cancelled below still counts the work it did up to the last
+    // neighbour read.
+    st.context->AddMetadata(tpr::common::kSearchProgressHeader, "1");
     st.reader = st.endpoint->stub->Search(st.context.get(), st.request);
     st.received = false;
+    st.last.Clear();
     return true;
   };
   std::vector<std::string> tried;
-  tpr::v1::SearchStats stats;
-  // Reads the next neighbour of `st` into its head (or ends it, adding its
-  // statistics); fails over to the shard's next address when the current
-  // one is unavailable before it sent anything.
+  // Reads the next neighbour of `st` into its head (or ends it, keeping its
+  // final statistics); fails over to the shard's next address when the
+  // current one is unavailable before it sent anything.
   auto advance = [&](ShardStream& st) -> absl::Status {
     st.has_head = false;
     tpr::v1::SearchResponse item;
@@ -640,10 +650,14 @@ grpc::Status GatewayService::Search(
         st.received = true;
         if (item.has_neighbor()) {
           st.head = std::move(*item.mutable_neighbor());
+          // A shard without progress (an older indexer) is counted by its
+          // final statistics only.
+          if (st.head.has_progress()) st.last = st.head.progress();
+          st.head.clear_progress();
           st.has_head = true;
           return absl::OkStatus();
         }
-        if (item.has_stats()) AddStats(item.stats(), &stats);
+        if (item.has_stats()) st.last = item.stats();
         continue;
       }
       const grpc::Status status = st.reader->Finish();
@@ -701,6 +715,20 @@ grpc::Status GatewayService::Search(
   }
   std::make_heap(heap.begin(), heap.end(), after);
 
+  // The statistics: per shard, the work up to the last neighbour read from
+  // it (or all of it, for a stream that ended), summed; the milliseconds
+  // are the gateway's own. Exact by construction, whichever streams are
+  // cancelled; work a shard did ahead of the gateway's reading is not
+  // counted. Callers that ask get the same sum as each neighbour's progress.
+  auto sum_stats = [&]() {
+    tpr::v1::SearchStats sum;
+    for (const ShardStream& st : streams) AddStats(st.last, &sum);
+    sum.set_milliseconds(std::chrono::duration<double, std::milli>(
+                             std::chrono::steady_clock::now() - start)
+                             .count());
+    return sum;
+  };
+  const bool progress = tpr::common::WantsSearchProgress(*context);
   tpr::v1::SearchResponse response;
   int sent = 0;
   while (sent < request->k() && !heap.empty()) {
@@ -710,6 +738,8 @@ grpc::Status GatewayService::Search(
     if (st.head.id() != exclude) {
       *response.mutable_neighbor() = st.head;
       response.mutable_neighbor()->set_rank(++sent);
+      if (progress)
+        *response.mutable_neighbor()->mutable_progress() = sum_stats();
       if (!writer->Write(response)) {
         stop_all();
         return Finish("Search", absl::CancelledError(
@@ -729,10 +759,7 @@ grpc::Status GatewayService::Search(
   stop_all();
   if (absl::Status c = CancelledStatus(context); !c.ok())
     return Finish("Search", c);
-  stats.set_milliseconds(std::chrono::duration<double, std::milli>(
-                             std::chrono::steady_clock::now() - start)
-                             .count());
-  *response.mutable_stats() = stats;
+  *response.mutable_stats() = sum_stats();
   writer->Write(response);
   return grpc::Status::OK;
 }

@@ -119,6 +119,13 @@ struct GatewayOptions {
   // Called when each call to a shard ends (health checks included), on the
   // thread that ends it; must be thread-safe and quick. Default none.
   std::function<void(const ShardCall&)> on_shard_call;
+  // Where reads (Get, List, Stats, Search) go: false, any serving copy of
+  // the shard (a follower may not yet have applied the latest acknowledged
+  // write: it tails the primary's log asynchronously); true, the primary
+  // only (every acknowledged write is seen; the replicas serve no reads and
+  // a stopped primary fails reads too). tpr-gateway --reads=primary|any.
+  // Default false (any).
+  bool reads_from_primary = false;
 };
 
 // ShardCallMetrics returns an on_shard_call that records into `metrics`
@@ -161,7 +168,8 @@ class Shards {
   }
   // ReadOrder returns the serving addresses of `shard`, rotated round-robin
   // so that reads spread over them; when none serves, the primary alone
-  // (tried anyway: it may be back before its next check).
+  // (tried anyway: it may be back before its next check). With
+  // reads_from_primary, the primary alone, always.
   std::vector<Endpoint*> ReadOrder(int shard);
   // MarkDown records that `endpoint` failed a call (until its next health
   // check says otherwise).

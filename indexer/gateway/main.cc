@@ -51,6 +51,13 @@ int main(int argc, char** argv) {
                  "Deadline of one health check")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  std::string reads = "any";
+  app.add_option("--reads", reads,
+                 "Where reads go: any (any serving copy of a shard; a follower "
+                 "may lag the primary's latest writes) or primary (the "
+                 "primary only: every acknowledged write is seen)")
+      ->check(CLI::IsMember({"any", "primary"}))
+      ->capture_default_str();
   // How the gateway reaches the shards: the SDK's connection options.
   tpr::client::ConnectionOptions shard_connection;
   tpr::client::AddPeerConnectionFlags(app, "shard", "the shards",
@@ -63,6 +70,7 @@ int main(int argc, char** argv) {
   tpr::common::ConfigSupport config =
       tpr::common::AddConfigSupport(app, "TPR_GATEWAY_", {"shard-api-key"});
   CLI11_PARSE(app, argc, argv);
+  options.reads_from_primary = reads == "primary";
   if (std::optional<int> exit_code =
           tpr::common::FinishServerFlags(config, ops_flags, &server_options)) {
     return *exit_code;

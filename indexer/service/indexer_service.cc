@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "common/call_interceptor.h"
 #include "common/grpc_status.h"
 #include "common/stream_messages.h"
 
@@ -181,8 +182,13 @@ grpc::Status IndexerService::Stream(
     grpc::ServerContext* context, SearchSession& session,
     grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
   tpr::v1::SearchResponse response;
+  // Per-neighbour statistics only for callers that ask (tpr-gateway): see
+  // tpr.v1.Neighbor.progress.
+  const bool progress = tpr::common::WantsSearchProgress(*context);
   while (std::optional<tpr::v1::Neighbor> n = session.Next()) {
     *response.mutable_neighbor() = std::move(*n);
+    if (progress)
+      *response.mutable_neighbor()->mutable_progress() = session.Stats();
     // Write fails once the client has gone: stop working for it.
     if (!writer->Write(response)) {
       return Finish("Search",

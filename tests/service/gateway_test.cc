@@ -6,9 +6,9 @@
 // the corpus, after deletes), and both against the brute-force oracle;
 // List pages, Stats sums, Get/Upsert/Delete errors; a stopped shard fails
 // the call with UNAVAILABLE naming it; search statistics are the shards'
-// sums; reads go to any serving replica and writes to the primary; once k
-// neighbours are sent the other shards' streams are cancelled (seen by a
-// shard whose stream never ends).
+// sums, also when streams are cancelled early; reads go to any serving replica
+// and writes to the primary; once k neighbours are sent the other shards'
+// streams are cancelled (seen by a shard whose stream never ends).
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -16,9 +16,11 @@
 #include <cstdio>
 #include <mutex>
 #include <optional>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "common/call_interceptor.h"
 #include "indexer/gateway/gateway_service.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
@@ -471,39 +473,124 @@ TEST_F(GatewayTest, StatsSumsAndListsEachShard) {
   EXPECT_EQ(sum, got.models());
 }
 
+// Counts of a SearchStats as a tuple, to compare them at once.
+std::tuple<int64_t, int64_t, int64_t> Counts(const tpr::v1::SearchStats& s) {
+  return {s.emd_computations(), s.lower_bounds(), s.nodes_visited()};
+}
+
+// Checks one stream asked with progress: every neighbour carries it, counts
+// never decrease, and the final statistics are at least the last progress.
+void ExpectProgressGrows(const SearchResult& r) {
+  ASSERT_TRUE(r.got_stats);
+  std::tuple<int64_t, int64_t, int64_t> last{0, 0, 0};
+  for (const tpr::v1::Neighbor& n : r.neighbors) {
+    ASSERT_TRUE(n.has_progress()) << "rank " << n.rank();
+    EXPECT_GE(n.progress().emd_computations(), std::get<0>(last));
+    EXPECT_GE(n.progress().lower_bounds(), std::get<1>(last));
+    EXPECT_GE(n.progress().nodes_visited(), std::get<2>(last));
+    last = Counts(n.progress());
+  }
+  EXPECT_GE(r.stats.emd_computations(), std::get<0>(last));
+  EXPECT_GE(r.stats.lower_bounds(), std::get<1>(last));
+  EXPECT_GE(r.stats.nodes_visited(), std::get<2>(last));
+}
+
+// The oracle of the gateway's statistics: `direct` holds each shard's
+// answer to the same request asked directly with progress, `answer` the
+// gateway's k-NN answer. The gateway reads lazily: each shard's first
+// neighbour, then the shard's next after each one it sends, except after
+// the k-th (the answer is complete and the other streams are cancelled); a
+// read past a shard's last neighbour gets its final statistics. The sum is,
+// per shard, its statistics at its last read. *cancelled counts the shards
+// whose stream the gateway stopped before its end.
+tpr::v1::SearchStats ExpectedSum(const std::vector<SearchResult>& direct,
+                                 const std::vector<tpr::v1::Neighbor>& answer,
+                                 int k, int* cancelled) {
+  std::vector<size_t> reads(direct.size(), 1);
+  for (size_t i = 0; i < answer.size(); ++i) {
+    if (static_cast<int>(i) + 1 < k)
+      ++reads[static_cast<size_t>(ShardOf(answer[i].id(), kShards))];
+  }
+  tpr::v1::SearchStats sum;
+  *cancelled = 0;
+  for (size_t s = 0; s < direct.size(); ++s) {
+    const tpr::v1::SearchStats& at =
+        reads[s] <= direct[s].neighbors.size()
+            ? direct[s].neighbors[reads[s] - 1].progress()
+            : direct[s].stats;
+    *cancelled += reads[s] <= direct[s].neighbors.size() ? 1 : 0;
+    sum.set_emd_computations(sum.emd_computations() + at.emd_computations());
+    sum.set_lower_bounds(sum.lower_bounds() + at.lower_bounds());
+    sum.set_nodes_visited(sum.nodes_visited() + at.nodes_visited());
+  }
+  return sum;
+}
+
 // Search statistics through the gateway are the shards' own, summed: each
-// shard asked directly with the same request is the oracle. k above the
-// corpus, so that every shard's stream runs to its end (a stream cancelled
-// once k neighbours are sent reports no statistics).
+// shard asked directly with the same request, with each neighbour's
+// progress, is the oracle (ExpectedSum). With k above the corpus every
+// shard's stream runs to its end; with a small k the gateway cancels the
+// shards' streams once k neighbours are sent, and their work up to the last
+// neighbour read still counts (before Neighbor.progress it was lost).
+// Neighbours carry progress only when asked, through the gateway too, where
+// each is the running sum and the last equals the final statistics.
 TEST_F(GatewayTest, SearchStatisticsAreTheShardsSums) {
   for (auto& shard : shards_) shard->core()->WaitForRebuild();
-  for (size_t q : {size_t{0}, size_t{57}, size_t{131}}) {
+  struct Case {
+    size_t query;
+    int k;
+    const char* label;
+  };
+  for (const Case& c : {Case{0, 1000, ""}, Case{57, 1000, "class1"},
+                        Case{131, 1000, ""}, Case{0, 1, ""}, Case{57, 10, ""},
+                        Case{131, 7, "class1"}, Case{200, 25, ""}}) {
+    SCOPED_TRACE(
+        absl::StrCat("query ", c.query, " k ", c.k, " label '", c.label, "'"));
     tpr::v1::SearchRequest request;
-    *request.mutable_signature() = ToWire(models_[q].signature);
-    request.set_k(1000);
-    request.set_label(q == 57 ? "class1" : "");
+    *request.mutable_signature() = ToWire(models_[c.query].signature);
+    request.set_k(c.k);
+    request.set_label(c.label);
     SearchResult got = RunSearch(gateway_.get(), request);
     ASSERT_TRUE(got.status.ok()) << got.status.error_message();
     ASSERT_TRUE(got.got_stats);
-    int64_t emds = 0, bounds = 0, nodes = 0;
-    for (auto& shard : shards_) {
-      SearchResult one = RunSearch(shard->stub(), request);
-      ASSERT_TRUE(one.status.ok() && one.got_stats);
-      emds += one.stats.emd_computations();
-      bounds += one.stats.lower_bounds();
-      nodes += one.stats.nodes_visited();
+    for (const tpr::v1::Neighbor& n : got.neighbors)
+      EXPECT_FALSE(n.has_progress()) << "not asked for, rank " << n.rank();
+    for (const tpr::v1::Neighbor& n :
+         RunSearch(shards_[0]->stub(), request).neighbors) {
+      EXPECT_FALSE(n.has_progress()) << "not asked for, rank " << n.rank();
     }
-    EXPECT_GT(emds, 0);
-    EXPECT_EQ(got.stats.emd_computations(), emds) << "query " << q;
-    EXPECT_EQ(got.stats.lower_bounds(), bounds) << "query " << q;
-    EXPECT_EQ(got.stats.nodes_visited(), nodes) << "query " << q;
+
+    std::vector<SearchResult> direct;
+    for (auto& shard : shards_) {
+      direct.push_back(RunSearch(shard->stub(), request, /*progress=*/true));
+      ASSERT_TRUE(direct.back().status.ok());
+      ExpectProgressGrows(direct.back());
+    }
+    int cancelled = 0;
+    const tpr::v1::SearchStats want =
+        ExpectedSum(direct, got.neighbors, c.k, &cancelled);
+    EXPECT_GT(want.emd_computations(), 0);
+    EXPECT_EQ(Counts(got.stats), Counts(want));
+    // A small k cancels shards (the case the sum used to miss); k above
+    // the corpus runs every stream to its end.
+    EXPECT_EQ(cancelled > 0, c.k < 100) << cancelled << " cancelled";
+
+    SearchResult through = RunSearch(gateway_.get(), request, true);
+    ASSERT_TRUE(through.status.ok()) << through.status.error_message();
+    ASSERT_EQ(through.neighbors.size(), got.neighbors.size());
+    ExpectProgressGrows(through);
+    EXPECT_EQ(Counts(through.stats), Counts(want));
+    if (static_cast<int>(through.neighbors.size()) == c.k) {
+      EXPECT_EQ(Counts(through.neighbors.back().progress()), Counts(want));
+    }
   }
 }
 
-// Replicas: reads go to any serving copy of a shard, writes only to its
-// primary. One shard with a primary and a replica holding the same models
-// (the gateway cannot tell a follower from any other copy); the replica also
-// holds one model the primary lacks, so that which copy answered shows.
+// Replicas: reads go to any serving copy of a shard (or, with
+// reads_from_primary, the primary only), writes only to its primary. One shard
+// with a primary and a replica holding the same models (the gateway cannot tell
+// a follower from any other copy); the replica also holds one model the primary
+// lacks, so that which copy answered shows.
 TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
   InProcessIndexer primary(dir_.path() + "/r-primary");
   InProcessIndexer replica(dir_.path() + "/r-replica");
@@ -551,6 +638,34 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
   EXPECT_GT(on_replica, 0);
   EXPECT_LT(on_replica, 8);
 
+  // --reads=primary: the same shard through a second gateway reads only
+  // from the primary, which lacks the marker (every read says NOT_FOUND,
+  // none reaches the replica); Stats counts the primary's 40 models.
+  GatewayOptions primary_options = options;
+  primary_options.reads_from_primary = true;
+  GatewayService primary_only(primary_options);
+  primary_only.shards().CheckNow();
+  absl::StatusOr<tpr::common::StartedServer> primary_started =
+      tpr::common::StartServer(server_options, {&primary_only});
+  ASSERT_TRUE(primary_started.ok()) << primary_started.status();
+  auto primary_gateway = tpr::v1::Indexer::NewStub(
+      grpc::CreateChannel(absl::StrCat("127.0.0.1:", primary_started->port),
+                          grpc::InsecureChannelCredentials()));
+  for (int i = 0; i < 8; ++i) {
+    grpc::ClientContext context;
+    tpr::v1::GetRequest request;
+    request.set_id(marker[0].id);
+    tpr::v1::Model model;
+    EXPECT_EQ(primary_gateway->Get(&context, request, &model).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+  }
+  {
+    grpc::ClientContext context;
+    tpr::v1::StatsResponse stats;
+    ASSERT_TRUE(primary_gateway->Stats(&context, {}, &stats).ok());
+    EXPECT_EQ(stats.models(), 40);
+  }
+
   // A write reaches the primary only.
   std::vector<TestModel> fresh = MakeModels(1, 1, 98, "written");
   {
@@ -583,6 +698,19 @@ TEST_F(GatewayTest, ReadsGoToAnyServingReplicaWritesToThePrimary) {
         << refused.error_message();
   }
   EXPECT_TRUE(absl::IsNotFound(replica.core()->Get(fresh[0].id).status()));
+  // Primary-only reads fail naming the shard while its primary is down,
+  // though the replica serves.
+  {
+    grpc::ClientContext context;
+    tpr::v1::GetRequest request;
+    request.set_id(marker[0].id);
+    tpr::v1::Model model;
+    grpc::Status refused = primary_gateway->Get(&context, request, &model);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::UNAVAILABLE);
+    EXPECT_NE(refused.error_message().find("shard 0"), std::string::npos)
+        << refused.error_message();
+  }
+  tpr::common::ShutdownGracefully(*primary_started, server_options);
   tpr::common::ShutdownGracefully(*started, server_options);
 }
 
@@ -639,18 +767,30 @@ class EndlessShard final : public tpr::v1::Indexer::Service {
       grpc::ServerContext* context, const tpr::v1::SearchRequest*,
       grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override {
     tpr::v1::SearchResponse response;
+    const bool progress = tpr::common::WantsSearchProgress(*context);
     int64_t sent = 0;
     for (; sent < kMaxNeighbors; ++sent) {
       tpr::v1::Neighbor* n = response.mutable_neighbor();
       n->set_id(absl::StrCat("far", sent));
       n->set_rank(static_cast<int>(sent + 1));
       n->set_distance(1e6 + static_cast<double>(sent));
+      if (progress) *n->mutable_progress() = Progress(sent);
       if (!writer->Write(response)) break;
     }
     std::lock_guard<std::mutex> lock(mu_);
     ends_.push_back({sent, context->IsCancelled()});
     ended_.notify_all();
     return grpc::Status::OK;
+  }
+
+  // Progress returns the statistics this shard reports with its neighbour
+  // number `i` (0-based) when asked: made-up counts growing with i.
+  static tpr::v1::SearchStats Progress(int64_t i) {
+    tpr::v1::SearchStats s;
+    s.set_emd_computations(100 * (i + 1));
+    s.set_lower_bounds(10 * (i + 1));
+    s.set_nodes_visited(i + 1);
+    return s;
   }
 
   // Waits up to `timeout` for a search to have ended; returns its end, or
@@ -675,7 +815,10 @@ class EndlessShard final : public tpr::v1::Indexer::Service {
 // cancel shard 1's stream: the call ends OK long before its deadline, and
 // shard 1 sees its call cancelled with neighbours still to send. Without the
 // cancellation the gateway would wait for shard 1's end, which only the
-// deadline brings (the call would fail with DEADLINE_EXCEEDED).
+// deadline brings (the call would fail with DEADLINE_EXCEEDED). The statistics
+// count shard 1's work: its progress at the one neighbour the gateway read
+// (its first, never sent), plus shard 0's at its k-th neighbour (the oracle:
+// shard 0 asked directly).
 TEST(GatewaySearchTest, CancelsTheShardStreamsOnceKNeighboursAreSent) {
   TempDir dir;
   InProcessIndexer near(dir.path() + "/near");
@@ -684,6 +827,7 @@ TEST(GatewaySearchTest, CancelsTheShardStreamsOnceKNeighboursAreSent) {
   tpr::v1::BatchUpsertResponse written;
   ASSERT_TRUE(Ingest(near.stub(), models, &written).ok());
   ASSERT_EQ(written.written(), static_cast<int64_t>(models.size()));
+  near.core()->WaitForRebuild();
 
   EndlessShard endless;
   tpr::common::ServerOptions shard_options;
@@ -722,6 +866,20 @@ TEST(GatewaySearchTest, CancelsTheShardStreamsOnceKNeighboursAreSent) {
     EXPECT_DOUBLE_EQ(got.neighbors[i].distance(), want[i].distance)
         << "rank " << i + 1;
   }
+
+  ASSERT_TRUE(got.got_stats);
+  const SearchResult direct = RunSearch(near.stub(), request, true);
+  ASSERT_TRUE(direct.status.ok());
+  ASSERT_GE(direct.neighbors.size(), static_cast<size_t>(kK));
+  const tpr::v1::SearchStats& near_at_k = direct.neighbors[kK - 1].progress();
+  const tpr::v1::SearchStats endless_first = EndlessShard::Progress(0);
+  EXPECT_GT(near_at_k.emd_computations(), 0);
+  EXPECT_EQ(got.stats.emd_computations(),
+            near_at_k.emd_computations() + endless_first.emd_computations());
+  EXPECT_EQ(got.stats.lower_bounds(),
+            near_at_k.lower_bounds() + endless_first.lower_bounds());
+  EXPECT_EQ(got.stats.nodes_visited(),
+            near_at_k.nodes_visited() + endless_first.nodes_visited());
 
   const std::optional<EndlessShard::End> end =
       endless.WaitForEnd(std::chrono::seconds(30));

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "common/call_interceptor.h"
 #include "common/grpc_status.h"
 #include "common/server_lifecycle.h"
 #include "indexer/lib/emd.h"
@@ -124,11 +125,15 @@ struct SearchResult {
   tpr::v1::SearchStats stats;
 };
 
+// RunSearch runs one search to its end (60 s deadline). `progress` asks for
+// each neighbour's cumulative statistics (tpr.v1.Neighbor.progress).
 inline SearchResult RunSearch(tpr::v1::Indexer::Stub* stub,
-                              const tpr::v1::SearchRequest& request) {
+                              const tpr::v1::SearchRequest& request,
+                              bool progress = false) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() +
                        std::chrono::seconds(60));
+  if (progress) context.AddMetadata(tpr::common::kSearchProgressHeader, "1");
   SearchResult result;
   auto reader = stub->Search(&context, request);
   tpr::v1::SearchResponse response;
