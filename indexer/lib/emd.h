@@ -14,6 +14,7 @@
 #define TPR_INDEXER_LIB_EMD_H_
 
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -195,6 +196,12 @@ inline bool PrefetchSignatureEarly(int64_t level1_bounds,
 double CentroidBound(const double* ca, int ba, const double* cb, int bb);
 
 namespace internal {
+
+// PrefetchLines asks the CPU to start loading `lines` 64-byte lines from
+// `data` into L2, without waiting: PrefetchSignature's loop, shared with
+// CentroidTable::PrefetchSignature. No effect on any result; O(lines);
+// thread-safe.
+void PrefetchLines(const void* data, size_t lines);
 
 // CentroidNorm returns N(x - y) for two centroids given by accessors:
 // x(-1, 0) is row 0 (W1 G'), x(block, d) band d of block 0, 1, 2 (K, A,

@@ -542,7 +542,12 @@ class VpCursor : public NeighborCursor {
     for (uint32_t child : {node.inner, node.outer}) {
       if (child == kNone) continue;
       const double bound = NodeBound(child, e.key);
-      if (bound <= spec_.radius) queue_.push({bound, child, kNode, 0});
+      if (!(bound <= spec_.radius)) continue;
+      queue_.push({bound, child, kNode, 0});
+      const uint32_t vp = data_->nodes[child].vp;
+      if (vp != kNone && spec_.prefetch && spec_.prefetch_vantage_points) {
+        spec_.prefetch(vp, spec_.lower_bounds.size());
+      }
     }
   }
 

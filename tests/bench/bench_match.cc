@@ -279,9 +279,14 @@ enum class Cascade {
 enum class Prefetch {
   kNone,      // never
   kAdaptive,  // as SignatureIndex does: at level 0 only while
-              // PrefetchSignatureEarly, at levels >= 1 always
-  kEarly,     // at level 0 always (the centroid row too)
-  kLate,      // at levels >= 1 only (level 0: the centroid row alone)
+              // PrefetchSignatureEarly, at levels >= 1 always, the block
+              // found through the table (CentroidTable::PrefetchSignature),
+              // vantage points' signatures when their node is queued
+  kAdaptiveBefore,  // the same as before both (through the
+                    // PreparedSignature object, no vantage points); the
+                    // policies below too
+  kEarly,           // at level 0 always (the centroid row too)
+  kLate,            // at levels >= 1 only (level 0: the centroid row alone)
 };
 
 // Level-1 and level-2 bound evaluations since the last reset (the `lbs1`
@@ -313,14 +318,20 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
       if (level == 0) {
         db.centroids.Prefetch(i);
         if (prefetch == Prefetch::kLate ||
-            (prefetch == Prefetch::kAdaptive &&
+            ((prefetch == Prefetch::kAdaptive ||
+              prefetch == Prefetch::kAdaptiveBefore) &&
              !tpr::index::PrefetchSignatureEarly(counts->level1.load(),
                                                  counts->level2.load()))) {
           return;
         }
       }
-      tpr::index::PrefetchSignature(db.items[i]);
+      if (prefetch == Prefetch::kAdaptive) {
+        db.centroids.PrefetchSignature(i);
+      } else {
+        tpr::index::PrefetchSignature(db.items[i]);
+      }
     };
+    spec.prefetch_vantage_points = prefetch == Prefetch::kAdaptive;
   }
   // The query's centroid, computed once per query as the index does.
   auto qc =
@@ -578,6 +589,24 @@ void BM_KnnVpTreeExtractedBefore(benchmark::State& state) {
 }
 BENCHMARK(BM_KnnVpTreeExtractedBefore)
     ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedPrefetch/<n>/<k>/<spectral>/<prefetch>: the
+// search now (prefetch 1: the signature's block found through the
+// centroid table, vantage points prefetched when queued) beside the same
+// search without those two changes (0: PrefetchSignature through the
+// PreparedSignature object, as at commit a68b7fb), on the data of
+// BM_KnnVpTreeExtractedLevel2 (same <spectral> meaning).
+void BM_KnnVpTreeExtractedPrefetch(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  if (state.range(2) != 0) key.spectral_permille = 1000;
+  RunTree(
+      state, key, static_cast<size_t>(state.range(1)), Cascade::kConstrained32,
+      /*threads=*/1,
+      state.range(3) != 0 ? Prefetch::kAdaptive : Prefetch::kAdaptiveBefore);
+}
+BENCHMARK(BM_KnnVpTreeExtractedPrefetch)
+    ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedPolicy/<n>/<k>/<policy>: the same for Eq. 7 alone

@@ -306,6 +306,7 @@ TEST(VpTreeTest, PrefetchHintNamesTheNextItemAndItsLevel) {
     SearchStats without;
     const std::vector<ItemNeighbor> want = tree.Knn(plain, 10, &without);
     std::fill(applied.begin(), applied.end(), 0);
+    spec.prefetch_vantage_points = false;  // their hints: the test below
     spec.prefetch = [&applied, &hinted, &hints](uint32_t i, size_t level) {
       ++hints;
       EXPECT_EQ(static_cast<size_t>(applied[i]), level) << "item " << i;
@@ -319,6 +320,51 @@ TEST(VpTreeTest, PrefetchHintNamesTheNextItemAndItsLevel) {
   }
   EXPECT_GT(hints, 0);
   EXPECT_GT(hinted_then_refined, hints / 2);
+}
+
+// With prefetch_vantage_points, every vantage point whose distance the
+// search computes was hinted (at level lower_bounds.size(): only the
+// distance left) when its node was queued, except the root's, which is
+// queued before the search starts; answers and work are unchanged.
+TEST(VpTreeTest, PrefetchHintsEachVantagePointBeforeItsDistance) {
+  const std::vector<Point> points = Clustered(3000, 8, 30, 0.02, 87);
+  const VpTree tree = BuildTree(points, L2);
+  const BruteForceIndex oracle(points.size());
+  int64_t vantage_distances = 0;
+  for (const Point& query : Queries(points, 50, 88)) {
+    std::vector<int> bounded(points.size(), 0);
+    std::vector<int> hinted(points.size(), 0);
+    QuerySpec spec = Spec(points, query, L2);
+    spec.lower_bounds.push_back([&points, &query, &bounded](uint32_t i) {
+      ++bounded[i];
+      return LInf(query, points[i]);
+    });
+    const QuerySpec plain = spec;
+    SearchStats without;
+    const std::vector<ItemNeighbor> want = tree.Knn(plain, 10, &without);
+    std::fill(bounded.begin(), bounded.end(), 0);
+    int64_t unhinted = 0;  // vantage points computed without a hint
+    int64_t computed = 0;
+    const auto distance = spec.distance;
+    spec.distance = [&](uint32_t i) {
+      if (bounded[i] == 0) {  // never bounded: a vantage point
+        ++computed;
+        if (hinted[i] == 0) ++unhinted;
+      }
+      return distance(i);
+    };
+    spec.prefetch = [&hinted](uint32_t i, size_t level) {
+      if (level == 1) ++hinted[i];  // lower_bounds.size()
+    };
+    SearchStats with;
+    ExpectSame(tree.Knn(spec, 10, &with), want, "prefetch");
+    ExpectSame(want, oracle.Knn(plain, 10), "brute force");
+    EXPECT_EQ(with.emd_computations, without.emd_computations);
+    EXPECT_EQ(with.lower_bounds, without.lower_bounds);
+    EXPECT_EQ(unhinted, 1) << "only the root's vantage point";
+    vantage_distances += computed;
+  }
+  EXPECT_GT(vantage_distances, 50 * 2);
 }
 
 TEST(VpTreeTest, LowerBoundFilterKeepsResultsAndSavesDistances) {
