@@ -135,8 +135,9 @@ struct QuerySpec {
   // calls prefetch(vp, lower_bounds.size()) for the node's vantage point
   // vp, whose distance it computes if it expands the node (a vantage
   // point's data are otherwise cold: about 9% of a 10-NN over 1M,
-  // docs/search-cost.md). Default: true.
-  bool prefetch_vantage_points = true;
+  // docs/search-cost.md). Default: false (measured slower at 1M, same
+  // document).
+  bool prefetch_vantage_points = false;
 };
 
 // NeighborCursor yields results in ascending (distance, tie_less) order.

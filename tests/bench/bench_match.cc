@@ -278,12 +278,12 @@ enum class Cascade {
 // When a search prefetches an item's signature (QuerySpec::prefetch).
 enum class Prefetch {
   kNone,      // never
-  kAdaptive,  // as SignatureIndex does: at level 0 only while
+  kAdaptive,  // at level 0 only while
               // PrefetchSignatureEarly, at levels >= 1 always, the block
               // found through the table (CentroidTable::PrefetchSignature),
               // vantage points' signatures when their node is queued
-  kAdaptiveBefore,  // the same as before both (through the
-                    // PreparedSignature object, no vantage points); the
+  kAdaptiveBefore,  // as SignatureIndex does: the same without both (through
+                    // the PreparedSignature object, no vantage points); the
                     // policies below too
   kEarly,           // at level 0 always (the centroid row too)
   kLate,            // at levels >= 1 only (level 0: the centroid row alone)
@@ -592,10 +592,10 @@ BENCHMARK(BM_KnnVpTreeExtractedBefore)
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedPrefetch/<n>/<k>/<spectral>/<prefetch>: the
-// search now (prefetch 1: the signature's block found through the
-// centroid table, vantage points prefetched when queued) beside the same
-// search without those two changes (0: PrefetchSignature through the
-// PreparedSignature object, as at commit a68b7fb), on the data of
+// search with the signature's block found through the centroid table and
+// vantage points prefetched when queued (prefetch 1; measured slower at
+// 1M, docs/search-cost.md) beside the index's search (0:
+// PrefetchSignature through the PreparedSignature object), on the data of
 // BM_KnnVpTreeExtractedLevel2 (same <spectral> meaning).
 void BM_KnnVpTreeExtractedPrefetch(benchmark::State& state) {
   DbKey key = ExtractedKey(state);

@@ -353,6 +353,7 @@ TEST(VpTreeTest, PrefetchHintsEachVantagePointBeforeItsDistance) {
       }
       return distance(i);
     };
+    spec.prefetch_vantage_points = true;
     spec.prefetch = [&hinted](uint32_t i, size_t level) {
       if (level == 1) ++hinted[i];  // lower_bounds.size()
     };
