@@ -2,7 +2,8 @@
 # The formatting check can fail: in a scratch git repository holding
 # scripts/format and .clang-format, a formatted file passes, and a file with
 # a line over the column limit, or one clang-format would change, is refused
-# (exit 1) and named. Exit 77 (skipped) without clang-format-14.
+# (exit 1) and named; --fix refuses (and leaves untouched) a file that is
+# not C++ or .proto. Exit 77 (skipped) without clang-format-14.
 set -euo pipefail
 ROOT="$1"
 command -v "${CLANG_FORMAT:-clang-format-14}" >/dev/null || exit 77
@@ -30,4 +31,16 @@ expect_refused long.h "// $(printf 'x%.0s' $(seq 1 90))
 "
 expect_refused spacing.cc 'int  Sub( int a,int b ){return a-b;}
 '
-echo "format check refuses both files"
+# --fix leaves a non-C++ file untouched and says so (it would otherwise
+# rewrite a shell script as C++).
+script='#!/usr/bin/env bash
+echo  "keep   these  spaces"
+'
+printf '%s' "$script" > tool.sh
+chmod +x tool.sh
+if scripts/format --fix tool.sh 2>/dev/null; then
+  echo "--fix accepted a shell script"; exit 1
+fi
+[ "$(cat tool.sh)" = "$(printf '%s' "$script")" ] && [ -x tool.sh ] ||
+  { echo "--fix changed tool.sh"; exit 1; }
+echo "format check refuses both files; --fix leaves a shell script alone"
