@@ -160,7 +160,8 @@ absl::StatusOr<std::vector<eval::Query>> D2Queries(
 struct Column {
   std::string key;    // JSON key
   std::string title;  // text heading
-  eval::Scores scores;
+  std::vector<eval::Query> queries;
+  eval::Scores scores;      // of `queries`, once the labels are known
   std::string unavailable;  // "" when scored
 };
 
@@ -263,7 +264,6 @@ int RunEval(const Globals& g, const std::string& dataset,
   std::vector<eval::Query> queries;
   double query_seconds = 0;
   std::vector<Column> compare;  // with options.compare: the other columns
-  std::vector<std::pair<std::string, std::vector<eval::Query>>> compare_queries;
   if (evaluated.size() >= 2) {
     absl::StatusOr<tpr::v1::StatsResponse> stats = indexer->Stats(&call);
     if (!stats.ok()) return Fail("indexer stats", stats.status());
@@ -296,16 +296,15 @@ int RunEval(const Globals& g, const std::string& dataset,
                 "paper", "paper TPR (EMD of Eq. 7 alone)", &paper},
             {"spectrum", "spectrum alone (ShapeDNA)", &spectrum}}) {
         Failures column_failures;
-        std::vector<eval::Query> q =
-            RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
-                    ranking, options.add.jobs, call, key, &column_failures);
         Column c;
         c.key = key;
         c.title = title;
-        if (q.empty() && !column_failures.empty()) {
+        c.queries =
+            RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
+                    ranking, options.add.jobs, call, key, &column_failures);
+        if (c.queries.empty() && !column_failures.empty()) {
           c.unavailable = column_failures.front().second;
         } else {
-          compare_queries.emplace_back(key, std::move(q));
           failures.insert(failures.end(), column_failures.begin(),
                           column_failures.end());
         }
@@ -317,7 +316,7 @@ int RunEval(const Globals& g, const std::string& dataset,
       c.key = "d2";
       c.title = "D2 (Osada et al. 2001, L1; local)";
       if (d2.ok()) {
-        compare_queries.emplace_back("d2", std::move(*d2));
+        c.queries = std::move(*d2);
       } else {
         c.unavailable = d2.status().ToString();
       }
@@ -335,9 +334,7 @@ int RunEval(const Globals& g, const std::string& dataset,
   const bool evaluable = scores.overall.queries > 0;
   if (options.compare) {
     for (Column& c : compare) {
-      for (const auto& [key, q] : compare_queries) {
-        if (key == c.key) c.scores = eval::Evaluate(labels, q);
-      }
+      if (c.unavailable.empty()) c.scores = eval::Evaluate(labels, c.queries);
     }
     Column own;
     own.key = "default";
