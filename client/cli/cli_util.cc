@@ -83,4 +83,16 @@ double Progress::Elapsed() const {
   return std::chrono::duration<double>(Clock::now() - start_).count();
 }
 
+std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name) {
+  tpr::v1::Ranking ranking;
+  if (name == "paper") {
+    ranking.set_emd_weight(1.0);
+  } else if (name == "spectrum") {
+    ranking.set_spectral_weight(1.0);
+  } else {
+    return std::nullopt;
+  }
+  return ranking;
+}
+
 }  // namespace tpr::cli

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cstddef>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -21,6 +22,7 @@
 #include "absl/strings/string_view.h"
 #include "common/parallel.h"
 #include "eval/lib/report.h"
+#include "tpr/v1/indexer.pb.h"
 #include "tpr/v1/signature.pb.h"
 
 namespace tpr::cli {
@@ -46,6 +48,13 @@ void PrintFailures(const Failures& failures);
 
 // CountKind returns the number of features of `kind` in `signature`.
 int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);
+
+// NamedRanking returns the SearchRequest.ranking that a `--rank-by` name
+// stands for: "paper" ranks by the EMD of Eq. 7 alone, "spectrum" by the
+// spectral term alone (both make the indexer compare the query with every
+// model). "default", "" and any other name give nullopt: the index's own
+// distance, served by its VP-tree. Thread-safe.
+std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name);
 
 // ToJson returns `message` as one line of JSON (proto field names, every
 // primitive field printed; 64-bit integers as strings, non-finite doubles

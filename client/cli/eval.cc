@@ -288,9 +288,8 @@ int RunEval(const Globals& g, const std::string& dataset,
       // The side-by-side columns of issue 9: the paper's distance and the
       // spectrum alone ranked by the indexer (SearchRequest.ranking), D2
       // here.
-      tpr::v1::Ranking paper, spectrum;
-      paper.set_emd_weight(1.0);
-      spectrum.set_spectral_weight(1.0);
+      const tpr::v1::Ranking paper = *NamedRanking("paper");
+      const tpr::v1::Ranking spectrum = *NamedRanking("spectrum");
       for (const auto& [key, title, ranking] :
            {std::tuple<std::string, std::string, const tpr::v1::Ranking*>{
                 "paper", "paper TPR (EMD of Eq. 7 alone)", &paper},

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "client/cli/cli_util.h"
@@ -46,10 +47,8 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
   request.set_k(flags.k);
   request.set_radius(flags.radius);
   request.set_label(flags.label);
-  if (flags.rank_by == "paper") {
-    request.mutable_ranking()->set_emd_weight(1.0);
-  } else if (flags.rank_by == "spectrum") {
-    request.mutable_ranking()->set_spectral_weight(1.0);
+  if (std::optional<tpr::v1::Ranking> ranking = NamedRanking(flags.rank_by)) {
+    *request.mutable_ranking() = *std::move(ranking);
   }
   std::unique_ptr<tpr::client::SearchStream> stream = indexer->Search(request);
   bool header = false;
