@@ -9,6 +9,7 @@
 //       --manifest ../shared/data/shrec07-watertight/MANIFEST.txt
 //   tpr-eval-local --synthetic 8x10 --out /tmp/eval
 //   tpr-eval-local --synthetic identity:10x10   # bodies x poses, synth.h
+//       [--identity-surface skinned|repolygonized]
 #include <CLI/CLI.hpp>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -149,6 +150,8 @@ struct Config {
   index::GroundDistanceOptions ground;
   D2Options d2;
   int synthetic_vertices = 5000;
+  // Identity mode's surfaces (synth.h, IdentitySurface).
+  synth::IdentitySurface identity_surface = synth::IdentitySurface::kSkinned;
   uint64_t seed = 1;
   std::string cache_dir;  // empty: no cache
 };
@@ -156,6 +159,9 @@ struct Config {
 // Bump whenever the extraction code changes what it produces, so that
 // --cache never serves signatures of older feature code.
 constexpr char kFeatureCodeVersion[] = "features-2026-11-30b";
+// Bump whenever identity mode's skinning (extractor/synth) changes its
+// meshes.
+constexpr char kIdentitySkinVersion[] = "skinned-2026-11-30";
 
 // CacheKey names everything a cached description depends on.
 std::string CacheKey(const Model& model, const Config& config, size_t index) {
@@ -166,6 +172,12 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   if (model.path.empty()) {
     key << " synth=" << model.label << "/" << model.synthetic_pose
         << " v=" << config.synthetic_vertices;
+    // Re-polygonized identity meshes keep the key they had before the
+    // skinned mode existed (the same meshes, synth_test pins them).
+    if (model.identity_body >= 0 &&
+        config.identity_surface == synth::IdentitySurface::kSkinned) {
+      key << " identity_surface=" << kIdentitySkinVersion;
+    }
   } else {
     std::error_code ec;
     key << " path="
@@ -223,6 +235,7 @@ Described Describe(const Model& model, const Config& config, size_t index) {
     synth::ShapeOptions shape;
     shape.target_vertices = config.synthetic_vertices;
     shape.seed = config.seed;
+    shape.identity_surface = config.identity_surface;
     absl::StatusOr<extract::Mesh> mesh =
         model.identity_body >= 0
             ? synth::GenerateIdentity(model.identity_body, model.synthetic_pose,
@@ -299,6 +312,15 @@ void DeclareFlags(CLI::App* app, Flags* f) {
       "--synthetic", f->synthetic,
       "generate CLASSESxPOSES synthetic models instead, or "
       "identity:BODIESxPOSES (bodies of one skeleton, class = body)");
+  app->add_option("--identity-surface", c.identity_surface,
+                  "identity mode's surfaces: skinned (one rest mesh per body, "
+                  "skinned to each pose; default) or repolygonized (each "
+                  "pose polygonized afresh, the set up to session 5)")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, synth::IdentitySurface>{
+              {"skinned", synth::IdentitySurface::kSkinned},
+              {"repolygonized", synth::IdentitySurface::kRepolygonized}},
+          CLI::ignore_case));
   app->add_option("--synthetic-vertices", c.synthetic_vertices,
                   "vertices per synthetic model");
   app->add_option("--out", f->out_dir,

@@ -63,6 +63,9 @@ constexpr double kMtVerticesPerArea = 4.49;
 // The fine mesh has this many times the target vertices before decimation;
 // collapsing a third of the vertices removes MT's slivers.
 constexpr double kOversample = 1.6;
+// Skin weights below this are dropped (a vertex moves by at most about
+// this fraction of its distance to the joint for it).
+constexpr double kMinSkinWeight = 1e-6;
 // 4 bytes per point: at most 240 MB of grid.
 constexpr int64_t kMaxGridPoints = 60'000'000;
 
@@ -932,6 +935,16 @@ absl::Status ValidateSkeleton(const Skeleton& skeleton, int target_vertices) {
   return absl::OkStatus();
 }
 
+// Blend radius: fillets at joints without swallowing the thinnest parts
+// (a joint of two bones bulges by k log 2).
+double BlendRadius(const Skeleton& skeleton) {
+  double r_min = 1e300;
+  for (const Bone& b : skeleton.bones) {
+    r_min = std::min({r_min, b.start_radius, b.end_radius});
+  }
+  return 0.5 * r_min;
+}
+
 }  // namespace
 
 absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
@@ -950,9 +963,7 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
     if (b.parent < 0)
       area_estimate += 4.0 * M_PI * b.start_radius * b.start_radius;
   }
-  // Blend radius: fillets at joints without swallowing the thinnest parts
-  // (a joint of two bones bulges by k log 2).
-  const BlendField field(skeleton, 0.5 * r_min);
+  const BlendField field(skeleton, BlendRadius(skeleton));
   // Thin parts must span at least two cells in radius for MT to keep them
   // whole and genus 0.
   double h = std::min(std::sqrt(kMtVerticesPerArea * area_estimate /
@@ -1000,6 +1011,81 @@ absl::StatusOr<Mesh> MeshFromSkeleton(const Skeleton& skeleton,
     Relax(mesh, field, max_step, 2);
   }
   return mesh;
+}
+
+std::vector<std::vector<BoneWeight>> SkinWeights(const Skeleton& skeleton,
+                                                 const Mesh& mesh,
+                                                 double blend_length) {
+  const BlendField field(skeleton, BlendRadius(skeleton));
+  const std::vector<Capsule>& capsules = field.capsules();
+  const size_t n = mesh.positions.size(), bones = capsules.size();
+  // One-hot on the nearest capsule (the bone whose part of the blend made
+  // the vertex), bones x vertices, vertex fastest.
+  std::vector<double> w(n * bones, 0.0), next(n * bones);
+  for (size_t v = 0; v < n; ++v) {
+    Vector3d q;
+    size_t nearest = 0;
+    double best = 1e300;
+    for (size_t i = 0; i < bones; ++i) {
+      const double d =
+          BlendField::CapsuleDistance(capsules[i], mesh.positions[v], &q);
+      if (d < best) {
+        best = d;
+        nearest = i;
+      }
+    }
+    w[nearest * n + v] = 1.0;
+  }
+  // Neighbours over the triangles' edges (each once per direction).
+  std::vector<std::vector<int32_t>> adjacent(n);
+  double edge_sum = 0.0;
+  int64_t edges = 0;
+  for (const auto& t : mesh.triangles) {
+    for (int e = 0; e < 3; ++e) {
+      const int32_t a = t[e], b = t[(e + 1) % 3];
+      if (a < b) {
+        adjacent[a].push_back(b);
+        adjacent[b].push_back(a);
+        edge_sum += (mesh.positions[a] - mesh.positions[b]).norm();
+        ++edges;
+      }
+    }
+  }
+  // Lazy random-walk smoothing, w <- (w + mean of the neighbours) / 2: after
+  // m steps a one-hot spreads with a standard deviation of about
+  // mean_edge sqrt(m) / 2 per surface direction, so m = (2 L / mean_edge)^2
+  // steps blend over about +-L whatever the resolution.
+  const double mean_edge = edges > 0 ? edge_sum / edges : 1.0;
+  const int steps = static_cast<int>(
+      std::ceil(std::pow(2.0 * blend_length / mean_edge, 2.0)));
+  for (int step = 0; step < steps; ++step) {
+    for (size_t i = 0; i < bones; ++i) {
+      const double* in = &w[i * n];
+      double* out = &next[i * n];
+      for (size_t v = 0; v < n; ++v) {
+        double sum = 0.0;
+        for (int32_t u : adjacent[v]) sum += in[u];
+        out[v] =
+            adjacent[v].empty()
+                ? in[v]
+                : 0.5 * (in[v] + sum / static_cast<double>(adjacent[v].size()));
+      }
+    }
+    w.swap(next);
+  }
+  std::vector<std::vector<BoneWeight>> result(n);
+  for (size_t v = 0; v < n; ++v) {
+    double sum = 0.0;
+    for (size_t i = 0; i < bones; ++i) {
+      if (w[i * n + v] > kMinSkinWeight) sum += w[i * n + v];
+    }
+    for (size_t i = 0; i < bones; ++i) {
+      if (w[i * n + v] > kMinSkinWeight) {
+        result[v].push_back({static_cast<int>(i), w[i * n + v] / sum});
+      }
+    }
+  }
+  return result;
 }
 
 }  // namespace tpr::synth

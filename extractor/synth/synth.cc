@@ -439,11 +439,15 @@ bool SeparatedFromEarlier(const std::vector<TemplateBone>& rest,
 // rigid motion. A swing that brings the bone too close to an earlier bone is
 // redrawn, then shrunk, then dropped; redrawing one bone instead of the
 // whole skeleton keeps poses varied for many-limbed classes. Returns false
-// if even the unswung bone collides (a parent's pose left no room).
+// if even the unswung bone collides (a parent's pose left no room). On
+// success `rot` holds each bone's rotation from rest: bone i maps rest point
+// p to out[i].start + rot[i] (p - bones[i].bone.start).
 bool Pose(const std::vector<TemplateBone>& bones, Rng& rng, double amount,
-          double threshold, std::vector<Bone>* out) {
+          double threshold, std::vector<Bone>* out,
+          std::vector<Matrix3d>* rotations) {
   const size_t n = bones.size();
-  std::vector<Matrix3d> rot(n);
+  std::vector<Matrix3d>& rot = *rotations;
+  rot.assign(n, Matrix3d::Identity());
   out->assign(n, Bone());
   for (size_t i = 0; i < n; ++i) {
     const Bone& rest = bones[i].bone;
@@ -532,6 +536,8 @@ Similarity DrawSimilarity(uint64_t seed) {
 // A posed skeleton in its own frame, and where to place it.
 struct Posed {
   Skeleton skeleton;
+  // Bone i's rotation from rest (Pose); identity for every bone at rest.
+  std::vector<Matrix3d> rotations;
   Similarity placement;
 };
 
@@ -540,6 +546,7 @@ Posed PoseTemplate(const std::vector<TemplateBone>& bones, uint64_t shape_id,
   const double threshold = GapThreshold(bones);
   Posed posed;
   for (const auto& t : bones) posed.skeleton.bones.push_back(t.bone);
+  posed.rotations.assign(bones.size(), Matrix3d::Identity());
   // A few full-range draws, then draws damped towards the rest pose, which
   // is the last resort and always separated.
   for (int attempt = 0; attempt < 36; ++attempt) {
@@ -548,8 +555,10 @@ Posed PoseTemplate(const std::vector<TemplateBone>& bones, uint64_t shape_id,
     if (amount == 0.0) break;
     Rng rng(StreamSeed(options.seed, shape_id, pose_index, 1 + attempt));
     std::vector<Bone> candidate;
-    if (Pose(bones, rng, amount, threshold, &candidate)) {
+    std::vector<Matrix3d> rotations;
+    if (Pose(bones, rng, amount, threshold, &candidate, &rotations)) {
       posed.skeleton.bones = std::move(candidate);
+      posed.rotations = std::move(rotations);
       break;
     }
   }
@@ -576,6 +585,75 @@ absl::StatusOr<extract::Mesh> MeshOf(const Posed& posed, int target) {
   absl::StatusOr<extract::Mesh> mesh = MeshFromSkeleton(posed.skeleton, target);
   if (!mesh.ok()) return mesh.status();
   for (Eigen::Vector3d& p : mesh->positions) p = posed.placement.Apply(p);
+  return mesh;
+}
+
+// A rigid motion p -> R p + t as a unit dual quaternion real + eps dual,
+// dual = t real / 2 (t read as a pure quaternion), stored as 4-vectors
+// (x, y, z, w) so that blending is plain vector arithmetic.
+struct DualQuaternion {
+  Eigen::Vector4d real;
+  Eigen::Vector4d dual;
+};
+
+DualQuaternion ToDualQuaternion(const Matrix3d& rotation,
+                                const Vector3d& translation) {
+  const Eigen::Quaterniond r(rotation);
+  const Eigen::Quaterniond t(0.0, translation.x(), translation.y(),
+                             translation.z());
+  const Eigen::Quaterniond d = t * r;
+  return {r.coeffs(), 0.5 * d.coeffs()};
+}
+
+// Dual-quaternion linear blending (Kavan et al. 2008, DLB): the weighted sum
+// of the bones' dual quaternions, each sign-aligned with the heaviest one
+// (q and -q are one motion), normalized, applied to `p`.
+Vector3d BlendMotions(const std::vector<BoneWeight>& weights,
+                      const std::vector<DualQuaternion>& motions,
+                      const Vector3d& p) {
+  size_t heaviest = 0;
+  for (size_t i = 1; i < weights.size(); ++i) {
+    if (weights[i].weight > weights[heaviest].weight) heaviest = i;
+  }
+  const Eigen::Vector4d& pivot = motions[weights[heaviest].bone].real;
+  Eigen::Vector4d real = Eigen::Vector4d::Zero(), dual = real;
+  for (const BoneWeight& w : weights) {
+    const DualQuaternion& m = motions[w.bone];
+    const double sign = m.real.dot(pivot) < 0.0 ? -1.0 : 1.0;
+    real += sign * w.weight * m.real;
+    dual += sign * w.weight * m.dual;
+  }
+  const double norm = real.norm();
+  const Eigen::Quaterniond r(real / norm), d(dual / norm);
+  // Translation 2 d conj(r); its vector part is exact for a unit blend and
+  // drops the component of d along r that normalization leaves otherwise.
+  const Vector3d t = 2.0 * (d * r.conjugate()).vec();
+  return r.toRotationMatrix() * p + t;
+}
+
+// Skin moves the rest mesh of `rest` (pose_amount 0) to `posed` by dual-
+// quaternion skinning with SkinWeights (synth.h, identity mode).
+extract::Mesh Skin(const Skeleton& rest, const Posed& posed,
+                   extract::Mesh mesh) {
+  std::vector<DualQuaternion> motions;
+  for (size_t i = 0; i < rest.bones.size(); ++i) {
+    const Matrix3d& r = posed.rotations[i];
+    motions.push_back(ToDualQuaternion(
+        r, posed.skeleton.bones[i].start - r * rest.bones[i].start));
+  }
+  // Blend over about a limb's radius (the mean bone radius) on either side
+  // of a junction (synth.h, identity mode).
+  double radius = 0.0;
+  for (const Bone& b : rest.bones) {
+    radius += 0.5 * (b.start_radius + b.end_radius);
+  }
+  const double blend_length = radius / rest.bones.size();
+  const std::vector<std::vector<BoneWeight>> weights =
+      SkinWeights(rest, mesh, blend_length);
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    mesh.positions[v] = posed.placement.Apply(
+        BlendMotions(weights[v], motions, mesh.positions[v]));
+  }
   return mesh;
 }
 
@@ -712,15 +790,22 @@ std::vector<TemplateBone> IdentityBiped(const BodyProportions& b) {
   return Biped(p);
 }
 
+// PoseIdentity poses body `body`; `rest`, when given, receives the body's
+// rest skeleton (the template's bones, unplaced).
 absl::StatusOr<Posed> PoseIdentity(int body, int pose_index,
-                                   const ShapeOptions& options) {
+                                   const ShapeOptions& options,
+                                   Skeleton* rest = nullptr) {
   absl::Status ok = CheckOptions(options, pose_index);
   if (!ok.ok()) return ok;
   absl::StatusOr<BodyProportions> proportions =
       IdentityProportions(body, options);
   if (!proportions.ok()) return proportions.status();
-  return PoseTemplate(IdentityBiped(*proportions), kIdentityIdBase + body,
-                      pose_index, options);
+  const std::vector<TemplateBone> bones = IdentityBiped(*proportions);
+  if (rest != nullptr) {
+    rest->bones.clear();
+    for (const TemplateBone& t : bones) rest->bones.push_back(t.bone);
+  }
+  return PoseTemplate(bones, kIdentityIdBase + body, pose_index, options);
 }
 
 absl::StatusOr<Posed> PoseStar(int arms, int pose_index,
@@ -804,9 +889,16 @@ absl::StatusOr<Skeleton> IdentitySkeleton(int body, int pose_index,
 
 absl::StatusOr<extract::Mesh> GenerateIdentity(int body, int pose_index,
                                                const ShapeOptions& options) {
-  absl::StatusOr<Posed> posed = PoseIdentity(body, pose_index, options);
+  Skeleton rest;
+  absl::StatusOr<Posed> posed = PoseIdentity(body, pose_index, options, &rest);
   if (!posed.ok()) return posed.status();
-  return MeshOf(*posed, options.target_vertices);
+  if (options.identity_surface == IdentitySurface::kRepolygonized) {
+    return MeshOf(*posed, options.target_vertices);
+  }
+  absl::StatusOr<extract::Mesh> mesh =
+      MeshFromSkeleton(rest, options.target_vertices);
+  if (!mesh.ok()) return mesh.status();
+  return Skin(rest, *posed, std::move(*mesh));
 }
 
 absl::StatusOr<extract::Mesh> GenerateStar(int arms,

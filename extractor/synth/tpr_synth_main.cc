@@ -2,13 +2,15 @@
 //
 //   tpr-synth --out DIR [--classes N] [--poses N] [--vertices N] [--seed S]
 //             [--format off|ply|ply-ascii] [--rigid] [--pose-amount A]
-//             [--jobs J] [--identity]
+//             [--jobs J] [--identity [--identity-surface S]]
 //
 // Output: DIR/<class>/<class>_<pose>.<ext> and DIR/MANIFEST.txt with one line
 // "<relative path> <class>" per mesh. The same flags give byte-identical
 // files. With --identity the classes are N bodies on the biped skeleton
 // that differ in limb lengths and thickness (body_000, body_001, ...;
-// synth.h, identity mode).
+// synth.h, identity mode); --identity-surface skinned (default: one rest
+// mesh per body, skinned to each pose) or repolygonized (each pose
+// polygonized afresh, the sets made up to session 5).
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -35,6 +37,7 @@ int main(int argc, char** argv) {
   double pose_amount = 1.0;
   int jobs = 1;
   bool identity = false;
+  std::string identity_surface = "skinned";
   std::vector<std::string> names = tpr::synth::ClassNames();
   app.add_option("--out", out_dir, "output directory (created)")->required();
   app.add_option(
@@ -46,6 +49,10 @@ int main(int argc, char** argv) {
   app.add_flag("--identity", identity,
                "bodies of one skeleton (biped) differing in limb lengths and "
                "thickness, class = body");
+  app.add_option("--identity-surface", identity_surface,
+                 "with --identity: skinned (one rest mesh per body, skinned to "
+                 "each pose) or repolygonized (each pose polygonized afresh)")
+      ->check(CLI::IsMember({"skinned", "repolygonized"}));
   app.add_option("--poses", poses, "poses per class")
       ->check(CLI::Range(1, 100000));
   app.add_option("--vertices", vertices, "target vertices per mesh")
@@ -87,6 +94,9 @@ int main(int argc, char** argv) {
   options.seed = seed;
   options.random_rigid = rigid;
   options.pose_amount = pose_amount;
+  options.identity_surface = identity_surface == "repolygonized"
+                                 ? tpr::synth::IdentitySurface::kRepolygonized
+                                 : tpr::synth::IdentitySurface::kSkinned;
 
   namespace fs = std::filesystem;
   std::error_code ec;
