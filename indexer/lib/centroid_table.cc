@@ -84,18 +84,12 @@ CentroidTable CentroidTable::Build(
   t.row_bytes_ =
       spectral_at + static_cast<size_t>(t.spectral_size_) * sizeof(int16_t);
   t.rows_.assign(n * t.row_bytes_, 0);
-  t.blocks_.assign(n, 0);
   for (size_t i = 0; i < n; ++i) {
     unsigned char* row = t.rows_.data() + i * t.row_bytes_;
     const PreparedSignature* p = items[i];
     if (p == nullptr) {
       StoreFloat(row, std::numeric_limits<float>::quiet_NaN());
       continue;
-    }
-    const uint64_t address = reinterpret_cast<uintptr_t>(p->weights());
-    const uint64_t lines = (p->MemoryBytes() + 63) / 64;
-    if (address >> 48 == 0 && lines < (uint64_t{1} << 16)) {
-      t.blocks_[i] = address | lines << 48;
     }
     const std::vector<double> c = Centroid(*p);
     const size_t b = static_cast<size_t>(p->bands());
@@ -155,13 +149,6 @@ void CentroidTable::Prefetch(uint32_t i) const {
 #else
   (void)i;
 #endif
-}
-
-void CentroidTable::PrefetchSignature(uint32_t i) const {
-  const uint64_t block = blocks_[i];
-  internal::PrefetchLines(reinterpret_cast<const void*>(static_cast<uintptr_t>(
-                              block & ((uint64_t{1} << 48) - 1))),
-                          static_cast<size_t>(block >> 48));
 }
 
 double CentroidTable::LowerBound(const double* query_centroid, int query_bands,

@@ -45,8 +45,7 @@ class CentroidTable {
   // when every present item has the same spectral_size() > 0 (items of one
   // index are prepared with the same options); otherwise none is (then
   // spectral_size() is 0). Cost O(n x features x bands) time and
-  // (32 + 6 B + 2 S) n bytes (8 of them the block address,
-  // PrefetchSignature), B the largest bands() of the items and S
+  // (24 + 6 B + 2 S) n bytes, B the largest bands() of the items and S
   // their spectral_size(); no EMD.
   static CentroidTable Build(
       size_t n, const std::function<const PreparedSignature*(uint32_t)>& item);
@@ -59,9 +58,7 @@ class CentroidTable {
   // keep: the items' common spectral_size(), or 0 (none kept).
   int spectral_size() const { return spectral_size_; }
   // MemoryBytes returns the heap bytes this table holds.
-  size_t MemoryBytes() const {
-    return rows_.capacity() + blocks_.capacity() * sizeof(uint64_t);
-  }
+  size_t MemoryBytes() const { return rows_.capacity(); }
 
   // LowerBound returns a lower bound of EmdLowerBound(query, s) (emd.h),
   // hence of Emd(query, s), for the signature s of slot i, given the
@@ -100,17 +97,6 @@ class CentroidTable {
   // size(). No effect on any result; thread-safe.
   void Prefetch(uint32_t i) const;
 
-  // PrefetchSignature does what PrefetchSignature(item(i)) (emd.h) does
-  // for the signature of slot i given to Build, nothing for an absent
-  // slot, but finds the signature's heap block in this table's flat array
-  // of block addresses instead of reading the PreparedSignature object:
-  // one cache miss (8 bytes per slot, 8 slots a line) before the prefetch
-  // can start instead of two chained ones (docs/search-cost.md).
-  // Precondition: i < size(); the signatures given to Build are alive and
-  // unchanged (moving a PreparedSignature keeps its block). No effect on
-  // any result; thread-safe.
-  void PrefetchSignature(uint32_t i) const;
-
  private:
   int bands_ = 0;          // largest bands() over present items
   int spectral_size_ = 0;  // see spectral_size()
@@ -129,12 +115,6 @@ class CentroidTable {
   // spectral_scale_. 184 bytes at 20 bands and 20 eigenvalues, against 488
   // + 80 for the centroid in double and the embedding in float32.
   std::vector<unsigned char> rows_;
-  // Slot i: the address of its signature's heap block (PreparedSignature::
-  // weights()) in bits 0 to 47 and its length in 64-byte lines in bits 48
-  // to 63; 0 for an absent slot or a block that does not fit (an address
-  // above 2^48 or 4 MB or more: then no prefetch). Apart from the rows so
-  // that a prefetch does not wait for the row it has just asked for.
-  std::vector<uint64_t> blocks_;
 };
 
 }  // namespace tpr::index

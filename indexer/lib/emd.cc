@@ -932,26 +932,18 @@ double ConstrainedTransportBound32(const PreparedSignature& a,
 }
 
 void PrefetchSignature(const PreparedSignature& p) {
-  internal::PrefetchLines(p.weights(), (p.MemoryBytes() + 63) / 64);
-}
-
-namespace internal {
-
-void PrefetchLines(const void* data, size_t lines) {
 #if defined(__GNUC__)
-  const char* block = static_cast<const char*>(data);
+  const char* block = reinterpret_cast<const char*>(p.weights());
+  const size_t lines = (p.MemoryBytes() + 63) / 64;
   // Locality 2 (x86 prefetcht1: into L2, not L1): about 54 lines at once
   // would overflow the L1 miss queue; the matrix kernel reads them from L2
   // in a few cycles each.
   for (size_t line = 0; line < lines; ++line)
     __builtin_prefetch(block + 64 * line, 0, 2);
 #else
-  (void)data;
-  (void)lines;
+  (void)p;
 #endif
 }
-
-}  // namespace internal
 
 // Centroid bound (Rubner et al. [22], section 4.3). With phi and the norm N
 // of ground_distance.h, Dist(x, y) = N(phi(x) - phi(y)). Let f be any

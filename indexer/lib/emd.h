@@ -197,12 +197,6 @@ double CentroidBound(const double* ca, int ba, const double* cb, int bb);
 
 namespace internal {
 
-// PrefetchLines asks the CPU to start loading `lines` 64-byte lines from
-// `data` into L2, without waiting: PrefetchSignature's loop, shared with
-// CentroidTable::PrefetchSignature. No effect on any result; O(lines);
-// thread-safe.
-void PrefetchLines(const void* data, size_t lines);
-
 // CentroidNorm returns N(x - y) for two centroids given by accessors:
 // x(-1, 0) is row 0 (W1 G'), x(block, d) band d of block 0, 1, 2 (K, A,
 // H) for d < ba, and likewise y with bb bands; bands one side lacks count

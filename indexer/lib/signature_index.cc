@@ -275,9 +275,10 @@ class IndexCursor : public SignatureIndex::Cursor {
           return;
         }
       }
-      // Through the PreparedSignature object: CentroidTable::
-      // PrefetchSignature (the address from a flat array) with the vantage
-      // points' prefetch measured slower at 1M (docs/search-cost.md).
+      // Through the PreparedSignature object: the block's address kept in
+      // a flat array of the centroid table (8 B per model), together with
+      // the vantage points' prefetch, measured slower at 1M
+      // (docs/search-cost.md, session 5), and was dropped.
       if (const PreparedSignature* p = t->prepared[i].get()) {
         PrefetchSignature(*p);
       }

@@ -277,16 +277,13 @@ enum class Cascade {
 
 // When a search prefetches an item's signature (QuerySpec::prefetch).
 enum class Prefetch {
-  kNone,      // never
-  kAdaptive,  // at level 0 only while
-              // PrefetchSignatureEarly, at levels >= 1 always, the block
-              // found through the table (CentroidTable::PrefetchSignature),
-              // vantage points' signatures when their node is queued
-  kAdaptiveBefore,  // as SignatureIndex does: the same without both (through
-                    // the PreparedSignature object, no vantage points); the
-                    // policies below too
-  kEarly,           // at level 0 always (the centroid row too)
-  kLate,            // at levels >= 1 only (level 0: the centroid row alone)
+  kNone,             // never
+  kAdaptive,         // as SignatureIndex does: at level 0 only while
+                     // PrefetchSignatureEarly, at levels >= 1 always
+  kAdaptiveVantage,  // the same, and vantage points' signatures when their
+                     // node is queued (QuerySpec::prefetch_vantage_points)
+  kEarly,            // at level 0 always (the centroid row too)
+  kLate,             // at levels >= 1 only (level 0: the centroid row alone)
 };
 
 // Level-1 and level-2 bound evaluations since the last reset (the `lbs1`
@@ -319,19 +316,15 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
         db.centroids.Prefetch(i);
         if (prefetch == Prefetch::kLate ||
             ((prefetch == Prefetch::kAdaptive ||
-              prefetch == Prefetch::kAdaptiveBefore) &&
+              prefetch == Prefetch::kAdaptiveVantage) &&
              !tpr::index::PrefetchSignatureEarly(counts->level1.load(),
                                                  counts->level2.load()))) {
           return;
         }
       }
-      if (prefetch == Prefetch::kAdaptive) {
-        db.centroids.PrefetchSignature(i);
-      } else {
-        tpr::index::PrefetchSignature(db.items[i]);
-      }
+      tpr::index::PrefetchSignature(db.items[i]);
     };
-    spec.prefetch_vantage_points = prefetch == Prefetch::kAdaptive;
+    spec.prefetch_vantage_points = prefetch == Prefetch::kAdaptiveVantage;
   }
   // The query's centroid, computed once per query as the index does.
   auto qc =
@@ -592,18 +585,17 @@ BENCHMARK(BM_KnnVpTreeExtractedBefore)
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedPrefetch/<n>/<k>/<spectral>/<prefetch>: the
-// search with the signature's block found through the centroid table and
-// vantage points prefetched when queued (prefetch 1; measured slower at
-// 1M, docs/search-cost.md) beside the index's search (0:
-// PrefetchSignature through the PreparedSignature object), on the data of
-// BM_KnnVpTreeExtractedLevel2 (same <spectral> meaning).
+// search with the vantage points' signatures prefetched when their node is
+// queued (prefetch 1, QuerySpec::prefetch_vantage_points) beside the
+// index's search (0), on the data of BM_KnnVpTreeExtractedLevel2 (same
+// <spectral> meaning).
 void BM_KnnVpTreeExtractedPrefetch(benchmark::State& state) {
   DbKey key = ExtractedKey(state);
   if (state.range(2) != 0) key.spectral_permille = 1000;
   RunTree(
       state, key, static_cast<size_t>(state.range(1)), Cascade::kConstrained32,
       /*threads=*/1,
-      state.range(3) != 0 ? Prefetch::kAdaptive : Prefetch::kAdaptiveBefore);
+      state.range(3) != 0 ? Prefetch::kAdaptiveVantage : Prefetch::kAdaptive);
 }
 BENCHMARK(BM_KnnVpTreeExtractedPrefetch)
     ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})

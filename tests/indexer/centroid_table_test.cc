@@ -86,7 +86,6 @@ TEST(CentroidTableTest, NeverAboveEmdLowerBoundAndWithinFloatRounding) {
       const std::vector<double> qc = Centroid(q);
       for (uint32_t i = 0; i < items.size(); ++i) {
         table.Prefetch(i);  // hints, absent slots too: no effect on bounds
-        table.PrefetchSignature(i);
         const double got = table.LowerBound(qc.data(), q.bands(), i);
         if (!present(i)) {
           EXPECT_TRUE(SameBits(got, 0.0)) << i;
