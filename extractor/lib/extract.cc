@@ -219,14 +219,26 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
   timer.Finish("topological_points");
 
   // Stage: integral geodesic at each point (Eq. 1 needs it; 5.1 reuses it)
-  // and, from the same sweep, the point's surface vectors (5.3).
+  // and, from the same sweep, the point's surface vectors (5.3). A point at
+  // a source point (far_a and far_b usually are tips) takes the distances
+  // of that source's Critical Point Analysis: the same field, bit for bit,
+  // as a sweep from it (both are the unique fixed point of the same
+  // relaxations; CriticalPointsTest.DistancesEqualAFreshSweep), one sweep
+  // less each.
   std::vector<double> point_g(num_points, 0.0);
   std::vector<SurfaceVectors> point_vectors(num_points);
   ParallelFor(graph, solver, num_points, options.threads,
               [&](int i, DijkstraSolver& s) {
-                point_g[i] = IntegralGeodesic(s, points[i].vertex);
+                const std::vector<double>* field = nullptr;
+                for (size_t j = 0; j < source_list.size(); ++j) {
+                  if (source_list[j] == points[i].vertex) {
+                    field = &sets[j].distances;
+                  }
+                }
+                if (field == nullptr) field = &s.Run(points[i].vertex);
+                point_g[i] = IntegralGeodesicOfField(graph, *field);
                 point_vectors[i] =
-                    ComputeSurfaceVectors(graph, links, s.distances(), defects,
+                    ComputeSurfaceVectors(graph, links, *field, defects,
                                           options.bands, area, band_extent);
               });
   // MAX G is an estimate from the centre search; the points are where G

@@ -239,14 +239,16 @@ DijkstraSolver::DijkstraSolver(const MeshGraph& graph) : graph_(&graph) {
 }
 
 void DijkstraSolver::Reset() {
-  for (int32_t v : touched_) {
+  for (int32_t v : reset_from_order_ ? order_ : touched_) {
     dist_[v] = kUnreachable;
     source_[v] = -1;
     parent_[v] = -1;
   }
   touched_.clear();
   order_.clear();
+  reset_from_order_ = false;
   for (auto& b : buckets_) b.clear();
+  nonempty_ = 0;
   heap_size_ = 0;
   last_key_ = 0;
 }
@@ -278,23 +280,28 @@ inline int BucketOf(uint64_t key, uint64_t last) {
 void DijkstraSolver::Push(double key, int32_t vertex) {
   const uint64_t k = OrderedBits(key);
   assert(k >= last_key_);  // monotone: Dijkstra never pushes below the front
-  buckets_[BucketOf(k, last_key_)].push_back({k, vertex});
+  const int b = BucketOf(k, last_key_);
+  buckets_[b].push_back({k, vertex});
+  if (b > 0) nonempty_ |= uint64_t{1} << (b - 1);
   ++heap_size_;
 }
 
 int32_t DijkstraSolver::Pop(double* key) {
   if (buckets_[0].empty()) {
-    int i = 1;
-    while (buckets_[i].empty()) ++i;
+    assert(nonempty_ != 0);
+    const int i = __builtin_ctzll(nonempty_) + 1;
     // The new front is the smallest key of the first non-empty bucket; every
     // entry of that bucket then falls into a lower one.
     uint64_t front = buckets_[i][0].key;
     for (const HeapEntry& e : buckets_[i]) front = std::min(front, e.key);
     last_key_ = front;
     for (const HeapEntry& e : buckets_[i]) {
-      buckets_[BucketOf(e.key, last_key_)].push_back(e);
+      const int b = BucketOf(e.key, last_key_);
+      buckets_[b].push_back(e);
+      if (b > 0) nonempty_ |= uint64_t{1} << (b - 1);
     }
     buckets_[i].clear();
+    nonempty_ &= ~(uint64_t{1} << (i - 1));
   }
   const HeapEntry e = buckets_[0].back();
   buckets_[0].pop_back();
@@ -328,6 +335,12 @@ const std::vector<double>& DijkstraSolver::Run(
     }
   }
   const double max_distance = run.max_distance;
+  // Unbounded, every vertex touched is settled and so in order_, which
+  // Reset then walks: no bookkeeping of first reaches in the inner loop.
+  const bool bounded = max_distance != kUnreachable;
+  reset_from_order_ = !bounded;
+  double* const dist = dist_.data();
+  int32_t* const parent = parent_.data();
   bool stopped_early = false;
   // No settled flags: a vertex's heap entries carry strictly decreasing
   // keys (pushed only on improvement) and lengths are non-negative, so the
@@ -338,22 +351,23 @@ const std::vector<double>& DijkstraSolver::Run(
   while (!HeapEmpty()) {
     double key;
     const int32_t v = Pop(&key);
-    if (key > dist_[v]) continue;  // stale entry
+    if (key > dist[v]) continue;  // stale entry
     if (key > max_distance) {
       stopped_early = true;
       break;
     }
-    if (parent_[v] >= 0) source_[v] = source_[parent_[v]];
+    if (parent[v] >= 0) source_[v] = source_[parent[v]];
     order_.push_back(v);
     const absl::Span<const int32_t> nbrs = g.neighbors(v);
     const absl::Span<const double> lens = g.lengths(v);
     for (size_t k = 0; k < nbrs.size(); ++k) {
       const int32_t u = nbrs[k];
       const double nd = key + lens[k];
-      if (nd < dist_[u]) {
-        if (dist_[u] == kUnreachable) touched_.push_back(u);
-        dist_[u] = nd;
-        parent_[u] = v;
+      const double old = dist[u];
+      if (nd < old) {
+        if (bounded && old == kUnreachable) touched_.push_back(u);
+        dist[u] = nd;
+        parent[u] = v;
         Push(nd, u);
       }
     }

@@ -199,15 +199,23 @@ class DijkstraSolver {
   std::vector<int32_t> source_;
   std::vector<int32_t> parent_;
   std::vector<int32_t> order_;
-  // Vertices whose dist_ was written by the last Run: reset touches only
-  // these, so a bounded sweep costs what it visits.
+  // Vertices whose dist_ was written by the last bounded Run: reset touches
+  // only these, so a bounded sweep costs what it visits. An unbounded Run
+  // settles every vertex it touches, so order_ lists them and touched_ is
+  // not kept (reset_from_order_).
   std::vector<int32_t> touched_;
+  bool reset_from_order_ = false;
   // Radix heap with lazy deletion (stale entries skipped on pop): Dijkstra
   // pops keys in non-decreasing order, so entries sit in bucket i by the
   // highest bit in which their key differs from the last popped key, and
   // each entry moves to a lower bucket at most 64 times. Buckets keep their
   // capacity across runs.
   std::vector<HeapEntry> buckets_[65];
+  // Bit i - 1 is set when bucket i (1 to 64) is not empty: Pop finds the
+  // next bucket with one instruction instead of testing up to 64 empty
+  // ones (Dijkstra's keys differ in low mantissa bits, so it is usually
+  // far down).
+  uint64_t nonempty_ = 0;
   uint64_t last_key_ = 0;
   size_t heap_size_ = 0;
 };

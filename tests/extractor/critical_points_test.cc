@@ -4,9 +4,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <string>
 #include <vector>
 
 #include "extractor/lib/geodesic.h"
+#include "extractor/lib/mesh_io.h"
 #include "extractor/synth/synth.h"
 #include "gtest/gtest.h"
 #include "tests/extractor/test_meshes.h"
@@ -190,6 +194,49 @@ TEST(CriticalPointsTest, RejectsBadArguments) {
   const VertexLinks other = VertexLinks::Build(testing::Icosphere(2));
   EXPECT_EQ(AnalyzeCriticalPoints(graph, other, 0, {}).status().code(),
             absl::StatusCode::kInvalidArgument);
+}
+
+// ExtractSignature takes a topological point's field from the Critical
+// Point Analysis of the source point at the same vertex instead of a new
+// sweep. That is exact only if the analysis's own Dijkstra gives the
+// solver's distances bit for bit (both are the least fixed point of the
+// same rounded relaxations d(u) = min_v d(v) + l(v, u), whatever the order
+// of ties): checked here from several sources on test meshes, generated
+// shapes and, when ../shared is present, a few SHREC meshes.
+TEST(CriticalPointsTest, DistancesEqualAFreshSweep) {
+  std::vector<Mesh> meshes = {testing::Icosphere(3),
+                              testing::Capsule(0.5, 3.0, 40, 24),
+                              testing::Tube(1.0, 3.0, 20, 24)};
+  synth::ShapeOptions shape;
+  shape.target_vertices = 2000;
+  for (const char* name : {"biped_adult", "octopus", "ant", "hand"}) {
+    absl::StatusOr<Mesh> m = synth::GenerateShape(name, 2, shape);
+    if (m.ok()) meshes.push_back(*std::move(m));
+  }
+  ASSERT_GE(meshes.size(), 6u);
+  const char* env = std::getenv("TPR_SHARED_DIR");
+  const std::string dir = std::string(env != nullptr ? env : TPR_SHARED_DIR) +
+                          "/data/shrec07-watertight";
+  std::ifstream manifest(dir + "/MANIFEST.txt");
+  std::string path, label;
+  for (int i = 0; i < 40 && manifest >> path >> label; ++i) {
+    if (i % 10 != 0) continue;  // four meshes of different classes
+    absl::StatusOr<LoadedMesh> m = LoadMeshFromFile(dir + "/" + path, {});
+    ASSERT_TRUE(m.ok()) << path << ": " << m.status();
+    meshes.push_back(std::move(m->mesh));
+  }
+  for (size_t i = 0; i < meshes.size(); ++i) {
+    const MeshGraph graph = MeshGraph::Build(meshes[i]);
+    DijkstraSolver solver(graph);
+    const int32_t n = graph.num_vertices();
+    for (int32_t source : {0, n / 3, n - 1}) {
+      absl::StatusOr<CriticalPoints> cp =
+          AnalyzeCriticalPoints(graph, graph.links(), source, {});
+      ASSERT_TRUE(cp.ok()) << cp.status();
+      EXPECT_EQ(cp->distances, solver.Run(source))
+          << "mesh " << i << " source " << source;
+    }
+  }
 }
 
 }  // namespace

@@ -8,8 +8,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <map>
 #include <new>
+#include <queue>
 #include <random>
 #include <utility>
 #include <vector>
@@ -350,6 +352,78 @@ TEST_P(SolverFamilyTest, BoundedRunMatchesFullRunInsideTheRadius) {
   EXPECT_EQ(solver.order().size(), inside);
   EXPECT_GT(inside, 1u);
   EXPECT_LT(inside, static_cast<size_t>(graph.num_vertices()));
+}
+
+// TextbookDistances is the independent oracle: Dijkstra with
+// std::priority_queue and settled flags, from sources with start times.
+std::vector<double> TextbookDistances(const MeshGraph& graph,
+                                      const std::vector<int32_t>& sources,
+                                      const std::vector<double>& starts,
+                                      double max_distance = kUnreachable) {
+  std::vector<double> d(graph.num_vertices(), kUnreachable);
+  std::vector<char> done(graph.num_vertices(), 0);
+  using Item = std::pair<double, int32_t>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const double t = starts.empty() ? 0.0 : starts[i];
+    if (t < d[sources[i]]) {
+      d[sources[i]] = t;
+      queue.push({t, sources[i]});
+    }
+  }
+  while (!queue.empty()) {
+    const auto [key, v] = queue.top();
+    queue.pop();
+    if (done[v]) continue;
+    done[v] = 1;
+    for (size_t k = 0; k < graph.neighbors(v).size(); ++k) {
+      const int32_t u = graph.neighbors(v)[k];
+      const double nd = key + graph.lengths(v)[k];
+      if (!done[u] && nd < d[u]) {
+        d[u] = nd;
+        queue.push({nd, u});
+      }
+    }
+  }
+  for (double& x : d) {
+    if (x > max_distance) x = kUnreachable;
+  }
+  return d;
+}
+
+// The solver reuses its buffers and heap across runs (an unbounded run
+// resets from its settle order, a bounded one from its touched list, the
+// heap keeps a mask of its non-empty buckets): a mixed sequence of runs
+// gives, run by run, the textbook Dijkstra's distances bit for bit and a
+// fresh solver's distances, order, parents and labels.
+TEST_P(SolverFamilyTest, MixedRunsMatchTextbookDijkstraAndAFreshSolver) {
+  const Mesh mesh = MakeMesh(GetParam());
+  const MeshGraph graph = MeshGraph::Build(mesh, MakeOptions(GetParam()));
+  const int32_t n = graph.num_vertices();
+  DijkstraSolver reused(graph);
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int32_t> pick(0, n - 1);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int run = 0; run < 24; ++run) {
+    std::vector<int32_t> sources = {pick(rng)};
+    std::vector<double> starts;
+    if (run % 3 == 1) {
+      sources.push_back(pick(rng));
+      sources.push_back(pick(rng));
+      starts = {unit(rng), 0.0, unit(rng)};
+    }
+    RunOptions options;
+    if (run % 2 == 1) options.max_distance = 0.2 + 2.0 * unit(rng);
+    const std::vector<double> got = reused.Run(sources, starts, options);
+    EXPECT_EQ(got,
+              TextbookDistances(graph, sources, starts, options.max_distance))
+        << "run " << run;
+    DijkstraSolver fresh(graph);
+    EXPECT_EQ(fresh.Run(sources, starts, options), got) << "run " << run;
+    EXPECT_EQ(fresh.order(), reused.order()) << "run " << run;
+    EXPECT_EQ(fresh.parent(), reused.parent()) << "run " << run;
+    EXPECT_EQ(fresh.nearest_source(), reused.nearest_source()) << "run " << run;
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Meshes, SolverFamilyTest, ::testing::Range(0, 6));
