@@ -224,7 +224,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
   // of that source's Critical Point Analysis: the same field, bit for bit,
   // as a sweep from it (both are the unique fixed point of the same
   // relaxations; CriticalPointsTest.DistancesEqualAFreshSweep), one sweep
-  // less each.
+  // less each; a point the surface-centre search swept takes the field it
+  // kept (IntegralGeodesicOptions::field_budget_bytes).
   std::vector<double> point_g(num_points, 0.0);
   std::vector<SurfaceVectors> point_vectors(num_points);
   ParallelFor(graph, solver, num_points, options.threads,
@@ -235,6 +236,12 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
                     field = &sets[j].distances;
                   }
                 }
+                // Else the field the surface-centre search kept for it (the
+                // same solver's sweep from the same vertex, bit for bit;
+                // IntegralGeodesicTest.KeptFieldsEqualAFreshSweep).
+                if (field == nullptr) {
+                  field = KeptField(sources.surface_centre, points[i].vertex);
+                }
                 if (field == nullptr) field = &s.Run(points[i].vertex);
                 point_g[i] = IntegralGeodesicOfField(graph, *field);
                 point_vectors[i] =
@@ -244,6 +251,9 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
   // MAX G is an estimate from the centre search; the points are where G
   // peaks (4.1), so they raise it and Eq. 1 stays non-negative.
   for (double g : point_g) g_max = std::max(g_max, g);
+  // The kept fields have served; release them before the ring stages.
+  std::vector<std::vector<double>>().swap(
+      sources.surface_centre.evaluated_fields);
   timer.Finish("point_features");
 
   // Stage: Topological Ring Extraction (4.6).

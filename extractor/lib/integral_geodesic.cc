@@ -159,6 +159,15 @@ class HierarchicalSearch {
     }
     result_.evaluated_vertices.push_back(v);
     result_.evaluated_g.push_back(g);
+    // The double field too, for reuse by later stages, while the budget
+    // lasts (IntegralGeodesicOptions::field_budget_bytes).
+    const int64_t field_bytes = static_cast<int64_t>(sizeof(double)) * n;
+    if (kept_field_bytes_ + field_bytes <= options_.field_budget_bytes) {
+      kept_field_bytes_ += field_bytes;
+      result_.evaluated_fields.push_back(d);
+    } else {
+      result_.evaluated_fields.emplace_back();
+    }
     if (result_.g_max_vertex < 0 || g > result_.g_max) {
       result_.g_max = g;
       result_.g_max_vertex = v;
@@ -244,6 +253,7 @@ class HierarchicalSearch {
   std::vector<double> approx_;
   int best_index_ = -1;
   double best_g_ = 0.0;
+  int64_t kept_field_bytes_ = 0;
 };
 
 }  // namespace
@@ -257,6 +267,18 @@ double IntegralGeodesicOfField(const MeshGraph& graph,
     if (d != kUnreachable) sum += d * area[v];
   }
   return sum;
+}
+
+const std::vector<double>* KeptField(const SurfaceCentre& centre, int32_t v) {
+  for (size_t i = 0; i < centre.evaluated_vertices.size() &&
+                     i < centre.evaluated_fields.size();
+       ++i) {
+    if (centre.evaluated_vertices[i] == v) {
+      return centre.evaluated_fields[i].empty() ? nullptr
+                                                : &centre.evaluated_fields[i];
+    }
+  }
+  return nullptr;
 }
 
 double IntegralGeodesic(DijkstraSolver& solver, int32_t q) {

@@ -42,6 +42,10 @@ absl::Status ValidateOptions(const IntegralGeodesicOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("max_sweeps must be >= 1, got ", o.max_sweeps));
   }
+  if (o.field_budget_bytes < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "field_budget_bytes must be >= 0, got ", o.field_budget_bytes));
+  }
   return absl::OkStatus();
 }
 

@@ -39,8 +39,8 @@ struct SourcePoints {
 // connected surface; the pipeline warns). Errors: INVALID_ARGUMENT for a
 // graph without vertices or whose largest component has zero area, or for
 // options out of range (first_level_patches < 2, patches_per_level < 1,
-// negative thresholds, max_sweeps < 1). Cost: 2 + psi Dijkstra sweeps. Not
-// thread-safe per solver.
+// negative thresholds, max_sweeps < 1, field_budget_bytes < 0). Cost: 2 + psi
+// Dijkstra sweeps. Not thread-safe per solver.
 absl::StatusOr<SourcePoints> SelectSourcePoints(
     const MeshGraph& graph, DijkstraSolver& solver,
     const IntegralGeodesicOptions& options);

@@ -241,6 +241,80 @@ TEST(SurfaceCentreTest, SweepCapIsHonoured) {
   EXPECT_GE(fast.vertex, 0);
 }
 
+TEST(SurfaceCentreTest, KeptFieldsEqualAFreshSweep) {
+  // Later stages take a kept field instead of sweeping from that vertex
+  // (extract.cc, point features), so it must be the fresh sweep's field bit
+  // for bit. The fresh sweeps run on a solver of their own after unrelated
+  // sweeps, so no state of the search's solver can leak into the answer.
+  for (const Case& c : SearchCases()) {
+    const MeshGraph graph = MeshGraph::Build(c.mesh);
+    DijkstraSolver solver(graph);
+    absl::StatusOr<SourcePoints> s = SelectSourcePoints(graph, solver, {});
+    ASSERT_TRUE(s.ok()) << c.name;
+    const SurfaceCentre& sc = s->surface_centre;
+    ASSERT_EQ(sc.evaluated_fields.size(), sc.evaluated_vertices.size());
+    DijkstraSolver fresh(graph);
+    fresh.Run(graph.num_vertices() - 1);
+    for (size_t i = 0; i < sc.evaluated_vertices.size(); ++i) {
+      const int32_t v = sc.evaluated_vertices[i];
+      // The default budget holds every field of these small meshes.
+      ASSERT_EQ(KeptField(sc, v), &sc.evaluated_fields[i]) << c.name;
+      const std::vector<double>& want = fresh.Run(v);
+      ASSERT_EQ(sc.evaluated_fields[i].size(), want.size());
+      for (size_t u = 0; u < want.size(); ++u) {
+        ASSERT_EQ(sc.evaluated_fields[i][u], want[u])
+            << c.name << " source " << v << " vertex " << u;
+      }
+      EXPECT_EQ(sc.evaluated_g[i], IntegralGeodesicOfField(graph, want));
+    }
+    int32_t unswept = -1;
+    for (int32_t v = 0; v < graph.num_vertices() && unswept < 0; ++v) {
+      if (std::find(sc.evaluated_vertices.begin(), sc.evaluated_vertices.end(),
+                    v) == sc.evaluated_vertices.end()) {
+        unswept = v;
+      }
+    }
+    if (unswept >= 0) {
+      EXPECT_EQ(KeptField(sc, unswept), nullptr) << c.name;
+    }
+  }
+}
+
+TEST(SurfaceCentreTest, FieldBudgetBoundsKeptFieldsAndNotTheResult) {
+  const Mesh mesh = SymmetricDumbbell();
+  const MeshGraph graph = MeshGraph::Build(mesh);
+  DijkstraSolver solver(graph);
+  const SurfaceCentre all = FindSurfaceCentre(graph, solver, {});
+  ASSERT_GE(all.sweeps, 3);
+  const int64_t field_bytes =
+      static_cast<int64_t>(sizeof(double)) * graph.num_vertices();
+  for (int64_t budget : {int64_t{0}, field_bytes - 1, 2 * field_bytes + 7}) {
+    IntegralGeodesicOptions options;
+    options.field_budget_bytes = budget;
+    const SurfaceCentre some = FindSurfaceCentre(graph, solver, options);
+    // The budget changes what is kept, never what is found.
+    EXPECT_EQ(some.vertex, all.vertex);
+    EXPECT_EQ(some.g_min, all.g_min);
+    EXPECT_EQ(some.g_max, all.g_max);
+    EXPECT_EQ(some.evaluated_vertices, all.evaluated_vertices);
+    ASSERT_EQ(some.evaluated_fields.size(), all.evaluated_fields.size());
+    // Fields are kept in sweep order while the total fits.
+    const int64_t fit = budget / field_bytes;
+    for (size_t i = 0; i < some.evaluated_fields.size(); ++i) {
+      if (static_cast<int64_t>(i) < fit) {
+        EXPECT_EQ(some.evaluated_fields[i], all.evaluated_fields[i]) << i;
+      } else {
+        EXPECT_TRUE(some.evaluated_fields[i].empty()) << budget << " " << i;
+        EXPECT_EQ(KeptField(some, some.evaluated_vertices[i]), nullptr);
+      }
+    }
+  }
+  IntegralGeodesicOptions bad;
+  bad.field_budget_bytes = -1;
+  EXPECT_EQ(SelectSourcePoints(graph, solver, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(SourcePointsTest, DoubleSweepFindsTheTipsOfACapsule) {
   const double radius = 0.4;
   const double length = 4.0;
