@@ -544,9 +544,10 @@ class VpCursor : public NeighborCursor {
       const double bound = NodeBound(child, e.key);
       if (!(bound <= spec_.radius)) continue;
       queue_.push({bound, child, kNode, 0});
-      const uint32_t vp = data_->nodes[child].vp;
-      if (vp != kNone && spec_.prefetch && spec_.prefetch_vantage_points) {
-        spec_.prefetch(vp, spec_.lower_bounds.size());
+      // Off by default: then the child's node is not read here at all.
+      if (spec_.prefetch_vantage_points && spec_.prefetch) {
+        const uint32_t vp = data_->nodes[child].vp;
+        if (vp != kNone) spec_.prefetch(vp, spec_.lower_bounds.size());
       }
     }
   }
