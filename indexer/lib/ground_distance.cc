@@ -110,14 +110,25 @@ absl::Status ValidateSignature(const Signature& signature) {
   return absl::OkStatus();
 }
 
+PreparedSignature::~PreparedSignature() { Release(); }
+
+void PreparedSignature::Release() noexcept {
+  if (owns_block_) delete[] block_;
+  block_ = nullptr;
+  owns_block_ = false;
+  size_ = bands_ = spectral_size_ = 0;
+  serial_ = 0;
+}
+
 PreparedSignature::PreparedSignature(const PreparedSignature& other)
     : size_(other.size_),
       bands_(other.bands_),
       spectral_size_(other.spectral_size_),
       serial_(other.serial_) {
   if (other.block_ != nullptr) {
-    block_ = std::make_unique<std::byte[]>(BlockBytes());
-    std::memcpy(block_.get(), other.block_.get(), BlockBytes());
+    block_ = new std::byte[BlockBytes()];
+    owns_block_ = true;
+    std::memcpy(block_, other.block_, BlockBytes());
   }
 }
 
@@ -125,6 +136,49 @@ PreparedSignature& PreparedSignature::operator=(
     const PreparedSignature& other) {
   if (this != &other) *this = PreparedSignature(other);
   return *this;
+}
+
+PreparedSignature::PreparedSignature(PreparedSignature&& other) noexcept
+    : size_(other.size_),
+      bands_(other.bands_),
+      spectral_size_(other.spectral_size_),
+      owns_block_(other.owns_block_),
+      serial_(other.serial_),
+      block_(other.block_) {
+  other.block_ = nullptr;
+  other.owns_block_ = false;
+  other.Release();
+}
+
+PreparedSignature& PreparedSignature::operator=(
+    PreparedSignature&& other) noexcept {
+  if (this != &other) {
+    Release();
+    size_ = other.size_;
+    bands_ = other.bands_;
+    spectral_size_ = other.spectral_size_;
+    owns_block_ = other.owns_block_;
+    serial_ = other.serial_;
+    block_ = other.block_;
+    other.block_ = nullptr;
+    other.owns_block_ = false;
+    other.Release();
+  }
+  return *this;
+}
+
+PreparedSignature PreparedSignature::CopyInto(std::byte* storage) const {
+  assert(block_ != nullptr && storage != nullptr);
+  assert(reinterpret_cast<uintptr_t>(storage) % alignof(double) == 0);
+  PreparedSignature view;
+  view.size_ = size_;
+  view.bands_ = bands_;
+  view.spectral_size_ = spectral_size_;
+  view.serial_ = serial_;
+  std::memcpy(storage, block_, BlockBytes());
+  view.block_ = storage;
+  view.owns_block_ = false;
+  return view;
 }
 
 absl::StatusOr<PreparedSignature> Prepare(
@@ -144,10 +198,10 @@ absl::StatusOr<PreparedSignature> Prepare(
   std::vector<double> spectral =
       SpectralEmbedding(signature.spectrum, options.spectral);
   p.spectral_size_ = static_cast<int>(spectral.size());
-  p.block_ = std::make_unique<std::byte[]>(p.BlockBytes());
-  double* weights = reinterpret_cast<double*>(p.block_.get());
-  float* spectral32 =
-      reinterpret_cast<float*>(p.block_.get() + sizeof(double) * un);
+  p.block_ = new std::byte[p.BlockBytes()];
+  p.owns_block_ = true;
+  double* weights = reinterpret_cast<double*>(p.block_);
+  float* spectral32 = reinterpret_cast<float*>(p.block_ + sizeof(double) * un);
   float* coords = spectral32 + spectral.size();
 
   double sum = 0.0;

@@ -109,12 +109,13 @@ inline constexpr int kMaxFeatures = 200;
 // the spectral embedding. Copyable and movable; built only by Prepare.
 // Thread-safe to read from any number of threads.
 //
-// Compact storage (issue 14: at most 4 KB per model). One heap block per
-// model holds the masses in double, then the spectral embedding and the
+// Compact storage (issue 14: at most 4 KB per model). One block per model
+// holds the masses in double, then the spectral embedding and the
 // coordinates in float32, unpadded: the coordinates (1 + 3 bands values per
-// feature) are the bulk of a signature. The centroid sum_i w_i phi(U_i) of
-// the centroid bound is not stored: Centroid (emd.h) computes it in
-// O(size x bands) when a query starts, and the index keeps its items'
+// feature) are the bulk of a signature. The index keeps its tree's blocks
+// side by side in one SignatureArena (signature_arena.h). The centroid sum_i
+// w_i phi(U_i) of the centroid bound is not stored: Centroid (emd.h) computes
+// it in O(size x bands) when a query starts, and the index keeps its items'
 // centroids once, in its CentroidTable.
 //
 // Every distance is computed in double from the float32 values, so the
@@ -131,13 +132,31 @@ inline constexpr int kMaxFeatures = 200;
 // MetricTest.DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper check the
 // bounds, ExtractedSignaturesTest that rankings on real signatures do not
 // change.
+//
+// Owning or view. Prepare returns an object that owns its block; CopyInto
+// returns a view whose block lives in storage the caller owns (one
+// contiguous arena for a whole index, signature_arena.h), which must
+// outlive the view. A copy of either owns a copy of the block; a move
+// carries the block and its ownership along.
 class PreparedSignature {
  public:
   PreparedSignature() = default;
+  ~PreparedSignature();
   PreparedSignature(const PreparedSignature& other);
   PreparedSignature& operator=(const PreparedSignature& other);
-  PreparedSignature(PreparedSignature&&) noexcept = default;
-  PreparedSignature& operator=(PreparedSignature&&) noexcept = default;
+  PreparedSignature(PreparedSignature&& other) noexcept;
+  PreparedSignature& operator=(PreparedSignature&& other) noexcept;
+
+  // CopyInto copies this signature's block (MemoryBytes() bytes) to
+  // `storage` and returns a view of it: equal to *this in every value and
+  // serial(), owning nothing. Preconditions: storage is aligned to
+  // alignof(double), holds at least MemoryBytes() bytes, and outlives the
+  // view (and every view moved from it); *this is not default-constructed.
+  // Cost O(MemoryBytes()); thread-safe for distinct storage.
+  PreparedSignature CopyInto(std::byte* storage) const;
+  // owns_block returns whether this object frees its block (false for a
+  // view from CopyInto and for a default-constructed object).
+  bool owns_block() const { return owns_block_; }
 
   // size returns the number of features (0 only for a default-constructed
   // object, which no function below accepts).
@@ -148,16 +167,17 @@ class PreparedSignature {
   double weight(int i) const { return weights()[i]; }
   // weights returns all masses (size() values summing to 1).
   const double* weights() const {
-    return reinterpret_cast<const double*>(block_.get());
+    return reinterpret_cast<const double*>(block_);
   }
-  // MemoryBytes returns the heap bytes this object holds.
+  // MemoryBytes returns the bytes of this object's block (heap bytes it
+  // holds when it owns them; arena bytes it refers to when a view).
   size_t MemoryBytes() const { return BlockBytes(); }
   // spectral returns the spectral embedding E(spectrum) (spectral.h),
   // rounded to float32, of spectral_size() values:
   // options.spectral.eigenvalues, or 0 when the spectral weight is 0.
   // metric.h compares it.
   const float* spectral() const {
-    return reinterpret_cast<const float*>(block_.get() +
+    return reinterpret_cast<const float*>(block_ +
                                           sizeof(double) * Size(size_));
   }
   int spectral_size() const { return spectral_size_; }
@@ -191,15 +211,21 @@ class PreparedSignature {
            sizeof(float) * (Size(spectral_size_) + Size(rows()) * Size(size_));
   }
 
+  // Frees block_ when owned; leaves *this default-constructed.
+  void Release() noexcept;
+
   int size_ = 0;
   int bands_ = 0;
   int spectral_size_ = 0;
+  // Whether block_ came from new[] here (in the padding before serial_:
+  // the object stays 32 bytes).
+  bool owns_block_ = false;
   uint64_t serial_ = 0;
   // BlockBytes() bytes: weights (size_ doubles), then the spectral
   // embedding (spectral_size_ floats), then the coordinates (rows() x size_
-  // floats). operator new[] aligns it for double; size_ doubles keep the
-  // floats aligned.
-  std::unique_ptr<std::byte[]> block_;
+  // floats). operator new[] (or CopyInto's caller) aligns it for double;
+  // size_ doubles keep the floats aligned.
+  std::byte* block_ = nullptr;
 };
 
 // Prepare validates `signature` and `options` (see ValidateSignature and

@@ -12,6 +12,11 @@
 // - Tree items are numbered in id order, so the tree's (distance, item)
 //   order is the (distance, id) order; buffer items are numbered after them
 //   and ties across the two are settled by comparing ids.
+// - A tree's signatures are copied, once its tree is built, into one
+//   huge-page-advised arena in the tree's order (signature_arena.h): a
+//   bucket's signatures adjacent, no per-item heap object. A rebuild holds
+//   the old arena (still searched) and the new one at once, so its peak is
+//   about twice the signatures' bytes.
 #include "indexer/lib/signature_index.h"
 
 #include <algorithm>
@@ -29,6 +34,7 @@
 #include "indexer/lib/centroid_table.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/metric.h"
+#include "indexer/lib/signature_arena.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 #include "tbb/task_arena.h"
@@ -68,9 +74,15 @@ bool IdLess(const BufferEntry& e, const std::string& id) { return e.id < id; }
 // next rebuild.
 struct TreePart {
   VpTree tree;
-  std::vector<std::string> ids;       // item order, strictly increasing
-  std::vector<PreparedPtr> prepared;  // null: signature unavailable
+  std::vector<std::string> ids;  // item order, strictly increasing
+  // The items' signatures, laid out in tree order (absent: unavailable).
+  SignatureArena signatures;
   std::vector<uint64_t> fingerprints;
+
+  // Prepared returns item i's signature, nullptr when unavailable. O(1).
+  const PreparedSignature* Prepared(uint32_t i) const {
+    return signatures.get(i);
+  }
 
   // ItemOf returns the item whose id is `id`, or -1: a binary search of the
   // sorted ids (O(log n) comparisons), which costs no memory per model
@@ -80,13 +92,18 @@ struct TreePart {
     if (it == ids.end() || *it != id) return -1;
     return it - ids.begin();
   }
-  // The centroids of `prepared` (absent where null), read by the search's
-  // lower bound; built once the prepared signatures are final.
+  // The centroids of the signatures (absent where unavailable), read by
+  // the search's lower bound.
   CentroidTable centroids;
 
-  void BuildCentroids() {
+  // Sets `signatures` (in the tree's order) and `centroids` from item(i),
+  // the signature of item i or nullptr, once `tree` is final; item's
+  // results must stay valid during the call.
+  void Store(const std::function<const PreparedSignature*(uint32_t)>& item) {
+    signatures =
+        SignatureArena::Build(ids.size(), tree.ItemsInTreeOrder(), item);
     centroids = CentroidTable::Build(
-        prepared.size(), [this](uint32_t i) { return prepared[i].get(); });
+        ids.size(), [this](uint32_t i) { return signatures.get(i); });
   }
 };
 
@@ -247,7 +264,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       }
       // A table without the embeddings (items of mixed spectral sizes,
       // which one index never holds): read them from the signature.
-      const PreparedSignature* p = spectral ? t->prepared[i].get() : nullptr;
+      const PreparedSignature* p = spectral ? t->Prepared(i) : nullptr;
       return p == nullptr ? centroid : centroid + SpectralDistance(query_, *p);
     });
     if (relaxed_bound) {
@@ -279,12 +296,12 @@ class IndexCursor : public SignatureIndex::Cursor {
       // a flat array of the centroid table (8 B per model), together with
       // the vantage points' prefetch, measured slower at 1M
       // (docs/search-cost.md, session 5), and was dropped.
-      if (const PreparedSignature* p = t->prepared[i].get()) {
+      if (const PreparedSignature* p = t->Prepared(i)) {
         PrefetchSignature(*p);
       }
     };
     spec.accept = [this, s, t](uint32_t i) {
-      if (i < n_tree_ && (t->prepared[i] == nullptr || s->Dead(i)))
+      if (i < n_tree_ && (t->Prepared(i) == nullptr || s->Dead(i)))
         return false;
       return !filter_ || filter_(Id(i));
     };
@@ -314,7 +331,7 @@ class IndexCursor : public SignatureIndex::Cursor {
 
  private:
   const PreparedSignature* Item(uint32_t i) const {
-    if (i < n_tree_) return snapshot_->tree->prepared[i].get();
+    if (i < n_tree_) return snapshot_->tree->Prepared(i);
     return snapshot_->buffer[i - n_tree_].prepared.get();
   }
   const std::string& Id(uint32_t i) const {
@@ -491,15 +508,9 @@ size_t SignatureIndex::MemoryBytes() const {
   };
   size_t bytes = t.tree.MemoryBytes() + t.centroids.MemoryBytes() +
                  t.ids.capacity() * sizeof(std::string) +
-                 t.prepared.capacity() * sizeof(PreparedPtr) +
+                 t.signatures.MemoryBytes() +
                  t.fingerprints.capacity() * sizeof(uint64_t);
-  for (size_t i = 0; i < t.ids.size(); ++i) {
-    bytes += string_bytes(t.ids[i]);
-    if (t.prepared[i] != nullptr) {
-      bytes += sizeof(PreparedSignature) + kControlBlock +
-               t.prepared[i]->MemoryBytes();
-    }
-  }
+  for (const std::string& id : t.ids) bytes += string_bytes(id);
   for (const BufferEntry& e : s->buffer) {
     bytes += sizeof(BufferEntry) + string_bytes(e.id);
     if (e.prepared != nullptr) {
@@ -581,8 +592,9 @@ class ExhaustiveCursor final : public SignatureIndex::Cursor {
     const SignatureIndex::Snapshot& s = *snapshot_;
     const TreePart& t = *s.tree;
     for (uint32_t i = 0; i < t.ids.size(); ++i) {
-      if (t.prepared[i] == nullptr || s.Dead(i)) continue;
-      if (!Consider(t.ids[i], *t.prepared[i])) return;
+      const PreparedSignature* p = t.Prepared(i);
+      if (p == nullptr || s.Dead(i)) continue;
+      if (!Consider(t.ids[i], *p)) return;
     }
     for (const BufferEntry& e : s.buffer) {
       if (!Consider(e.id, *e.prepared)) return;
@@ -674,47 +686,48 @@ void SignatureIndex::Rebuild() {
     base = snapshot_;
     journal_ = &journal;
   }
-  // The live set of `base`, in id order (tree and buffer ids are disjoint).
+  // The live set of `base`, in id order (tree and buffer ids are disjoint;
+  // `base` keeps every signature named here alive).
   struct Live {
     const std::string* id;
-    PreparedPtr prepared;
+    const PreparedSignature* prepared;
     uint64_t fingerprint;
   };
   std::vector<Live> live;
   const TreePart& old = *base->tree;
   for (uint32_t i = 0; i < old.ids.size(); ++i) {
-    if (old.prepared[i] != nullptr && !base->Dead(i)) {
-      live.push_back({&old.ids[i], old.prepared[i], old.fingerprints[i]});
+    if (old.Prepared(i) != nullptr && !base->Dead(i)) {
+      live.push_back({&old.ids[i], old.Prepared(i), old.fingerprints[i]});
     }
   }
   for (const BufferEntry& e : base->buffer) {
-    live.push_back({&e.id, e.prepared, e.fingerprint});
+    live.push_back({&e.id, e.prepared.get(), e.fingerprint});
   }
   std::sort(live.begin(), live.end(),
             [](const Live& a, const Live& b) { return *a.id < *b.id; });
   auto part = std::make_shared<TreePart>();
   part->ids.reserve(live.size());  // exact capacities: MemoryBytes counts them
-  part->prepared.reserve(live.size());
   part->fingerprints.reserve(live.size());
   for (const Live& l : live) {
     part->ids.push_back(*l.id);
-    part->prepared.push_back(l.prepared);
     part->fingerprints.push_back(l.fingerprint);
   }
-  part->BuildCentroids();  // outside mu_, like the tree
-  const std::vector<PreparedPtr>& items = part->prepared;
   absl::StatusOr<VpTree> tree = VpTree::Build(
-      items.size(),
-      [&items](uint32_t i, uint32_t j) {
-        return Distance(*items[i], *items[j]);
+      live.size(),
+      [&live](uint32_t i, uint32_t j) {
+        return Distance(*live[i].prepared, *live[j].prepared);
       },
       options_.tree, &cancel_);
+  if (tree.ok()) {
+    // Outside mu_, like the tree: the copy into the arena and the centroids.
+    part->tree = *std::move(tree);
+    part->Store([&live](uint32_t i) { return live[i].prepared; });
+  }
   std::lock_guard<std::mutex> lock(mu_);
   journal_ = nullptr;
   // Only cancellation (destruction) or invalid tree options fail here; the
   // current snapshot then stays, still exact.
   if (!tree.ok()) return;
-  part->tree = *std::move(tree);
   auto next = std::make_shared<Snapshot>();
   next->tree = std::move(part);
   for (JournalEntry& e : journal) {
@@ -795,7 +808,8 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   auto part = std::make_shared<TreePart>();
   part->ids.resize(n);
   part->fingerprints.resize(n);
-  part->prepared.resize(n);
+  // The tree's signatures until they move into its arena.
+  std::vector<PreparedSignature> tree_items(n);
   for (uint64_t i = 0; i < n; ++i) {
     uint64_t len;
     absl::string_view id;
@@ -836,17 +850,17 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
                                        "': ", prepared.status().message()));
     }
     const uint64_t fingerprint = Fingerprint(*prepared);
-    auto shared =
-        std::make_shared<const PreparedSignature>(*std::move(prepared));
     const int64_t item = part->ItemOf(id);
     if (item >= 0 &&
         part->fingerprints[static_cast<size_t>(item)] == fingerprint) {
-      part->prepared[static_cast<size_t>(item)] = std::move(shared);
+      tree_items[static_cast<size_t>(item)] = *std::move(prepared);
       seen[static_cast<size_t>(item)] = true;
     } else {
       // New, or changed since the tree was built: the stored distances do
       // not describe it, so it is searched linearly until the next rebuild.
-      snap->buffer.push_back({id, std::move(shared), fingerprint});
+      snap->buffer.push_back(
+          {id, std::make_shared<const PreparedSignature>(*std::move(prepared)),
+           fingerprint});
     }
   }
   std::sort(
@@ -855,7 +869,8 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   for (uint32_t i = 0; i < n; ++i) {
     if (!seen[i]) snap->tombstones.push_back(i);
   }
-  part->BuildCentroids();
+  part->Store([&](uint32_t i) { return seen[i] ? &tree_items[i] : nullptr; });
+  std::vector<PreparedSignature>().swap(tree_items);
   snap->tree = std::move(part);
   std::lock_guard<std::mutex> lock(index->mu_);
   index->InstallLocked(std::move(snap));

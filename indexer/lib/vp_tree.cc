@@ -33,6 +33,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "indexer/lib/byte_codec.h"
+#include "indexer/lib/huge_pages.h"
 
 namespace tpr::index {
 
@@ -63,19 +64,22 @@ struct VpTree::Node {
 struct VpTree::Data {
   uint32_t n_items = 0;
   size_t height = 0;
-  std::vector<Node> nodes;
-  std::vector<uint32_t> leaf_items;
+  // The arrays a search reads are huge-page advised (huge_pages.h): at 1M
+  // items item_dists alone is about 110 MB, read at a random bucket per
+  // visited leaf.
+  HugeVector<Node> nodes;
+  HugeVector<uint32_t> leaf_items;
   // Per node, per ancestor (root first): min and max distance from that
   // ancestor's vantage point to the items of the node's subtree.
-  std::vector<double> ranges;
+  HugeVector<double> ranges;
   // Per item: the node holding it, and its distances to the vantage points
   // of that node's ancestors (root first) at item_dists[item_row[item]].
   // Rows are in node order (a vantage point's row, or its bucket's rows in
   // leaf_items order, back to back): see AssignRows. Serialized bytes keep
   // them in item-id order, independent of this layout.
   std::vector<uint32_t> item_holder;
-  std::vector<uint64_t> item_row;
-  std::vector<double> item_dists;
+  HugeVector<uint64_t> item_row;
+  HugeVector<double> item_dists;
 
   // Sets item_row from nodes (with depths), leaf_items and the vantage
   // points, in the tree-order layout above; returns the total row length.
@@ -112,6 +116,21 @@ uint64_t VpTree::Data::AssignRows() {
     }
   }
   return row;
+}
+
+std::vector<uint32_t> VpTree::ItemsInTreeOrder() const {
+  const Data& d = *data_;
+  std::vector<uint32_t> order;
+  order.reserve(d.n_items);
+  for (const Node& n : d.nodes) {
+    if (n.vp != kNone) {
+      order.push_back(n.vp);
+      continue;
+    }
+    order.insert(order.end(), d.leaf_items.begin() + n.begin,
+                 d.leaf_items.begin() + n.end);
+  }
+  return order;
 }
 
 size_t VpTree::size() const { return data_->n_items; }

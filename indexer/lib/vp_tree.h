@@ -181,6 +181,13 @@ class VpTree {
   size_t height() const;
   // node_count returns the number of nodes.
   size_t node_count() const;
+  // ItemsInTreeOrder returns every item once, in the tree's node order
+  // (depth first: a node's vantage point, then its inner subtree, then its
+  // outer one; a leaf's bucket in bucket order), the order in which the
+  // tree keeps its stored distances. Items laid out in memory in this
+  // order put a bucket's items side by side and a subtree's buckets near
+  // each other (SignatureArena). O(n); thread-safe.
+  std::vector<uint32_t> ItemsInTreeOrder() const;
   // MemoryBytes returns the heap bytes the tree holds (nodes, stored
   // distances, item tables; not the items' points). O(1).
   size_t MemoryBytes() const;

@@ -35,6 +35,7 @@
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
 #include "indexer/lib/metric.h"
+#include "indexer/lib/signature_arena.h"
 #include "indexer/lib/signature_index.h"
 #include "indexer/lib/vp_tree.h"
 #include "tests/indexer/emd_oracle.h"
@@ -174,8 +175,12 @@ struct DbKey {
 };
 
 struct Db {
+  // One heap block per signature, in generation order.
   std::vector<PreparedSignature> items;
   std::vector<PreparedSignature> queries;
+  // The same signatures as SignatureIndex keeps them: one huge-page arena
+  // in tree order (SignatureArena); built on first use (Arena below).
+  tpr::index::SignatureArena arena;
   // The items' centroids in one flat array, as SignatureIndex keeps them for
   // its lower bound.
   tpr::index::CentroidTable centroids;
@@ -266,6 +271,25 @@ Db& GetDb(const DbKey& key) {
   return *slot;
 }
 
+// Arena returns db's signatures in a SignatureArena laid out in its tree's
+// order, as SignatureIndex stores them, building it on first use (a second
+// copy of the signatures beside `items`, so that both storages can run in
+// one process).
+const tpr::index::SignatureArena& Arena(Db& db) {
+  if (db.arena.size() != db.items.size()) {
+    db.arena = tpr::index::SignatureArena::Build(
+        db.items.size(), db.tree.ItemsInTreeOrder(),
+        [&db](uint32_t i) { return &db.items[i]; });
+  }
+  return db.arena;
+}
+
+// Where a search reads the items' signatures.
+enum class Storage {
+  kHeap,   // Db::items: a heap block each (the index before session 7)
+  kArena,  // Arena(db): as SignatureIndex keeps them
+};
+
 // The bound cascade of a query (QuerySpec::lower_bounds) before the EMD.
 enum class Cascade {
   kCentroid,       // the centroid bound alone
@@ -297,12 +321,14 @@ std::atomic<int64_t> level2_bounds{0};
 // term and level 2 the exact term, as SignatureIndex does
 // (`table_spectral` false: level 1 reads the exact term from the
 // signature instead, as before the table kept the embeddings).
-QuerySpec Spec(const Db& db, const PreparedSignature& q,
+// `items` (Db::items or Arena(db)) must outlive the search.
+template <typename Items>
+QuerySpec Spec(const Db& db, const Items& items, const PreparedSignature& q,
                Cascade cascade = Cascade::kConstrained32,
                Prefetch prefetch = Prefetch::kAdaptive,
                bool table_spectral = true) {
   QuerySpec spec;
-  spec.distance = [&db, &q](uint32_t i) { return Distance(q, db.items[i]); };
+  spec.distance = [&items, &q](uint32_t i) { return Distance(q, items[i]); };
   // This query's bound counts, for the adaptive policy (as the index's
   // cursor keeps them).
   struct Counts {
@@ -311,7 +337,7 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
   };
   auto counts = std::make_shared<Counts>();
   if (prefetch != Prefetch::kNone) {
-    spec.prefetch = [&db, prefetch, counts](uint32_t i, size_t level) {
+    spec.prefetch = [&db, &items, prefetch, counts](uint32_t i, size_t level) {
       if (level == 0) {
         db.centroids.Prefetch(i);
         if (prefetch == Prefetch::kLate ||
@@ -322,7 +348,7 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
           return;
         }
       }
-      tpr::index::PrefetchSignature(db.items[i]);
+      tpr::index::PrefetchSignature(items[i]);
     };
     spec.prefetch_vantage_points = prefetch == Prefetch::kAdaptiveVantage;
   }
@@ -344,33 +370,32 @@ QuerySpec Spec(const Db& db, const PreparedSignature& q,
                                              i);
     });
   } else {
-    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &items, &q, qc, counts](uint32_t i) {
       level1_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level1.fetch_add(1, std::memory_order_relaxed);
       return db.centroids.LowerBound(qc->data(), q.bands(), i) +
-             SpectralDistance(q, db.items[i]);
+             SpectralDistance(q, items[i]);
     });
   }
   if (cascade == Cascade::kRelaxed) {
-    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
+    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
       level2_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return RelaxedTransportBound(q, db.items[i]) +
-             SpectralDistance(q, db.items[i]);
+      return RelaxedTransportBound(q, items[i]) + SpectralDistance(q, items[i]);
     });
   } else if (cascade == Cascade::kConstrained) {
-    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
+    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
       level2_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return ConstrainedTransportBound(q, db.items[i]) +
-             SpectralDistance(q, db.items[i]);
+      return ConstrainedTransportBound(q, items[i]) +
+             SpectralDistance(q, items[i]);
     });
   } else if (cascade == Cascade::kConstrained32) {
-    spec.lower_bounds.push_back([&db, &q, counts](uint32_t i) {
+    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
       level2_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return tpr::index::ConstrainedTransportBound32(q, db.items[i]) +
-             SpectralDistance(q, db.items[i]);
+      return tpr::index::ConstrainedTransportBound32(q, items[i]) +
+             SpectralDistance(q, items[i]);
     });
   }
   return spec;
@@ -395,7 +420,7 @@ double PeakRssMiB() {
 }
 
 void Report(benchmark::State& state, const Db& db, const SearchStats& total,
-            int64_t queries) {
+            int64_t queries, Storage storage = Storage::kHeap) {
   const double per = queries > 0 ? 1.0 / static_cast<double>(queries) : 0.0;
   const double n = static_cast<double>(db.items.size());
   state.counters["emds"] = static_cast<double>(total.emd_computations) * per;
@@ -409,16 +434,24 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
   state.counters["build_cpu_s"] = db.build_cpu_seconds;
   state.counters["peak_rss_mib"] = PeakRssMiB();
   size_t bytes = db.tree.MemoryBytes() + db.centroids.MemoryBytes();
-  for (const PreparedSignature& p : db.items)
-    bytes += sizeof(PreparedSignature) + p.MemoryBytes();
+  if (storage == Storage::kArena) {
+    bytes += db.arena.MemoryBytes();
+  } else {
+    for (const PreparedSignature& p : db.items)
+      bytes += sizeof(PreparedSignature) + p.MemoryBytes();
+  }
   state.counters["bytes_per_model"] = static_cast<double>(bytes) / n;
 }
 
+// RunTree times k-NN searches of the tree over `key`'s database, reading
+// the signatures from `storage` (by default as SignatureIndex does).
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
              Cascade cascade = Cascade::kConstrained32, int threads = 1,
              Prefetch prefetch = Prefetch::kAdaptive,
-             bool table_spectral = true) {
+             bool table_spectral = true, Storage storage = Storage::kArena) {
   Db& db = GetDb(key);
+  const tpr::index::SignatureArena* signatures =
+      storage == Storage::kArena ? &Arena(db) : nullptr;
   SearchStats total;
   int64_t queries = 0;
   level1_bounds = 0;
@@ -426,8 +459,11 @@ void RunTree(benchmark::State& state, const DbKey& key, size_t k,
   tbb::task_arena arena(std::max(threads, 1));
   for (auto _ : state) {
     SearchStats stats;
-    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()], cascade,
-                          prefetch, table_spectral);
+    const PreparedSignature& q = db.queries[queries % db.queries.size()];
+    QuerySpec spec =
+        signatures != nullptr
+            ? Spec(db, *signatures, q, cascade, prefetch, table_spectral)
+            : Spec(db, db.items, q, cascade, prefetch, table_spectral);
     if (threads > 1) {
       // As SignatureIndex does with IndexOptions::search_threads.
       spec.parallel_batch = 2 * static_cast<size_t>(threads);
@@ -445,7 +481,7 @@ void RunTree(benchmark::State& state, const DbKey& key, size_t k,
     total.nodes_visited += stats.nodes_visited;
     ++queries;
   }
-  Report(state, db, total, queries);
+  Report(state, db, total, queries, storage);
 }
 
 // BM_KnnVpTree/<n>/<k>: default clustered data.
@@ -564,6 +600,26 @@ void BM_KnnVpTreeExtractedLevel2(benchmark::State& state) {
       state.range(3) == 0 ? Cascade::kConstrained : Cascade::kConstrained32);
 }
 BENCHMARK(BM_KnnVpTreeExtractedLevel2)
+    ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnVpTreeExtractedStorage/<n>/<k>/<spectral>/<arena>: the index's
+// search (as BM_KnnVpTreeExtractedLevel2/<n>/<k>/<spectral>/1) with the
+// signatures read from one heap block each in generation order (arena 0,
+// the index before session 7) or from the SignatureArena in tree order
+// (1, the index's), side by side on one database and tree. Both rows
+// build the arena (a second copy of the signatures), so peak_rss_mib
+// counts both; bytes_per_model is each storage's.
+void BM_KnnVpTreeExtractedStorage(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  if (state.range(2) != 0) key.spectral_permille = 1000;
+  Arena(GetDb(key));
+  RunTree(state, key, static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained32, /*threads=*/1, Prefetch::kAdaptive,
+          /*table_spectral=*/true,
+          state.range(3) != 0 ? Storage::kArena : Storage::kHeap);
+}
+BENCHMARK(BM_KnnVpTreeExtractedStorage)
     ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 
@@ -701,7 +757,8 @@ void BM_KnnBruteForce(benchmark::State& state) {
   SearchStats total;
   int64_t queries = 0;
   for (auto _ : state) {
-    QuerySpec spec = Spec(db, db.queries[queries % db.queries.size()]);
+    QuerySpec spec =
+        Spec(db, db.items, db.queries[queries % db.queries.size()]);
     spec.lower_bounds.clear();
     SearchStats stats;
     std::vector<ItemNeighbor> result = oracle.Knn(
