@@ -190,6 +190,7 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
       << " ring=" << e.ring_length_threshold
       << " prominence=" << e.point_min_prominence
       << " stop=" << e.ring_stop_at_centre_saddles
+      << (e.cut_handles ? " handles=cut" : "")
       << " spectrum=" << e.spectrum_eigenvalues << "/"
       << e.spectrum.max_vertices << "/" << e.spectrum.dense_max_vertices
       << " d2=" << config.d2.pairs << "/" << config.d2.bins << "/"
@@ -341,6 +342,9 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "geodesic diameter (0)");
   app->add_option("--ring-threshold", c.extract.ring_length_threshold,
                   "ring length threshold (4.6.2)");
+  app->add_option("--cut-handles", c.extract.cut_handles,
+                  "cut a closed mesh of genus > 0 to genus 0 before describing "
+                  "it (1, default) or describe it as it is (0, the paper)");
   app->add_option("--point-prominence", c.extract.point_min_prominence,
                   "smallest protrusion holding a topological point, / "
                   "sqrt(area) (0 = paper)");

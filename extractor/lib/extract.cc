@@ -8,6 +8,8 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <optional>
+#include <string>
 #include <thread>
 #include <utility>
 
@@ -16,6 +18,7 @@
 #include "common/status_macros.h"
 #include "extractor/lib/critical_points.h"
 #include "extractor/lib/features.h"
+#include "extractor/lib/mesh_handles.h"
 #include "extractor/lib/source_points.h"
 #include "extractor/lib/topological_points.h"
 #include "extractor/lib/topological_rings.h"
@@ -104,11 +107,27 @@ Feature MakeFeature(FeatureKind kind, double g_norm, SurfaceVectors vectors) {
 
 }  // namespace
 
-absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
+absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& input,
                                                const MeshStats& stats,
                                                const Options& options) {
   TPR_RETURN_IF_ERROR(ValidateOptions(options));
   ExtractResult result;
+  StageTimer timer(&result.timings);
+
+  // Handles (Options::cut_handles, mesh_handles.h): a closed mesh of genus
+  // > 0 is cut to genus 0 before every stage, the spectrum's included. Its
+  // time counts in stage "graph".
+  std::optional<HandleCut> cut;
+  if (options.cut_handles && stats.genus > 0 && stats.boundary_edges == 0) {
+    absl::StatusOr<HandleCut> c = CutHandles(input, HandleCutOptions{});
+    if (!c.ok()) {
+      result.warnings.push_back(
+          absl::StrCat("handles not cut: ", c.status().message()));
+    } else if (c->handles_cut > 0) {
+      cut = std::move(*c);
+    }
+  }
+  const Mesh& mesh = cut ? cut->mesh : input;
 
   // The Laplace-Beltrami spectrum of the whole mesh (issue 9) needs only
   // the mesh: with threads > 1 it runs on its own thread beside the TPR
@@ -134,7 +153,6 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
     }
   } spectrum_thread;
   if (spectrum_beside) spectrum_thread.thread = std::thread(compute_spectrum);
-  StageTimer timer(&result.timings);
 
   // Stage: mesh graph, 1-ring links and angle defects.
   TPR_ASSIGN_OR_RETURN(MeshGraph graph,
@@ -147,7 +165,19 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
   if (!(area > 0.0)) {
     return absl::InvalidArgumentError("mesh has zero surface area");
   }
-  if (stats.genus > 0) {
+  if (cut) {
+    std::string lengths;
+    for (double l : cut->cycle_lengths) {
+      absl::StrAppend(&lengths, lengths.empty() ? "" : ", ",
+                      absl::SixDigits(l / std::sqrt(stats.area)));
+    }
+    result.warnings.push_back(absl::StrCat(
+        "mesh has genus ", stats.genus, "; cut ", cut->handles_cut,
+        " handle(s) along the shortest non-separating cycles (length / "
+        "sqrt(area): ",
+        lengths, ") and capped them: TPR describes genus-0 surfaces (7.4)"));
+  }
+  if (stats.genus > 0 && (!cut || cut->handles_cut < stats.genus)) {
     result.warnings.push_back(
         absl::StrCat("mesh has genus ", stats.genus,
                      "; TPR analysis describes genus-0 surfaces poorly (7.4)"));
@@ -375,6 +405,17 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& mesh,
         e.feature_vertices.push_back({point_vertices[i]});
       for (int32_t f : ring_fronts)
         e.feature_vertices.push_back(rings.fronts[f].ring_vertices);
+    }
+    if (cut) {
+      // Back to the input's ids: a cut's copies and caps map to the
+      // vertices they come from (HandleCut::origin).
+      e.vertex_region.resize(input.positions.size());
+      for (std::vector<int32_t>& vertices : e.feature_vertices) {
+        for (int32_t& v : vertices) v = cut->origin[v];
+        std::sort(vertices.begin(), vertices.end());
+        vertices.erase(std::unique(vertices.begin(), vertices.end()),
+                       vertices.end());
+      }
     }
     result.explanation = std::move(e);
   }
