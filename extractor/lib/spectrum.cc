@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <utility>
 // OpenMesh's property vectors default-construct VectorT without
 // initializing it, which g++ 12 flags at -O3 inside OpenMesh's headers.
@@ -22,6 +23,7 @@
 #include <OpenMesh/Tools/Decimater/ModRoundnessT.hh>
 #pragma GCC diagnostic pop
 #include <Spectra/SymEigsSolver.h>
+#include <Spectra/Util/SimpleRandom.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
@@ -313,16 +315,132 @@ int64_t EigenvaluesBelow(const SparseMatrix& l, const SparseMatrix& m,
 
 // Eigenpairs are the converged pairs of one Lanczos run: the eigenvalues
 // lambda ascending, and the matching eigenvectors of ShiftInvertOp's A
-// (orthonormal columns).
+// (orthonormal columns), held as basis * coefficients and formed only when
+// a deflated run needs them (a product of V x m and m x nev).
 struct Eigenpairs {
   Eigen::VectorXd values;
-  Eigen::MatrixXd vectors;
+  Eigen::MatrixXd basis;
+  Eigen::MatrixXd coefficients;
   int64_t operations = 0;
 };
 
-absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, int64_t nev,
-                                      double sigma,
-                                      const SpectrumOptions& options) {
+// SubtractBasis sets w -= basis.leftCols(k) * c, eight columns at a time.
+// Eigen's product with a k-column block (k < 128) walks the rows once and
+// reads all k columns at each row, k streams a page apart that the
+// hardware prefetcher does not follow; on the 10k-vertex biped that
+// product took 24% of a 50-eigenvalue spectrum inside Spectra, against 14%
+// for the transposed product that reads the same columns one after another
+// (perf, docs/benchmarks.md). Eight columns at a time cost one more pass
+// over w (in cache) per block.
+void SubtractBasis(const Eigen::MatrixXd& basis, int64_t k,
+                   const Eigen::VectorXd& c, Eigen::VectorXd* w) {
+  constexpr int64_t kBlock = 8;
+  for (int64_t j = 0; j < k; j += kBlock) {
+    const int64_t b = std::min(kBlock, k - j);
+    w->noalias() -= basis.middleCols(j, b) * c.segment(j, b);
+  }
+}
+
+// RunPlainLanczos is the symmetric Lanczos iteration on op without
+// restarts, every new vector orthogonalized against the whole basis by
+// classical Gram-Schmidt with the DGKS criterion (a second pass only when
+// the first removed more than 1 - 1/sqrt(2) of the vector's norm), until
+// the nev largest Ritz values mu of the tridiagonal T pass Spectra's test
+// (residual |beta_m s_mi| < tol max(eps^(2/3), |mu_i|)) or the basis
+// reaches max_basis vectors; *converged says which. Written by hand, beside
+// Spectra (kept for the restarted fallback), because at 50 eigenvalues
+// Spectra's implicitly restarted Lanczos spent as much time in its dense
+// bookkeeping as in the operator: it orthogonalizes with one product of
+// each kind and a third to check (three passes over the basis per step)
+// through the slow Eigen product SubtractBasis avoids, and each restart
+// applies the implicit QR shifts to the whole basis. Here a step costs two
+// passes (DGKS rarely asks for the second after the three-term
+// recurrence); the memory is the basis, max_basis x V doubles. The start
+// vector is Spectra's (its SimpleRandom with seed 0), so runs are
+// reproducible.
+absl::StatusOr<Eigenpairs> RunPlainLanczos(const ShiftInvertOp& op, int64_t nev,
+                                           double sigma, int64_t max_basis,
+                                           const SpectrumOptions& options,
+                                           bool* converged) {
+  *converged = false;
+  const int64_t n = op.rows();
+  max_basis = std::min(max_basis, n);
+  Eigenpairs out;
+  Eigen::MatrixXd basis(n, max_basis);
+  Eigen::VectorXd alpha(max_basis), beta(max_basis);
+  Eigen::VectorXd w(n), c(max_basis);
+  {
+    Spectra::SimpleRandom<double> rng(0);
+    basis.col(0) = rng.random_vec(n);
+    basis.col(0).normalize();
+  }
+  const double eps23 =
+      std::pow(std::numeric_limits<double>::epsilon(), 2.0 / 3.0);
+  // Convergence is tested from 2 nev + 1 vectors (the Krylov dimension
+  // Spectra was given), then every tenth of the basis: each test costs an
+  // m x m tridiagonal eigendecomposition, O(m^3).
+  int64_t next_test = std::min(max_basis, 2 * nev + 1);
+  for (int64_t j = 0; j < max_basis; ++j) {
+    op.perform_op(basis.col(j).data(), w.data());
+    ++out.operations;
+    double a = basis.col(j).dot(w);
+    w.noalias() -= a * basis.col(j);
+    if (j > 0) w.noalias() -= beta[j - 1] * basis.col(j - 1);
+    double norm = w.norm();
+    for (int pass = 0; pass < 2; ++pass) {
+      c.head(j + 1).noalias() = basis.leftCols(j + 1).transpose() * w;
+      SubtractBasis(basis, j + 1, c, &w);
+      a += c[j];
+      const double before = norm;
+      norm = w.norm();
+      if (norm > before * 0.7071) break;
+    }
+    alpha[j] = a;
+    beta[j] = norm;
+    const int64_t m = j + 1;
+    const bool breakdown =
+        !(norm > std::numeric_limits<double>::epsilon() * std::abs(a));
+    if (m >= nev && (m == next_test || m == max_basis || breakdown)) {
+      next_test = m + std::max<int64_t>(4, m / 10);
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> tri;
+      tri.computeFromTridiagonal(alpha.head(m), beta.head(m - 1),
+                                 Eigen::ComputeEigenvectors);
+      if (tri.info() != Eigen::Success) {
+        return absl::InternalError("spectrum: tridiagonal eigensolver failed");
+      }
+      // Eigen sorts ascending: the nev largest mu are the last columns.
+      bool all = true;
+      for (int64_t i = 0; i < nev && all; ++i) {
+        const int64_t col = m - 1 - i;
+        const double mu = tri.eigenvalues()[col];
+        const double residual =
+            std::abs(tri.eigenvectors()(m - 1, col)) * (breakdown ? 0.0 : norm);
+        all = residual < options.tolerance * std::max(eps23, std::abs(mu));
+      }
+      if (all) {
+        *converged = true;
+        out.values.resize(nev);
+        out.coefficients.resize(m, nev);
+        for (int64_t i = 0; i < nev; ++i) {
+          const int64_t col = m - 1 - i;
+          out.values[i] = sigma + 1.0 / tri.eigenvalues()[col];  // ascending
+          out.coefficients.col(i) = tri.eigenvectors().col(col);
+        }
+        out.basis = basis.leftCols(m);
+        return out;
+      }
+    }
+    if (breakdown || m == max_basis) break;
+    basis.col(j + 1) = w / norm;
+  }
+  return out;
+}
+
+// RunRestartedLanczos is Spectra's implicitly restarted Lanczos
+// (SymEigsSolver) for the nev largest mu of op.
+absl::StatusOr<Eigenpairs> RunRestartedLanczos(ShiftInvertOp& op, int64_t nev,
+                                               double sigma,
+                                               const SpectrumOptions& options) {
   // Spectra requires nev < ncv <= n and advises ncv >= 2 nev. Between
   // nev + 10 and 2 nev + 1, ncv changed neither the number of solves
   // (about 130 for 51 values) nor the time much; for 21 values on a
@@ -345,11 +463,34 @@ absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, int64_t nev,
     }
     const Eigen::VectorXd mu = solver.eigenvalues();  // descending
     out.values = sigma + mu.array().inverse();        // ascending
-    out.vectors = solver.eigenvectors();
+    out.basis = solver.eigenvectors();
+    out.coefficients = Eigen::MatrixXd::Identity(nev, nev);
   } catch (const std::exception& e) {
     return absl::InternalError(
         absl::StrCat("spectrum: eigensolver failed: ", e.what()));
   }
+  return out;
+}
+
+absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, int64_t nev,
+                                      double sigma,
+                                      const SpectrumOptions& options) {
+  // The plain iteration first, with room for three times the wanted
+  // pairs; if that is not enough (clustered spectra), Spectra's restarted
+  // iteration, whose memory stays at 2 nev + 1 vectors.
+  const int64_t max_basis = options.max_lanczos_vectors > 0
+                                ? options.max_lanczos_vectors
+                                : 3 * nev + 20;
+  Eigenpairs plain;
+  if (max_basis > nev) {
+    bool converged = false;
+    TPR_ASSIGN_OR_RETURN(
+        plain, RunPlainLanczos(op, nev, sigma, max_basis, options, &converged));
+    if (converged) return plain;
+  }
+  TPR_ASSIGN_OR_RETURN(Eigenpairs out,
+                       RunRestartedLanczos(op, nev, sigma, options));
+  out.operations += plain.operations;
   return out;
 }
 
@@ -373,6 +514,10 @@ absl::Status ValidateOptions(const SpectrumOptions& o) {
   if (o.dense_max_vertices < 0 || o.dense_max_vertices > 5000) {
     return absl::InvalidArgumentError(
         "spectrum options: dense_max_vertices not in [0, 5000]");
+  }
+  if (o.max_lanczos_vectors < 0) {
+    return absl::InvalidArgumentError(
+        "spectrum options: max_lanczos_vectors must be >= 0");
   }
   if (o.max_restarts < 1) {
     return absl::InvalidArgumentError(
@@ -509,7 +654,8 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
         "spectrum: sparse Cholesky of L - sigma M failed");
   }
   std::vector<double> found;
-  Eigen::MatrixXd vectors(result.vertices, 0);
+  Eigen::MatrixXd vectors(result.vertices, 0);  // deflation, when needed
+  std::vector<Eigenpairs> pending;              // runs not yet in vectors
   constexpr int kMaxRuns = 8;
   int64_t missing = 0;
   for (int run = 0;; ++run) {
@@ -527,9 +673,7 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
                  pairs.values.data() + pairs.values.size());
     std::sort(found.begin(), found.end());
     if (static_cast<int64_t>(found.size()) > nev) found.resize(nev);
-    Eigen::MatrixXd all(result.vertices, vectors.cols() + pairs.vectors.cols());
-    all << vectors, pairs.vectors;
-    vectors = std::move(all);
+    pending.push_back(std::move(pairs));
     // Every eigenvalue below just under the nev-th found must be among the
     // found (copies equal to the nev-th itself may lie beyond index nev).
     // A tau on an eigenvalue fails the factorization; nudge it.
@@ -552,6 +696,12 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
           "spectrum: ", missing, " eigenvalues still missing after ", kMaxRuns,
           " deflated Lanczos runs"));
     }
+    for (const Eigenpairs& p : pending) {
+      Eigen::MatrixXd all(result.vertices, vectors.cols() + p.values.size());
+      all << vectors, p.basis * p.coefficients;
+      vectors = std::move(all);
+    }
+    pending.clear();
     op.Deflate(vectors);
   }
   // Ascending; the first `components` are the zero eigenvalues.

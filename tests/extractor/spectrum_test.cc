@@ -290,6 +290,7 @@ TEST(SpectrumTest, BadInputIsInvalidArgument) {
                       +[](SpectrumOptions& o) { o.shift = 0.0; },
                       +[](SpectrumOptions& o) { o.tolerance = 0.0; },
                       +[](SpectrumOptions& o) { o.max_restarts = 0; },
+                      +[](SpectrumOptions& o) { o.max_lanczos_vectors = -1; },
                       +[](SpectrumOptions& o) { o.dense_max_vertices = -1; }}) {
     SpectrumOptions o;
     mutate(o);
@@ -300,9 +301,37 @@ TEST(SpectrumTest, BadInputIsInvalidArgument) {
             absl::StatusCode::kInvalidArgument);
 }
 
+// The unrestarted Lanczos iteration (the default) and Spectra's restarted
+// one (forced by max_lanczos_vectors = 1, or reached when the unrestarted
+// basis is too small to converge) find the same 50 eigenvalues, on a mesh
+// without symmetry and on one with multiple eigenvalues; and the operator
+// products stay within the documented 3 nev + 20 vectors.
+TEST(SpectrumTest, UnrestartedAndRestartedLanczosAgree) {
+  const Mesh meshes[] = {Biped(2000, 4), testing::Icosphere(3)};
+  for (const Mesh& mesh : meshes) {
+    SpectrumOptions plain, restarted, fallback;
+    plain.eigenvalues = restarted.eigenvalues = fallback.eigenvalues = 50;
+    restarted.max_lanczos_vectors = 1;
+    fallback.max_lanczos_vectors = 60;  // > nev = 51, too few to converge
+    absl::StatusOr<Spectrum> a = LaplaceBeltramiSpectrum(mesh, plain);
+    absl::StatusOr<Spectrum> b = LaplaceBeltramiSpectrum(mesh, restarted);
+    absl::StatusOr<Spectrum> c = LaplaceBeltramiSpectrum(mesh, fallback);
+    ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+    EXPECT_LT(MaxRelativeError(a->eigenvalues, b->eigenvalues), 1e-9);
+    EXPECT_LT(MaxRelativeError(c->eigenvalues, b->eigenvalues), 1e-9);
+    if (&mesh == &meshes[0]) {
+      // One run each (no multiple eigenvalue): the fallback paid for the
+      // 60 unrestarted products, then did what the restarted one did.
+      EXPECT_EQ(c->operations, b->operations + 60);
+      EXPECT_LE(a->operations, 3 * 51 + 20);
+    }
+  }
+}
+
 // Non-convergence is reported, not hidden: one restart is not enough.
 TEST(SpectrumTest, NonConvergenceIsInternal) {
   SpectrumOptions options;
+  options.max_lanczos_vectors = 1;  // the restarted iteration
   options.max_restarts = 1;
   options.tolerance = 1e-15;
   absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(Biped(2000), options);
