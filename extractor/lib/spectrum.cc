@@ -133,36 +133,52 @@ double Assemble(const Mesh& mesh, SparseMatrix* stiffness, SparseMatrix* mass) {
     inner.insert(inner.end(), column.begin(), column.end());
     outer[v + 1] = static_cast<int>(inner.size());
   }
-  // Slot of entry (row i, column j): i is in column j's sorted rows.
-  auto slot = [&](int32_t i, int32_t j) {
-    return static_cast<int>(std::lower_bound(inner.begin() + outer[j],
-                                             inner.begin() + outer[j + 1], i) -
-                            inner.begin());
-  };
-  std::vector<double> l(inner.size(), 0.0), m(inner.size(), 0.0);
+  // The cotangent at corner k of each triangle, opposite edge (k+1, k+2):
+  // cot = (u . v) / |u x v| = (u . v) / twice_area.
+  std::vector<double> half_cot(3 * mesh.triangles.size(), 0.0);
   double area = 0.0;
   for (size_t f = 0; f < mesh.triangles.size(); ++f) {
     const double twice_area = twice_areas[f];
     if (!(twice_area > 0.0)) continue;
     const auto& t = mesh.triangles[f];
-    const double a = 0.5 * twice_area;
-    area += a;
-    // The cotangent at corner k, opposite edge (k+1, k+2):
-    // cot = (u . v) / |u x v| = (u . v) / twice_area.
+    area += 0.5 * twice_area;
     for (int k = 0; k < 3; ++k) {
-      const int32_t i = t[(k + 1) % 3];
-      const int32_t j = t[(k + 2) % 3];
       const Eigen::Vector3d& c = mesh.positions[t[k]];
-      const double w =
-          0.5 * (mesh.positions[i] - c).dot(mesh.positions[j] - c) / twice_area;
-      const int ij = slot(i, j), ji = slot(j, i);
-      l[ij] += -w;
-      l[ji] += -w;
-      l[slot(i, i)] += w;
-      l[slot(j, j)] += w;
-      m[ij] += a / 12.0;
-      m[ji] += a / 12.0;
-      m[slot(t[k], t[k])] += a / 6.0;
+      half_cot[3 * f + k] = 0.5 *
+                            (mesh.positions[t[(k + 1) % 3]] - c)
+                                .dot(mesh.positions[t[(k + 2) % 3]] - c) /
+                            twice_area;
+    }
+  }
+  // Column by column: its triangles in increasing order, and in each the
+  // corners in order, add what the triplets (i, j, -w), (j, i, -w),
+  // (i, i, w), (j, j, w) of L and (i, j, a/12), (j, i, a/12),
+  // (t_k, t_k, a/6) of M put in this column, so each entry sums the same
+  // terms in the same order as setFromTriplets did.
+  std::vector<double> l(inner.size(), 0.0), m(inner.size(), 0.0);
+  std::vector<int> slot(n, -1);  // row -> entry of the current column
+  for (int32_t v = 0; v < n; ++v) {
+    for (int e = outer[v]; e < outer[v + 1]; ++e) slot[inner[e]] = e;
+    for (int32_t c = corner_count[v]; c < corner_count[v + 1]; ++c) {
+      const int32_t f = corners[c];
+      const auto& t = mesh.triangles[f];
+      const double a = 0.5 * twice_areas[f];
+      for (int k = 0; k < 3; ++k) {
+        const int32_t i = t[(k + 1) % 3];
+        const int32_t j = t[(k + 2) % 3];
+        const double w = half_cot[3 * f + k];
+        if (j == v) {
+          l[slot[i]] += -w;
+          m[slot[i]] += a / 12.0;
+        }
+        if (i == v) {
+          l[slot[j]] += -w;
+          m[slot[j]] += a / 12.0;
+        }
+        if (i == v) l[slot[i]] += w;
+        if (j == v) l[slot[j]] += w;
+        if (t[k] == v) m[slot[v]] += a / 6.0;
+      }
     }
   }
   for (auto [matrix, values] : {std::pair{stiffness, &l}, {mass, &m}}) {
