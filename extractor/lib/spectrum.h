@@ -25,9 +25,10 @@ struct SpectrumOptions {
   // Non-zero eigenvalues to return (the N). Must be >= 1.
   // Default 20: the count the searched distance compares by default
   // (index::SpectralOptions::eigenvalues, chosen by cross-validation over
-  // every dev set, docs/results.md). The cost grows much faster than
-  // linearly with it (more Lanczos steps, each orthogonalized against more
-  // vectors): BM_SpectrumEigenvalues compares 20 with 50 (figures in
+  // every dev set, docs/results.md). The cost grows faster than linearly
+  // with it (more Lanczos steps, each orthogonalized against more
+  // vectors): BM_SpectrumEigenvalues compares 20 with 50, and 50 would put
+  // a whole extraction at 10k vertices over its 150 ms (figures in
   // docs/benchmarks.md).
   int eigenvalues = 20;
   // Meshes with more (referenced) vertices than this are first simplified
