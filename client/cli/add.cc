@@ -41,7 +41,7 @@ absl::StatusOr<std::vector<AddOutcome>> AddItems(
     absl::Status status;
     bool created = false;
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        extractor.ExtractFile(item.path, {}, &call);
+        extractor.ExtractFile(item.path, options.extract, &call);
     if (r.ok()) {
       tpr::v1::Model model;
       model.set_id(item.id);
@@ -78,10 +78,12 @@ struct AddFlags {
   std::vector<std::string> paths;
   std::string manifest;
   AddOptions options;
+  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 int RunAdd(const Globals& g, const AddFlags& flags) {
-  const AddOptions& options = flags.options;
+  AddOptions options = flags.options;
+  options.extract.set_handles(flags.handles);
   absl::StatusOr<std::vector<Item>> items = eval::CollectItems(flags.paths);
   if (!items.ok()) return Fail("add", items.status());
   if (!flags.manifest.empty()) {
@@ -159,6 +161,7 @@ const bool kRegistered = RegisterCommand(
            ->check(CLI::Range(1, 64));
        sub.add_flag("--update", flags->options.update,
                     "replace ids already present (default: skip them)");
+       AddHandlesOption(sub, &flags->handles);
        return [flags](const Globals& g) { return RunAdd(g, *flags); };
      }});
 

@@ -29,6 +29,9 @@ struct AddOptions {
   // Replace ids already present (re-extract and overwrite). Default false:
   // ids present are skipped, so that re-runs are cheap and safe.
   bool update = false;
+  // Extraction options sent with every mesh (ExtractOptions; zero fields:
+  // the extractor's defaults). Default: all defaults.
+  tpr::v1::ExtractOptions extract;
 };
 
 // AddOutcome is what happened to one item.

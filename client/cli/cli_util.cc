@@ -3,7 +3,9 @@
 #include <google/protobuf/util/json_util.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <cstdio>
+#include <map>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -93,6 +95,18 @@ std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name) {
     return std::nullopt;
   }
   return ranking;
+}
+
+void AddHandlesOption(CLI::App& command, tpr::v1::HandleTreatment* handles) {
+  const std::map<std::string, tpr::v1::HandleTreatment> names = {
+      {"cut", tpr::v1::HANDLE_TREATMENT_CUT},
+      {"keep", tpr::v1::HANDLE_TREATMENT_KEEP}};
+  command
+      .add_option("--handles", *handles,
+                  "handles of a closed mesh of genus > 0: cut (the default: "
+                  "cut to genus 0 along shortest cycles) or keep (the "
+                  "paper's method); compare signatures made the same way")
+      ->transform(CLI::CheckedTransformer(names, CLI::ignore_case));
 }
 
 }  // namespace tpr::cli

@@ -25,6 +25,10 @@
 #include "tpr/v1/indexer.pb.h"
 #include "tpr/v1/signature.pb.h"
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace tpr::cli {
 
 // One escaper and one loop for the whole command (eval/lib is shared with
@@ -55,6 +59,13 @@ int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);
 // model). "default", "" and any other name give nullopt: the index's own
 // distance, served by its VP-tree. Thread-safe.
 std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name);
+
+// AddHandlesOption adds `--handles cut|keep` (case ignored) to a command
+// that extracts meshes: what the extractor does with the handles of a
+// closed mesh of genus > 0 (ExtractOptions.handles). "keep" is the
+// paper's method; unset leaves HANDLE_TREATMENT_UNSPECIFIED, the
+// extractor's default (cut). CLI11 refuses any other word, naming it.
+void AddHandlesOption(CLI::App& command, tpr::v1::HandleTreatment* handles);
 
 // ToJson returns `message` as one line of JSON (proto field names, every
 // primitive field printed; 64-bit integers as strings, non-finite doubles

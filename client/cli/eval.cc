@@ -432,6 +432,7 @@ namespace {
 struct EvalFlags {
   std::string dataset;
   EvalOptions options;
+  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 const bool kRegistered = RegisterCommand(
@@ -463,8 +464,11 @@ const bool kRegistered = RegisterCommand(
        sub.add_flag("--update", flags->options.add.update,
                     "re-extract ids already in the indexer (default: use them "
                     "as they are)");
+       AddHandlesOption(sub, &flags->handles);
        return [flags](const Globals& g) {
-         return RunEval(g, flags->dataset, flags->options);
+         EvalOptions options = flags->options;
+         options.add.extract.set_handles(flags->handles);
+         return RunEval(g, flags->dataset, options);
        };
      }});
 

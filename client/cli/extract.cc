@@ -17,6 +17,7 @@ namespace {
 struct ExtractFlags {
   std::vector<std::string> meshes;
   int bands = 0;
+  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 void PrintSummary(const std::string& path, const tpr::v1::ExtractResponse& r) {
@@ -46,6 +47,7 @@ int RunExtract(const Globals& g, const ExtractFlags& flags) {
   if (!client) return 1;
   tpr::v1::ExtractOptions options;
   options.set_bands(flags.bands);
+  options.set_handles(flags.handles);
   int failures = 0;
   for (const std::string& path : flags.meshes) {
     absl::StatusOr<tpr::v1::ExtractResponse> r =
@@ -75,6 +77,7 @@ const bool kRegistered = RegisterCommand(
            ->required();
        sub.add_option("--bands", flags->bands,
                       "geodesic bands per feature (0: default 20)");
+       AddHandlesOption(sub, &flags->handles);
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
      }});
 

@@ -23,6 +23,7 @@ struct QueryFlags {
   // "paper" (the EMD of Eq. 7 alone) or "spectrum" (the spectrum alone);
   // the last two rank every model (SearchRequest.ranking).
   std::string rank_by;
+  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 int RunQuery(const Globals& g, const QueryFlags& flags) {
@@ -36,8 +37,10 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
   if (!flags.mesh.empty()) {
     std::optional<tpr::client::ExtractorClient> extractor = ConnectExtractor(g);
     if (!extractor) return 1;
+    tpr::v1::ExtractOptions options;
+    options.set_handles(flags.handles);
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        extractor->ExtractFile(flags.mesh);
+        extractor->ExtractFile(flags.mesh, options);
     if (!r.ok()) return Fail(flags.mesh, r.status());
     *request.mutable_signature() = std::move(*r->mutable_signature());
   } else {
@@ -101,6 +104,7 @@ const bool kRegistered = RegisterCommand(
                       "EMD of Eq. 7 alone; spectrum: the spectrum alone "
                       "(these two compare the query with every model)")
            ->check(CLI::IsMember({"default", "paper", "spectrum"}));
+       AddHandlesOption(sub, &flags->handles);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});
 

@@ -66,6 +66,20 @@ absl::StatusOr<extract::Options> OptionsFromProto(
                      proto.point_min_prominence()));
   }
   options.point_min_prominence = proto.point_min_prominence();
+  switch (proto.handles()) {
+    case v1::HANDLE_TREATMENT_UNSPECIFIED:
+      break;  // the library's default
+    case v1::HANDLE_TREATMENT_CUT:
+      options.cut_handles = true;
+      break;
+    case v1::HANDLE_TREATMENT_KEEP:
+      options.cut_handles = false;
+      break;
+    default:  // a newer client's value
+      return absl::InvalidArgumentError(absl::StrCat(
+          "options.handles has unknown value ", proto.handles(),
+          " (1 = HANDLE_TREATMENT_CUT, 2 = HANDLE_TREATMENT_KEEP)"));
+  }
   return options;
 }
 
@@ -78,6 +92,8 @@ v1::ExtractOptions OptionsToProto(const extract::Options& options) {
   proto.set_explain(options.explain);
   proto.set_spectrum_eigenvalues(options.spectrum_eigenvalues);
   proto.set_point_min_prominence(options.point_min_prominence);
+  proto.set_handles(options.cut_handles ? v1::HANDLE_TREATMENT_CUT
+                                        : v1::HANDLE_TREATMENT_KEEP);
   return proto;
 }
 

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <map>
@@ -198,6 +199,69 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   EXPECT_NE(extract.out.find("points"), std::string::npos);
   EXPECT_EQ(RunTpr(cluster_, "extract " + set + "/broken/bad.off").exit_code,
             1);
+}
+
+// Writes a closed torus (major radius 2, minor 0.6; 24 x 12 quads split in
+// two triangles) as OFF: genus 1, one handle.
+void WriteTorusOff(const std::string& path) {
+  constexpr int kMajor = 24, kMinor = 12;
+  std::ofstream out(path);
+  out << "OFF\n" << kMajor * kMinor << " " << 2 * kMajor * kMinor << " 0\n";
+  for (int i = 0; i < kMajor; ++i) {
+    const double u = 2 * M_PI * i / kMajor;
+    for (int j = 0; j < kMinor; ++j) {
+      const double v = 2 * M_PI * j / kMinor;
+      out << (2 + 0.6 * std::cos(v)) * std::cos(u) << " "
+          << (2 + 0.6 * std::cos(v)) * std::sin(u) << " " << 0.6 * std::sin(v)
+          << "\n";
+    }
+  }
+  auto at = [](int i, int j) { return (i % kMajor) * kMinor + (j % kMinor); };
+  for (int i = 0; i < kMajor; ++i) {
+    for (int j = 0; j < kMinor; ++j) {
+      out << "3 " << at(i, j) << " " << at(i + 1, j) << " " << at(i + 1, j + 1)
+          << "\n3 " << at(i, j) << " " << at(i + 1, j + 1) << " "
+          << at(i, j + 1) << "\n";
+    }
+  }
+}
+
+// `--handles` reaches the extractor (ExtractOptions.handles) from `tpr
+// extract` and `tpr add`, and the stored signature records the treatment:
+// the default cuts a torus's handle (a warning says so), `keep` describes it
+// as it is (the paper's method), and another word is refused by the parser.
+TEST_F(CliTest, HandlesOptionSelectsCutOrKeep) {
+  const std::string torus = cluster_.dir() + "/torus.off";
+  WriteTorusOff(torus);
+  CommandResult cut = RunTpr(cluster_, "--json extract " + torus);
+  ASSERT_EQ(cut.exit_code, 0) << cut.err;
+  EXPECT_NE(cut.out.find("\"handles\":\"HANDLE_TREATMENT_CUT\""),
+            std::string::npos)
+      << cut.out;
+  EXPECT_NE(cut.out.find("cut 1 handle(s)"), std::string::npos) << cut.out;
+  EXPECT_EQ(JsonInt(cut.out, "genus"), 1);  // the input's genus
+
+  CommandResult keep =
+      RunTpr(cluster_, "--json extract --handles KEEP " + torus);
+  ASSERT_EQ(keep.exit_code, 0) << keep.err;
+  EXPECT_NE(keep.out.find("\"handles\":\"HANDLE_TREATMENT_KEEP\""),
+            std::string::npos)
+      << keep.out;
+  EXPECT_EQ(keep.out.find("cut 1 handle(s)"), std::string::npos) << keep.out;
+
+  CommandResult bad = RunTpr(cluster_, "extract --handles sew " + torus);
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.err.find("sew"), std::string::npos) << bad.err;
+
+  ASSERT_EQ(RunTpr(cluster_, "add --handles keep " + torus).exit_code, 0);
+  CommandResult stored = RunTpr(cluster_, "--json get " + torus);
+  ASSERT_EQ(stored.exit_code, 0) << stored.err;
+  EXPECT_NE(stored.out.find("HANDLE_TREATMENT_KEEP"), std::string::npos)
+      << stored.out;
+  ASSERT_EQ(RunTpr(cluster_, "add --update " + torus).exit_code, 0);
+  stored = RunTpr(cluster_, "--json get " + torus);
+  EXPECT_NE(stored.out.find("HANDLE_TREATMENT_CUT"), std::string::npos)
+      << stored.out;
 }
 
 // Labels from --manifest; then SIGTERM while a search stream is open: the

@@ -23,6 +23,8 @@ TEST(ExtractorConvertTest, ZeroFieldsGiveTheLibraryDefaults) {
   EXPECT_EQ(o->spectrum_eigenvalues, defaults.spectrum_eigenvalues);
   EXPECT_EQ(o->spectrum_eigenvalues, 20);
   EXPECT_EQ(o->point_min_prominence, defaults.point_min_prominence);
+  EXPECT_EQ(o->cut_handles, defaults.cut_handles);
+  EXPECT_TRUE(o->cut_handles);
 }
 
 TEST(ExtractorConvertTest, EveryFieldIsMapped) {
@@ -34,6 +36,7 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
   p.set_explain(true);
   p.set_spectrum_eigenvalues(17);
   p.set_point_min_prominence(0.02);
+  p.set_handles(v1::HANDLE_TREATMENT_KEEP);
   absl::StatusOr<extract::Options> o = OptionsFromProto(p, 4);
   ASSERT_TRUE(o.ok()) << o.status();
   EXPECT_EQ(o->bands, 12);
@@ -43,6 +46,7 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
   EXPECT_TRUE(o->explain);
   EXPECT_EQ(o->spectrum_eigenvalues, 17);
   EXPECT_EQ(o->point_min_prominence, 0.02);
+  EXPECT_FALSE(o->cut_handles);
   // And back: the wire form records what was used, field for field.
   const v1::ExtractOptions back = OptionsToProto(*o);
   EXPECT_EQ(back.bands(), 12);
@@ -52,6 +56,21 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
   EXPECT_TRUE(back.explain());
   EXPECT_EQ(back.spectrum_eigenvalues(), 17);
   EXPECT_EQ(back.point_min_prominence(), 0.02);
+  EXPECT_EQ(back.handles(), v1::HANDLE_TREATMENT_KEEP);
+}
+
+TEST(ExtractorConvertTest, HandleTreatmentsMapBothWays) {
+  v1::ExtractOptions p;
+  p.set_handles(v1::HANDLE_TREATMENT_CUT);
+  absl::StatusOr<extract::Options> cut = OptionsFromProto(p, 4);
+  ASSERT_TRUE(cut.ok()) << cut.status();
+  EXPECT_TRUE(cut->cut_handles);
+  EXPECT_EQ(OptionsToProto(*cut).handles(), v1::HANDLE_TREATMENT_CUT);
+  p.set_handles(v1::HANDLE_TREATMENT_KEEP);
+  absl::StatusOr<extract::Options> keep = OptionsFromProto(p, 4);
+  ASSERT_TRUE(keep.ok()) << keep.status();
+  EXPECT_FALSE(keep->cut_handles);
+  EXPECT_EQ(OptionsToProto(*keep).handles(), v1::HANDLE_TREATMENT_KEEP);
 }
 
 TEST(ExtractorConvertTest, DefaultsAreFilledInTheWireForm) {
@@ -59,6 +78,8 @@ TEST(ExtractorConvertTest, DefaultsAreFilledInTheWireForm) {
       OptionsToProto(*OptionsFromProto(v1::ExtractOptions(), 4));
   EXPECT_EQ(back.spectrum_eigenvalues(), 20);
   EXPECT_EQ(back.bands(), extract::Options().bands);
+  // The stored signature says which treatment made it, never "unspecified".
+  EXPECT_EQ(back.handles(), v1::HANDLE_TREATMENT_CUT);
 }
 
 TEST(ExtractorConvertTest, ThreadsAreCappedByTheServer) {
@@ -98,6 +119,10 @@ TEST(ExtractorConvertTest, OutOfRangeValuesNameTheField) {
   p = v1::ExtractOptions();
   p.set_cycle_min_vertices(-2);
   ExpectInvalid(p, "cycle_min_vertices");
+  // A value from a newer contract (proto3 keeps unknown enum numbers).
+  p = v1::ExtractOptions();
+  p.set_handles(static_cast<v1::HandleTreatment>(7));
+  ExpectInvalid(p, "handles");
 }
 
 TEST(ExtractorConvertTest, LimitsAreAccepted) {
