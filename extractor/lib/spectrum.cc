@@ -496,9 +496,11 @@ absl::StatusOr<Eigenpairs> RunLanczos(ShiftInvertOp& op, int64_t nev,
   // The plain iteration first, with room for three times the wanted
   // pairs; if that is not enough (clustered spectra), Spectra's restarted
   // iteration, whose memory stays at 2 nev + 1 vectors.
+  constexpr int64_t kMaxUnrestartedPairs = 200;
   const int64_t max_basis = options.max_lanczos_vectors > 0
                                 ? options.max_lanczos_vectors
-                                : 3 * nev + 20;
+                            : nev <= kMaxUnrestartedPairs ? 3 * nev + 20
+                                                          : 0;
   Eigenpairs plain;
   if (max_basis > nev) {
     bool converged = false;

@@ -58,9 +58,12 @@ struct SpectrumOptions {
   // Vectors the unrestarted Lanczos iteration may hold (V doubles each)
   // before Spectra's implicitly restarted iteration (2 nev + 1 vectors,
   // nev = eigenvalues + components) takes over from scratch; 0 means
-  // 3 nev + 20. The unrestarted iteration converges within about 2.7 nev
-  // on the dev meshes (136 products for nev = 51 on the 10k-vertex biped);
-  // a value <= nev goes straight to the restarted one. Default 0.
+  // 3 nev + 20 for nev <= 200 and the restarted iteration alone above (its
+  // basis stays at 2 nev + 1 vectors, and each convergence test of the
+  // unrestarted one costs O(m^3) in its m vectors). The unrestarted
+  // iteration needed about 2.5 nev on the 10k-vertex biped (129 products
+  // for nev = 51); a value <= nev goes straight to the restarted one.
+  // Default 0.
   int max_lanczos_vectors = 0;
   // Restarts of the implicitly restarted Lanczos iteration (the fallback
   // above) before giving up. Default 1000.

@@ -328,6 +328,20 @@ TEST(SpectrumTest, UnrestartedAndRestartedLanczosAgree) {
   }
 }
 
+// Above 200 pairs the default goes straight to the restarted iteration
+// (bounded basis): the same products as when forced, and the same values.
+TEST(SpectrumTest, ManyEigenvaluesUseTheRestartedIteration) {
+  const Mesh mesh = Biped(1000, 2);
+  SpectrumOptions many, forced;
+  many.eigenvalues = forced.eigenvalues = 210;
+  forced.max_lanczos_vectors = 1;
+  absl::StatusOr<Spectrum> a = LaplaceBeltramiSpectrum(mesh, many);
+  absl::StatusOr<Spectrum> b = LaplaceBeltramiSpectrum(mesh, forced);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->operations, b->operations);
+  EXPECT_EQ(a->eigenvalues, b->eigenvalues);
+}
+
 // Non-convergence is reported, not hidden: one restart is not enough.
 TEST(SpectrumTest, NonConvergenceIsInternal) {
   SpectrumOptions options;
