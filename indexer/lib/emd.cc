@@ -203,26 +203,43 @@ int RowArgMinScalar(const double* row, const double* mask, int cs) {
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
-// Lane-wise minimum and first index, then one masked reduction: no
-// data-dependent branch.
+// The minimum first (two independent min chains, then three in-register
+// swaps that leave it in every lane), then the first column equal to it
+// (one compare per block, the masks gathered into a bit set): about half
+// the latency of a lane-wise argmin followed by two horizontal reductions,
+// and the same column (minima round nothing; ties go to the first).
 __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
                                                        const double* mask,
                                                        int cs) {
-  __m512d mn = _mm512_set1_pd(kInf);
-  __m512d arg = _mm512_setzero_pd();
-  __m512d idx = _mm512_set_pd(7, 6, 5, 4, 3, 2, 1, 0);
-  const __m512d step = _mm512_set1_pd(8.0);
-  for (int j0 = 0; j0 < cs; j0 += 8) {
-    const __m512d c =
-        _mm512_add_pd(_mm512_loadu_pd(row + j0), _mm512_loadu_pd(mask + j0));
-    const __mmask8 lt = _mm512_cmp_pd_mask(c, mn, _CMP_LT_OQ);
-    mn = _mm512_mask_blend_pd(lt, mn, c);
-    arg = _mm512_mask_blend_pd(lt, arg, idx);
-    idx = _mm512_add_pd(idx, step);
+  __m512d m0 = _mm512_add_pd(_mm512_loadu_pd(row), _mm512_loadu_pd(mask));
+  __m512d m1 = _mm512_set1_pd(kInf);
+  int j0 = 8;
+  for (; j0 + 16 <= cs; j0 += 16) {
+    m0 = _mm512_min_pd(m0, _mm512_add_pd(_mm512_loadu_pd(row + j0),
+                                         _mm512_loadu_pd(mask + j0)));
+    m1 = _mm512_min_pd(m1, _mm512_add_pd(_mm512_loadu_pd(row + j0 + 8),
+                                         _mm512_loadu_pd(mask + j0 + 8)));
   }
-  const __mmask8 eq = _mm512_cmp_pd_mask(
-      mn, _mm512_set1_pd(_mm512_reduce_min_pd(mn)), _CMP_EQ_OQ);
-  return static_cast<int>(_mm512_mask_reduce_min_pd(eq, arg));
+  if (j0 < cs) {
+    m1 = _mm512_min_pd(m1, _mm512_add_pd(_mm512_loadu_pd(row + j0),
+                                         _mm512_loadu_pd(mask + j0)));
+  }
+  __m512d mn = _mm512_min_pd(m0, m1);
+  mn = _mm512_min_pd(mn, _mm512_shuffle_f64x2(mn, mn, 0x4E));
+  mn = _mm512_min_pd(mn, _mm512_permutex_pd(mn, 0x4E));
+  mn = _mm512_min_pd(mn, _mm512_permute_pd(mn, 0x55));
+  for (int g = 0; g < cs; g += 64) {
+    const int end = std::min(cs, g + 64);
+    uint64_t bits = 0;
+    for (int j = g; j < end; j += 8) {
+      const __m512d c =
+          _mm512_add_pd(_mm512_loadu_pd(row + j), _mm512_loadu_pd(mask + j));
+      bits |= static_cast<uint64_t>(_mm512_cmp_pd_mask(c, mn, _CMP_EQ_OQ))
+              << (j - g);
+    }
+    if (bits != 0) return g + __builtin_ctzll(bits);
+  }
+  return 0;  // not reached: some entry is finite, so equals the minimum
 }
 #pragma GCC diagnostic pop
 #endif
@@ -263,22 +280,70 @@ __attribute__((target("avx512f"))) void ColumnMinAvx512(const double* cost,
 
 using ColumnMinFn = void (*)(const double*, int, int, double*);
 
+// RankOrder writes order[r_i] = i for i < n, where r_i counts the k < n
+// with w[k] < w[i], or w[k] == w[i] and k < i: the indices in increasing
+// order of w, ties by index (a stable sort). O(n^2) comparisons, but
+// branch-free and vectorizable, which beats a comparison sort's
+// unpredictable branches at these sizes.
+void RankOrderScalar(const double* w, int n, int* order) {
+  for (int i = 0; i < n; ++i) {
+    const double wi = w[i];
+    int rank = 0;
+    for (int k = 0; k < n; ++k) {
+      const double wk = w[k];
+      rank += (wk < wi) | ((wk == wi) & (k < i));
+    }
+    order[rank] = i;
+  }
+}
+
+#ifdef TPR_HAVE_X86_PRICING
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+// Eight comparisons per instruction pair, counted by popcount (the
+// compiler's SSE2 code for RankOrderScalar took about 2% of a solve at
+// n = 30).
+__attribute__((target("avx512f"))) void RankOrderAvx512(const double* w, int n,
+                                                        int* order) {
+  for (int i = 0; i < n; ++i) {
+    const __m512d wi = _mm512_set1_pd(w[i]);
+    int rank = 0;
+    for (int k0 = 0; k0 < n; k0 += 8) {
+      const int valid = std::min(n - k0, 8);
+      const __mmask8 in = static_cast<__mmask8>((1u << valid) - 1u);
+      const int below = std::min(std::max(i - k0, 0), 8);  // lanes k < i
+      const __mmask8 lower = static_cast<__mmask8>((1u << below) - 1u);
+      const __m512d wk = _mm512_maskz_loadu_pd(in, w + k0);
+      const __mmask8 lt = _mm512_mask_cmp_pd_mask(in, wk, wi, _CMP_LT_OQ);
+      const __mmask8 eq = _mm512_mask_cmp_pd_mask(lower, wk, wi, _CMP_EQ_OQ);
+      rank += __builtin_popcount(static_cast<unsigned>(lt | eq));
+    }
+    order[rank] = i;
+  }
+}
+#pragma GCC diagnostic pop
+#endif
+
+using RankOrderFn = void (*)(const double*, int, int*);
+
 // The pricing kernels this CPU runs, chosen once by one CPU check: the
 // avx512f pair where the CPU has it, else the scalar pair (same results).
 struct PricingKernels {
   CollectFn collect;
   RowArgMinFn row_arg_min;
   ColumnMinFn column_min;
+  RankOrderFn rank_order;
 };
 
 PricingKernels PickPricingKernels() {
 #ifdef TPR_HAVE_X86_PRICING
   __builtin_cpu_init();
   if (__builtin_cpu_supports("avx512f")) {
-    return {CollectAvx512, RowArgMinAvx512, ColumnMinAvx512};
+    return {CollectAvx512, RowArgMinAvx512, ColumnMinAvx512, RankOrderAvx512};
   }
 #endif
-  return {CollectScalar, RowArgMinScalar, ColumnMinScalar};
+  return {CollectScalar, RowArgMinScalar, ColumnMinScalar, RankOrderScalar};
 }
 
 const PricingKernels& Kernels() {
@@ -320,9 +385,9 @@ struct EmdSolver::Impl {
   std::vector<int> adj_fill;
   std::vector<int> adj;
   std::vector<int> queue;
-  std::vector<int> sub;       // pivot: old preorder of the moved subtree
-  std::vector<int> sub_pos;   // pivot: node -> index in sub
-  std::vector<int> stem_end;  // pivot: end of each stem node's old subtree
+  std::vector<int> piece_a_last;   // pivot: last node of A_k (stem k)
+  std::vector<int> piece_b_first;  // pivot: first node of B_k
+  std::vector<int> piece_b_last;   // pivot: last node of B_k, -1 if empty
   std::vector<int> path1;
   std::vector<int> path2;
   std::vector<unsigned char> closed;  // ConstrainedBound: entries used
@@ -374,9 +439,9 @@ struct EmdSolver::Impl {
       parent.resize(nodes);
       thread.resize(nodes);
       rev_thread.resize(nodes);
-      sub.resize(nodes);
-      sub_pos.resize(nodes);
-      stem_end.resize(nodes);
+      piece_a_last.resize(nodes);
+      piece_b_first.resize(nodes);
+      piece_b_last.resize(nodes);
       flow.resize(nodes);
       pi.resize(nodes);
       depth.resize(nodes);
@@ -444,20 +509,10 @@ void EmdSolver::Impl::InitialBasis() {
   const RowArgMinFn row_arg_min = Kernels().row_arg_min;
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
-  // which measured 8% fewer pivots than index order at n = m = 30.
-  // The order comes from ranks (how many rows sort before each; ties by
-  // index): O(n^2) comparisons, but branch-free and vectorizable, which
-  // beats a comparison sort's unpredictable branches at these sizes.
+  // which measured 8% fewer pivots than index order at n = m = 30 (ties
+  // by index; RankOrder).
   int* order = row_order.data();
-  for (int i = 0; i < n; ++i) {
-    const double wi = rem_a[i];
-    int rank = 0;
-    for (int k = 0; k < n; ++k) {
-      const double wk = rem_a[k];
-      rank += (wk < wi) | ((wk == wi) & (k < i));
-    }
-    order[rank] = i;
-  }
+  Kernels().rank_order(rem_a.data(), n, order);
   for (int oi = 0; oi < n && open_cols > 0; ++oi) {
     const int i = order[oi];
     while (rem_a[i] > kDust && open_cols > 0) {
@@ -540,6 +595,9 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
   // path the arc nearest `first` wins (strict <), on the second path the
   // arc nearest the apex (<=), and the second path wins over the first:
   // the last blocking arc in cycle order.
+  // The deeper end climbs to the other's depth, then both climb in step
+  // until they meet at the apex: the loops' branches are predictable
+  // (which side is deeper at each step is not).
   double delta1 = kInf;
   int out1 = -1;  // index in path1
   double delta2 = kInf;
@@ -548,22 +606,27 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
   int len2 = 0;
   int v1 = first;
   int v2 = second;
-  while (v1 != v2) {
-    if (depth[v1] >= depth[v2]) {
-      if (v1 < n && parent[v1] != root && flow[v1] < delta1) {
-        delta1 = flow[v1];
-        out1 = len1;
-      }
-      path1[len1++] = v1;
-      v1 = parent[v1];
-    } else {
-      if ((v2 >= n || parent[v2] == root) && flow[v2] <= delta2) {
-        delta2 = flow[v2];
-        out2 = len2;
-      }
-      path2[len2++] = v2;
-      v2 = parent[v2];
+  auto step1 = [&] {
+    if (v1 < n && parent[v1] != root && flow[v1] < delta1) {
+      delta1 = flow[v1];
+      out1 = len1;
     }
+    path1[len1++] = v1;
+    v1 = parent[v1];
+  };
+  auto step2 = [&] {
+    if ((v2 >= n || parent[v2] == root) && flow[v2] <= delta2) {
+      delta2 = flow[v2];
+      out2 = len2;
+    }
+    path2[len2++] = v2;
+    v2 = parent[v2];
+  };
+  for (int d = depth[v1] - depth[v2]; d > 0; --d) step1();
+  for (int d = depth[v2] - depth[v1]; d > 0; --d) step2();
+  while (v1 != v2) {
+    step1();
+    step2();
   }
   const bool out_on_first = !(out2 >= 0 && delta2 <= delta1);
   const double delta = out_on_first ? delta1 : delta2;
@@ -601,85 +664,80 @@ void EmdSolver::Impl::Pivot(int ei, int ej, double rc) {
     carried = old;
   }
   // The thread (preorder) is rebuilt for the moved subtree only. Old
-  // preorder: the subtree of u_out = path[len - 1] is one run `sub`, in
-  // which the subtrees of the stem nodes path[0] = s, path[1], ... are
-  // nested runs [sub_pos, stem_end). Re-rooted at s and hung below t, its
-  // preorder is s's old run, then for k = 1, 2, ...: path[k]'s old run
-  // minus path[k - 1]'s (two pieces). Each piece keeps its internal order
-  // and shifts its depths uniformly; every potential of the subtree shifts
-  // by the amount that zeroes the entering arc's reduced cost
-  // rc = c + pi_i - pi_j: -rc if the supply end moved, +rc if the demand
-  // end did. The run is spliced right after t. O(subtree) with no
-  // recursion and no per-child branching (LEMON keeps similar arrays).
+  // preorder: the subtree of u_out = path[len - 1] is one run in which the
+  // subtrees of the stem nodes path[0] = s, path[1], ... are nested runs.
+  // Re-rooted at s and hung below t, its preorder is s's old run, then for
+  // k = 1, 2, ...: path[k]'s old run minus path[k - 1]'s, in two pieces:
+  // A_k (from path[k] up to path[k - 1]) and B_k (after path[k - 1]'s run
+  // up to the end of path[k]'s). Each piece keeps its internal order, so
+  // its internal thread links stay valid and only the links between pieces
+  // change (O(len)). The old run is A_{len-1} ... A_1, s's run, B_1 ...
+  // B_{len-1}: one walk along it shifts each piece's depths by its own
+  // amount (stem node k goes from depth d_out + len - 1 - k to
+  // depth[t] + 1 + k) and every potential by the amount that zeroes the
+  // entering arc's reduced cost rc = c + pi_i - pi_j: -rc if the supply
+  // end moved, +rc if the demand end did. The walk reads each node's old
+  // depth before updating it. Then the pieces are spliced right after t.
+  // O(subtree) with no recursion, no copy and no per-child branching.
   const double shift = out_on_first ? -rc : rc;
-  if (len == 1) {
-    // The leaving arc is s's own (about 60% of pivots at n = m = 30): s's
-    // run keeps its order, so it is shifted and moved in one walk, with no
-    // copy. Each node's old depth is tested before it is updated.
-    const int ds = depth[s];
-    const int dd = depth[t] + 1 - ds;
-    const int before = rev_thread[s];
-    int x = s;
-    int last = s;
+  const int u_out = path[len - 1];
+  const int d_out = depth[u_out];
+  const int dd0 = depth[t] + 1 - (d_out + len - 1);  // depth shift of s
+  const int before = rev_thread[u_out];
+  int* a_last = piece_a_last.data();
+  int* b_first = piece_b_first.data();
+  int* b_last = piece_b_last.data();
+  for (int k = len - 1; k >= 1; --k) {  // A_k: ends where path[k - 1] is
+    const int dd = dd0 + 2 * k;
+    const int stop = path[k - 1];
+    int x = path[k];
+    int last;
     do {
       pi[x] += shift;
       depth[x] += dd;
       last = x;
       x = thread[x];
-    } while (depth[x] > ds);
-    thread[before] = x;
-    rev_thread[x] = before;
-    const int next = thread[t];
-    thread[t] = s;
-    rev_thread[s] = t;
-    thread[last] = next;
-    rev_thread[next] = last;
-    return;
+    } while (x != stop);
+    a_last[k] = last;
   }
-  const int u_out = path[len - 1];
-  const int d_out = depth[u_out];
-  int size = 0;
-  int v = u_out;
-  do {
-    sub_pos[v] = size;
-    sub[size++] = v;
-    v = thread[v];
-  } while (depth[v] > d_out);
-  const int after = v;
-  const int before = rev_thread[u_out];
+  int x = s;
+  int s_last;
+  {
+    const int ds = d_out + len - 1;  // s's old depth
+    do {
+      pi[x] += shift;
+      depth[x] += dd0;
+      s_last = x;
+      x = thread[x];
+    } while (depth[x] > ds);
+  }
+  for (int k = 1; k < len; ++k) {  // B_k: deeper than path[k] (old)
+    const int dk = d_out + len - 1 - k;
+    const int dd = dd0 + 2 * k;
+    int last = -1;  // B_k empty
+    b_first[k] = x;
+    while (depth[x] > dk) {
+      pi[x] += shift;
+      depth[x] += dd;
+      last = x;
+      x = thread[x];
+    }
+    b_last[k] = last;
+  }
+  const int after = x;
   thread[before] = after;
   rev_thread[after] = before;
-  int end = size;
-  {
-    int j = sub_pos[s] + 1;
-    for (int k = 0; k < len - 1; ++k) {
-      const int dk = depth[path[k]];
-      while (j < size && depth[sub[j]] > dk) ++j;
-      stem_end[k] = j;
-    }
-    stem_end[len - 1] = end;
-  }
   int prev = t;
   const int next = thread[t];
-  auto emit = [&](int from, int to, int ddepth) {
-    for (int q = from; q < to; ++q) {
-      const int x = sub[q];
-      thread[prev] = x;
-      rev_thread[x] = prev;
-      prev = x;
-      pi[x] += shift;
-      depth[x] += ddepth;
-    }
+  auto link = [&](int from, int to) {
+    thread[prev] = from;
+    rev_thread[from] = prev;
+    prev = to;
   };
-  const int d_new = depth[t] + 1;
-  emit(sub_pos[s], stem_end[0], d_new - depth[s]);
+  link(s, s_last);
   for (int k = 1; k < len; ++k) {
-    const int pk = path[k];
-    const int dd = d_new + k - depth[pk];
-    const int inner_from = sub_pos[path[k - 1]];
-    const int inner_to = stem_end[k - 1];
-    emit(sub_pos[pk], inner_from, dd);
-    emit(inner_to, stem_end[k], dd);
+    link(path[k], a_last[k]);
+    if (b_last[k] >= 0) link(b_first[k], b_last[k]);
   }
   thread[prev] = next;
   rev_thread[next] = prev;
