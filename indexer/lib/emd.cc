@@ -185,16 +185,31 @@ __attribute__((target("avx512f"))) int CollectAvx512(const double* cost, int cs,
 using CollectFn = int (*)(const double*, int, int, const double*, const double*,
                           double, int*, int*);
 
-// RowArgMin returns the first j < cs minimizing row[j] + mask[j] (mask is
-// a per-column offset, +inf for closed and padding columns; cs a positive
-// multiple of 8; at least one finite entry).
-int RowArgMinScalar(const double* row, const double* mask, int cs) {
-  int best = 0;
-  double bv = row[0] + mask[0];
-  for (int j = 1; j < cs; ++j) {
-    const double c = row[j] + mask[j];
-    best = c < bv ? j : best;
-    bv = c < bv ? c : bv;
+// RowArgMin returns the first j < cs minimizing row[j] + offset[j] among
+// the columns whose bit in the closed set is clear: bit j of closed_lo for
+// j < 64, bit j % 64 of closed[j / 64] above (closed[0] is not read;
+// padding columns are closed; cs a positive multiple of 8; at least one
+// column open). Why a bit set, and the first 64 columns' part passed in a
+// register: the start closes a column after almost every allocation, and
+// the next search reads the closed set at once. Kept in memory (as +inf
+// offsets, or as bits) the search's loads were issued before the store
+// that closed a column had its address (it depends on the previous
+// search) and were replayed: at n = m = 30 that cost as much as the
+// searches themselves.
+inline uint64_t ClosedWord(uint64_t closed_lo, const uint64_t* closed, int j) {
+  return j < 64 ? closed_lo : closed[j >> 6];
+}
+
+int RowArgMinScalar(const double* row, const double* offset, uint64_t closed_lo,
+                    const uint64_t* closed, int cs) {
+  int best = -1;
+  double bv = kInf;
+  for (int j = 0; j < cs; ++j) {
+    const bool shut = (ClosedWord(closed_lo, closed, j) >> (j & 63)) & 1u;
+    const double c = shut ? kInf : row[j] + offset[j];
+    const bool take = best < 0 ? !shut : c < bv;
+    best = take ? j : best;
+    bv = take ? c : bv;
   }
   return best;
 }
@@ -203,26 +218,41 @@ int RowArgMinScalar(const double* row, const double* mask, int cs) {
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
+// Lanes j..j+7 open (j a multiple of 8), and their row + offset values,
+// +inf where closed.
+inline __mmask8 OpenLanes(uint64_t closed_lo, const uint64_t* closed, int j) {
+  return static_cast<__mmask8>(~(ClosedWord(closed_lo, closed, j) >> (j & 63)));
+}
+__attribute__((target("avx512f"))) inline __m512d OpenValues(
+    const double* row, const double* offset, __mmask8 open) {
+  return _mm512_mask_add_pd(_mm512_set1_pd(kInf), open, _mm512_loadu_pd(row),
+                            _mm512_loadu_pd(offset));
+}
+
 // The minimum first (two independent min chains, then three in-register
-// swaps that leave it in every lane), then the first column equal to it
-// (one compare per block, the masks gathered into a bit set): about half
-// the latency of a lane-wise argmin followed by two horizontal reductions,
-// and the same column (minima round nothing; ties go to the first).
+// swaps that leave it in every lane), then the first open column equal to
+// it (one compare per block, the masks gathered into a bit set): about
+// half the latency of a lane-wise argmin followed by two horizontal
+// reductions, and the same column (minima round nothing; ties go to the
+// first).
 __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
-                                                       const double* mask,
+                                                       const double* offset,
+                                                       uint64_t closed_lo,
+                                                       const uint64_t* closed,
                                                        int cs) {
-  __m512d m0 = _mm512_add_pd(_mm512_loadu_pd(row), _mm512_loadu_pd(mask));
-  __m512d m1 = _mm512_set1_pd(kInf);
+  const __m512d inf = _mm512_set1_pd(kInf);
+  __m512d m0 = OpenValues(row, offset, OpenLanes(closed_lo, closed, 0));
+  __m512d m1 = inf;
   int j0 = 8;
   for (; j0 + 16 <= cs; j0 += 16) {
-    m0 = _mm512_min_pd(m0, _mm512_add_pd(_mm512_loadu_pd(row + j0),
-                                         _mm512_loadu_pd(mask + j0)));
-    m1 = _mm512_min_pd(m1, _mm512_add_pd(_mm512_loadu_pd(row + j0 + 8),
-                                         _mm512_loadu_pd(mask + j0 + 8)));
+    m0 = _mm512_min_pd(m0, OpenValues(row + j0, offset + j0,
+                                      OpenLanes(closed_lo, closed, j0)));
+    m1 = _mm512_min_pd(m1, OpenValues(row + j0 + 8, offset + j0 + 8,
+                                      OpenLanes(closed_lo, closed, j0 + 8)));
   }
   if (j0 < cs) {
-    m1 = _mm512_min_pd(m1, _mm512_add_pd(_mm512_loadu_pd(row + j0),
-                                         _mm512_loadu_pd(mask + j0)));
+    m1 = _mm512_min_pd(m1, OpenValues(row + j0, offset + j0,
+                                      OpenLanes(closed_lo, closed, j0)));
   }
   __m512d mn = _mm512_min_pd(m0, m1);
   mn = _mm512_min_pd(mn, _mm512_shuffle_f64x2(mn, mn, 0x4E));
@@ -232,19 +262,20 @@ __attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
     const int end = std::min(cs, g + 64);
     uint64_t bits = 0;
     for (int j = g; j < end; j += 8) {
-      const __m512d c =
-          _mm512_add_pd(_mm512_loadu_pd(row + j), _mm512_loadu_pd(mask + j));
-      bits |= static_cast<uint64_t>(_mm512_cmp_pd_mask(c, mn, _CMP_EQ_OQ))
+      const __mmask8 open = OpenLanes(closed_lo, closed, j);
+      bits |= static_cast<uint64_t>(_mm512_mask_cmp_pd_mask(
+                  open, OpenValues(row + j, offset + j, open), mn, _CMP_EQ_OQ))
               << (j - g);
     }
     if (bits != 0) return g + __builtin_ctzll(bits);
   }
-  return 0;  // not reached: some entry is finite, so equals the minimum
+  return 0;  // not reached: some column is open, so equals the minimum
 }
 #pragma GCC diagnostic pop
 #endif
 
-using RowArgMinFn = int (*)(const double*, const double*, int);
+using RowArgMinFn = int (*)(const double*, const double*, uint64_t,
+                            const uint64_t*, int);
 
 // ColumnMin writes out[j] = min over i < n of cost[i cs + j], for j < cs
 // (cs a positive multiple of 8; n >= 1). Exact either way (a minimum
@@ -375,8 +406,9 @@ struct EmdSolver::Impl {
   std::vector<double> rem_a;
   std::vector<int> row_order;
   std::vector<double> rem_b;
-  std::vector<double> col_mask;  // cs entries: -v_j open, +inf closed
-  std::vector<int> cand_i;       // pricing candidates (one per column at most)
+  std::vector<double> col_offset;    // cs entries: -(column minimum)
+  std::vector<uint64_t> col_closed;  // bit set of closed columns
+  std::vector<int> cand_i;  // pricing candidates (one per column at most)
   std::vector<int> cand_j;
   std::vector<int> cell_i;
   std::vector<int> cell_j;
@@ -433,7 +465,8 @@ struct EmdSolver::Impl {
       vpad.resize(stride);
       cand_i.resize(stride);
       cand_j.resize(stride);
-      col_mask.resize(stride);
+      col_offset.resize(stride);
+      col_closed.resize((stride + 63) / 64);
     }
     if (parent.size() < nodes) {
       parent.resize(nodes);
@@ -499,13 +532,18 @@ void EmdSolver::Impl::InitialBasis() {
   // this 10 / 56 / 140 at 3.9 / 30 / 112 before the vectorized argmin:
   // Vogel's plans need fewer pivots but its line choices cost more than
   // the pivots they save.
-  Kernels().column_min(cost.data(), cs, n, col_mask.data());
+  double* offset = col_offset.data();
+  uint64_t* closed = col_closed.data();
+  Kernels().column_min(cost.data(), cs, n, offset);
+  for (int w = 0; w < (cs + 63) / 64; ++w) closed[w] = 0;
   int open_cols = 0;
   for (int j = 0; j < cs; ++j) {
     const bool open = j < m && rem_b[j] > kDust;
-    col_mask[j] = open ? -col_mask[j] : kInf;
+    offset[j] = -offset[j];
+    closed[j >> 6] |= static_cast<uint64_t>(!open) << (j & 63);
     open_cols += open;
   }
+  uint64_t closed_lo = closed[0];
   const RowArgMinFn row_arg_min = Kernels().row_arg_min;
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
@@ -516,8 +554,8 @@ void EmdSolver::Impl::InitialBasis() {
   for (int oi = 0; oi < n && open_cols > 0; ++oi) {
     const int i = order[oi];
     while (rem_a[i] > kDust && open_cols > 0) {
-      const int bj =
-          row_arg_min(&cost[static_cast<size_t>(i) * cs], col_mask.data(), cs);
+      const int bj = row_arg_min(&cost[static_cast<size_t>(i) * cs], offset,
+                                 closed_lo, closed, cs);
       const double f = std::min(rem_a[i], rem_b[bj]);
       rem_a[i] -= f;
       rem_b[bj] -= f;
@@ -526,7 +564,11 @@ void EmdSolver::Impl::InitialBasis() {
       cell_f[cells] = f;
       ++cells;
       if (rem_b[bj] <= kDust) {
-        col_mask[bj] = kInf;
+        if (bj < 64) {
+          closed_lo |= uint64_t{1} << bj;
+        } else {
+          closed[bj >> 6] |= uint64_t{1} << (bj & 63);
+        }
         --open_cols;
       }
     }
