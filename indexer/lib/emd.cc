@@ -5,7 +5,7 @@
 // liblemon-dev) is correct and is our test oracle, but it is generic graph
 // code (arc and node maps, block-search pricing tuned for large sparse
 // graphs, an all-artificial start that needs about n + m pivots just to
-// build a basis); in bench_match it takes about 3x our time even with
+// build a basis); in bench_match it takes about 3.7x our time even with
 // its graph built once per size.
 // Rubner's emd.c keeps static state (not thread-safe) and has fixed maximum
 // sizes. Here the arcs are implicit (arc (i, j) is cell (i, j) of a dense
