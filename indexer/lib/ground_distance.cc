@@ -327,6 +327,16 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // and b exactly: (x - y)^2 and (y - x)^2 are the same double and
 // fma(d, d, s) depends on d only through d * d.
 
+// WideBuffer returns the calling thread's buffer for Widen and
+// WidenAvx512, grown to b's widened size (rows x blocks of 8 doubles).
+double* WideBuffer(const PreparedSignature& b) {
+  thread_local std::vector<double> buffer;
+  const size_t size =
+      static_cast<size_t>(b.rows()) * (static_cast<size_t>(b.stride()) / 8) * 8;
+  if (buffer.size() < size) buffer.resize(size);
+  return buffer.data();
+}
+
 // Widen returns b's float32 coordinates widened to double in a per-thread
 // buffer, block by block: columns 8k .. 8k + 7 of row r at [(k rows + r) 8]
 // (rows = b.rows()), columns at or past b.size() as 0. It reads b's
@@ -336,15 +346,14 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
 // zero fill per row, cost as much CPU as the distance arithmetic in a
 // 10-NN search (perf; docs/search-cost.md). No allocation after warm-up.
 const double* Widen(const PreparedSignature& b) {
-  thread_local std::vector<double> buffer;
+  double* const buffer = WideBuffer(b);
   const size_t rows = static_cast<size_t>(b.rows());
   const size_t n = static_cast<size_t>(b.size());
   const size_t blocks = static_cast<size_t>(b.stride()) / 8;
-  if (buffer.size() < rows * blocks * 8) buffer.resize(rows * blocks * 8);
   const float* in = b.coords();
   for (size_t r = 0; r < rows; ++r, in += n) {
     for (size_t k = 0; k < blocks; ++k) {
-      double* out = buffer.data() + (k * rows + r) * 8;
+      double* out = buffer + (k * rows + r) * 8;
       const float* x = in + 8 * k;
       if (8 * k + 8 <= n) {  // fixed length: vectorized
         for (int c = 0; c < 8; ++c) out[c] = static_cast<double>(x[c]);
@@ -356,7 +365,7 @@ const double* Widen(const PreparedSignature& b) {
       }
     }
   }
-  return buffer.data();
+  return buffer;
 }
 
 __attribute__((target("avx2,fma"))) double KernelAvx2(
@@ -487,25 +496,24 @@ __attribute__((target("avx512f"))) inline __m512d Avx512Blocks(
 // Masked-off lanes are not read, so nothing past b's block is touched.
 __attribute__((target("avx512f"))) const double* WidenAvx512(
     const PreparedSignature& b) {
-  thread_local std::vector<double> buffer;
+  double* const buffer = WideBuffer(b);
   const size_t rows = static_cast<size_t>(b.rows());
   const size_t n = static_cast<size_t>(b.size());
   const size_t blocks = static_cast<size_t>(b.stride()) / 8;
-  if (buffer.size() < rows * blocks * 8) buffer.resize(rows * blocks * 8);
   const float* in = b.coords();
   const __mmask16 tail =
       static_cast<__mmask16>((1u << (n - 8 * (blocks - 1))) - 1);
   for (size_t r = 0; r < rows; ++r, in += n) {
     for (size_t k = 0; k + 1 < blocks; ++k) {
-      _mm512_storeu_pd(buffer.data() + (k * rows + r) * 8,
+      _mm512_storeu_pd(buffer + (k * rows + r) * 8,
                        _mm512_cvtps_pd(_mm256_loadu_ps(in + 8 * k)));
     }
     const size_t k = blocks - 1;
     const __m512 x = _mm512_maskz_loadu_ps(tail, in + 8 * k);
-    _mm512_storeu_pd(buffer.data() + (k * rows + r) * 8,
+    _mm512_storeu_pd(buffer + (k * rows + r) * 8,
                      _mm512_cvtps_pd(_mm512_castps512_ps256(x)));
   }
-  return buffer.data();
+  return buffer;
 }
 
 __attribute__((target("avx512f"))) double KernelAvx512(
