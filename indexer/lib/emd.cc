@@ -534,17 +534,18 @@ void EmdSolver::Impl::InitialBasis() {
   // Vogel's plans need fewer pivots but its line choices cost more than
   // the pivots they save.
   double* offset = col_offset.data();
-  uint64_t* closed = col_closed.data();
+  uint64_t* closed_cols = col_closed.data();
   Kernels().column_min(cost.data(), cs, n, offset);
-  for (int w = 0; w < (cs + 63) / 64; ++w) closed[w] = 0;
+  for (int w = 0; w < (cs + 63) / 64; ++w) closed_cols[w] = 0;
   int open_cols = 0;
   for (int j = 0; j < cs; ++j) {
     const bool open = j < m && rem_b[j] > kDust;
     offset[j] = -offset[j];
-    closed[j >> 6] |= static_cast<uint64_t>(!open) << (j & 63);
+    closed_cols[j >> 6] |= static_cast<uint64_t>(!open) << (j & 63);
     open_cols += open;
   }
-  uint64_t closed_lo = closed[0];
+  // Columns 0..63 are tracked in a register from here on (RowArgMin).
+  uint64_t closed_lo = closed_cols[0];
   const RowArgMinFn row_arg_min = Kernels().row_arg_min;
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
@@ -556,7 +557,7 @@ void EmdSolver::Impl::InitialBasis() {
     const int i = order[oi];
     while (rem_a[i] > kDust && open_cols > 0) {
       const int bj = row_arg_min(&cost[static_cast<size_t>(i) * cs], offset,
-                                 closed_lo, closed, cs);
+                                 closed_lo, closed_cols, cs);
       const double f = std::min(rem_a[i], rem_b[bj]);
       rem_a[i] -= f;
       rem_b[bj] -= f;
@@ -568,7 +569,7 @@ void EmdSolver::Impl::InitialBasis() {
         if (bj < 64) {
           closed_lo |= uint64_t{1} << bj;
         } else {
-          closed[bj >> 6] |= uint64_t{1} << (bj & 63);
+          closed_cols[bj >> 6] |= uint64_t{1} << (bj & 63);
         }
         --open_cols;
       }
