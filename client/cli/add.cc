@@ -78,12 +78,10 @@ struct AddFlags {
   std::vector<std::string> paths;
   std::string manifest;
   AddOptions options;
-  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 int RunAdd(const Globals& g, const AddFlags& flags) {
-  AddOptions options = flags.options;
-  options.extract.set_handles(flags.handles);
+  const AddOptions& options = flags.options;
   absl::StatusOr<std::vector<Item>> items = eval::CollectItems(flags.paths);
   if (!items.ok()) return Fail("add", items.status());
   if (!flags.manifest.empty()) {
@@ -161,7 +159,7 @@ const bool kRegistered = RegisterCommand(
            ->check(CLI::Range(1, 64));
        sub.add_flag("--update", flags->options.update,
                     "replace ids already present (default: skip them)");
-       AddHandlesOption(sub, &flags->handles);
+       AddHandlesOption(sub, &flags->options.extract);
        return [flags](const Globals& g) { return RunAdd(g, *flags); };
      }});
 

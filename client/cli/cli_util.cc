@@ -97,15 +97,19 @@ std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name) {
   return ranking;
 }
 
-void AddHandlesOption(CLI::App& command, tpr::v1::HandleTreatment* handles) {
+void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options) {
   const std::map<std::string, tpr::v1::HandleTreatment> names = {
       {"cut", tpr::v1::HANDLE_TREATMENT_CUT},
       {"keep", tpr::v1::HANDLE_TREATMENT_KEEP}};
   command
-      .add_option("--handles", *handles,
-                  "handles of a closed mesh of genus > 0: cut (the default: "
-                  "cut to genus 0 along shortest cycles) or keep (the "
-                  "paper's method); compare signatures made the same way")
+      .add_option_function<tpr::v1::HandleTreatment>(
+          "--handles",
+          [options](const tpr::v1::HandleTreatment& handles) {
+            options->set_handles(handles);
+          },
+          "handles of a closed mesh of genus > 0: cut (the default: "
+          "cut to genus 0 along shortest cycles) or keep (the "
+          "paper's method); compare signatures made the same way")
       ->transform(CLI::CheckedTransformer(names, CLI::ignore_case));
 }
 

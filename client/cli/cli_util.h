@@ -61,11 +61,12 @@ int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);
 std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name);
 
 // AddHandlesOption adds `--handles cut|keep` (case ignored) to a command
-// that extracts meshes: what the extractor does with the handles of a
-// closed mesh of genus > 0 (ExtractOptions.handles). "keep" is the
-// paper's method; unset leaves HANDLE_TREATMENT_UNSPECIFIED, the
+// that extracts meshes; when given, it sets options->handles: what the
+// extractor does with the handles of a closed mesh of genus > 0. "keep" is
+// the paper's method; unset leaves HANDLE_TREATMENT_UNSPECIFIED, the
 // extractor's default (cut). CLI11 refuses any other word, naming it.
-void AddHandlesOption(CLI::App& command, tpr::v1::HandleTreatment* handles);
+// `options` must outlive the parse.
+void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options);
 
 // ToJson returns `message` as one line of JSON (proto field names, every
 // primitive field printed; 64-bit integers as strings, non-finite doubles

@@ -432,7 +432,6 @@ namespace {
 struct EvalFlags {
   std::string dataset;
   EvalOptions options;
-  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
 };
 
 const bool kRegistered = RegisterCommand(
@@ -464,11 +463,9 @@ const bool kRegistered = RegisterCommand(
        sub.add_flag("--update", flags->options.add.update,
                     "re-extract ids already in the indexer (default: use them "
                     "as they are)");
-       AddHandlesOption(sub, &flags->handles);
+       AddHandlesOption(sub, &flags->options.add.extract);
        return [flags](const Globals& g) {
-         EvalOptions options = flags->options;
-         options.add.extract.set_handles(flags->handles);
-         return RunEval(g, flags->dataset, options);
+         return RunEval(g, flags->dataset, flags->options);
        };
      }});
 

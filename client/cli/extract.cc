@@ -16,8 +16,8 @@ namespace {
 
 struct ExtractFlags {
   std::vector<std::string> meshes;
-  int bands = 0;
-  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
+  // Sent with every mesh; --bands and --handles fill it.
+  tpr::v1::ExtractOptions options;
 };
 
 void PrintSummary(const std::string& path, const tpr::v1::ExtractResponse& r) {
@@ -45,13 +45,10 @@ void PrintSummary(const std::string& path, const tpr::v1::ExtractResponse& r) {
 int RunExtract(const Globals& g, const ExtractFlags& flags) {
   std::optional<tpr::client::ExtractorClient> client = ConnectExtractor(g);
   if (!client) return 1;
-  tpr::v1::ExtractOptions options;
-  options.set_bands(flags.bands);
-  options.set_handles(flags.handles);
   int failures = 0;
   for (const std::string& path : flags.meshes) {
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        client->ExtractFile(path, options);
+        client->ExtractFile(path, flags.options);
     if (!r.ok()) {
       ++failures;
       if (g.json) {
@@ -75,9 +72,11 @@ const bool kRegistered = RegisterCommand(
        auto flags = std::make_shared<ExtractFlags>();
        sub.add_option("MESH", flags->meshes, "mesh files (OFF, OBJ, PLY, STL)")
            ->required();
-       sub.add_option("--bands", flags->bands,
-                      "geodesic bands per feature (0: default 20)");
-       AddHandlesOption(sub, &flags->handles);
+       sub.add_option_function<int>(
+           "--bands",
+           [flags](const int& bands) { flags->options.set_bands(bands); },
+           "geodesic bands per feature (0: default 20)");
+       AddHandlesOption(sub, &flags->options);
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
      }});
 

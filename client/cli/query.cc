@@ -23,7 +23,8 @@ struct QueryFlags {
   // "paper" (the EMD of Eq. 7 alone) or "spectrum" (the spectrum alone);
   // the last two rank every model (SearchRequest.ranking).
   std::string rank_by;
-  tpr::v1::HandleTreatment handles = tpr::v1::HANDLE_TREATMENT_UNSPECIFIED;
+  // Extraction of MESH (--handles).
+  tpr::v1::ExtractOptions extract;
 };
 
 int RunQuery(const Globals& g, const QueryFlags& flags) {
@@ -37,10 +38,8 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
   if (!flags.mesh.empty()) {
     std::optional<tpr::client::ExtractorClient> extractor = ConnectExtractor(g);
     if (!extractor) return 1;
-    tpr::v1::ExtractOptions options;
-    options.set_handles(flags.handles);
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        extractor->ExtractFile(flags.mesh, options);
+        extractor->ExtractFile(flags.mesh, flags.extract);
     if (!r.ok()) return Fail(flags.mesh, r.status());
     *request.mutable_signature() = std::move(*r->mutable_signature());
   } else {
@@ -104,7 +103,7 @@ const bool kRegistered = RegisterCommand(
                       "EMD of Eq. 7 alone; spectrum: the spectrum alone "
                       "(these two compare the query with every model)")
            ->check(CLI::IsMember({"default", "paper", "spectrum"}));
-       AddHandlesOption(sub, &flags->handles);
+       AddHandlesOption(sub, &flags->extract);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});
 
