@@ -74,6 +74,47 @@ std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
   return e;
 }
 
+absl::Status ValidateHeatTraceOptions(const HeatTraceOptions& o) {
+  if (o.scales < 0 || o.scales > 256) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("heat-trace scales ", o.scales, " must be in 0..256"));
+  }
+  if (!(std::isfinite(o.t_min) && std::isfinite(o.t_max) && o.t_min > 0.0 &&
+        o.t_min < o.t_max)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("heat-trace times [", o.t_min, ", ", o.t_max,
+                     "] must satisfy 0 < t_min < t_max"));
+  }
+  if (o.eigenvalues < 1 || o.eigenvalues > kMaxSpectrum) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("heat-trace eigenvalues ", o.eigenvalues,
+                     " must be in 1..", kMaxSpectrum));
+  }
+  return absl::OkStatus();
+}
+
+std::vector<double> HeatTraceEmbedding(const std::vector<double>& spectrum,
+                                       const HeatTraceOptions& options) {
+  const size_t m = static_cast<size_t>(options.scales);
+  if (m == 0) return {};
+  const size_t n = static_cast<size_t>(options.eigenvalues);
+  const double scale = 1.0 / std::sqrt(static_cast<double>(m));
+  const double log_ratio = std::log(options.t_max / options.t_min);
+  std::vector<double> f(m);
+  for (size_t j = 0; j < m; ++j) {
+    const double step = m == 1 ? 0.0 : static_cast<double>(j) / (m - 1);
+    const double t = options.t_min * std::exp(step * log_ratio);
+    double z = 0.0;
+    for (size_t k = 0; k < n; ++k) {
+      const double x =
+          k < spectrum.size() ? spectrum[k] : static_cast<double>(k + 1);
+      z += std::exp(-x * t);
+    }
+    f[j] = scale * std::log(t * z);
+  }
+  return f;
+}
+
 namespace {
 
 template <typename T>

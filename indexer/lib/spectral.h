@@ -75,6 +75,39 @@ struct SpectralOptions {
 // above, INVALID_ARGUMENT naming the field otherwise. O(1); thread-safe.
 absl::Status ValidateSpectralOptions(const SpectralOptions& options);
 
+// HeatTraceOptions: the heat-trace term H of the distance, a second fixed
+// embedding of the same spectrum. With s_1 <= ... <= s_n the stored values
+// (padded with the Weyl asymptote s_i = i like the spectral term), the heat
+// trace is Z(t) = sum_{i=1..n} exp(-s_i t) (Sun et al. 2009; the trace of
+// the heat kernel, scale-free because s is), and coordinate j of the
+// embedding is
+//   F_j(s) = log(t_j Z(t_j)) / sqrt(m),   j = 1..m,
+// at m times t_j spaced evenly in log between t_min and t_max. t Z(t) tends
+// to 1 for small t on every surface (Weyl's law), so each coordinate is of
+// order 1. H(A, B) = ||F(s_A) - F(s_B)||_2 is a pseudometric (a Euclidean
+// distance between images of one fixed map).
+struct HeatTraceOptions {
+  // m: diffusion times; 0 means the term is absent (empty embedding).
+  // Range 0..256. Default 16.
+  int scales = 16;
+  // t_1 and t_m, dimensionless (the unit of 1 / s_i). 0 < t_min < t_max.
+  // Defaults 0.05 and 5.
+  double t_min = 0.05;
+  double t_max = 5.0;
+  // n: eigenvalues summed (the first n). Range 1..kMaxSpectrum. Default 50.
+  int eigenvalues = 50;
+};
+
+// ValidateHeatTraceOptions returns OK when `options` meets the constraints
+// above, INVALID_ARGUMENT naming the field otherwise. O(1); thread-safe.
+absl::Status ValidateHeatTraceOptions(const HeatTraceOptions& options);
+
+// HeatTraceEmbedding returns F(spectrum) of HeatTraceOptions: options.scales
+// values (none when scales is 0). Preconditions: `options` valid and every
+// value of `spectrum` finite and > 0. O(n m); thread-safe.
+std::vector<double> HeatTraceEmbedding(const std::vector<double>& spectrum,
+                                       const HeatTraceOptions& options);
+
 // SpectralEmbedding returns E(spectrum) of the file comment: options.
 // eigenvalues values, or an empty vector when options.weight is 0 (the
 // term is then absent). Preconditions: `options` valid and every value of
