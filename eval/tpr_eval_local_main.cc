@@ -375,7 +375,7 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option(
       "--save-matrices", f->save_matrices,
       "write names, classes, spectra and the EMD and D2 matrices to this file "
-      "(saved_set.h), for tpr-tune-spectral");
+      "(saved_set.h), for tpr-tune-intents");
   app->add_option("--dump", f->dump,
                   "write every model's features (text) to this file");
 }

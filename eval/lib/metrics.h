@@ -73,7 +73,7 @@ Scores Evaluate(const std::vector<std::string>& labels,
                 const std::vector<Query>& queries);
 
 // Objective returns mean(NN, FT, ST, DCG), the one number the tuning
-// tools maximize (tpr-eval-local --tune, tpr-tune-spectral).
+// tools maximize (tpr-eval-local --tune, tpr-tune-intents).
 inline double Objective(const Metrics& m) {
   return (m.nn + m.ft + m.st + m.dcg) / 4;
 }

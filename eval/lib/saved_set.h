@@ -1,9 +1,9 @@
 // A dev set's leave-one-out material saved once by `tpr-eval-local
-// --save-matrices` and combined offline by `tpr-tune-spectral` (issue 9:
-// the spectral weight is chosen by cross-validation over every dev set
-// together, from the EMD and spectra computed ONCE): every model's name,
-// class and Laplace-Beltrami spectrum, the paper's EMD matrix (w_s = 0) and
-// the D2 matrix.
+// --save-matrices` and combined offline by `tpr-tune-intents` (the intents'
+// weightings are chosen by cross-validation over every dev set together,
+// from the EMD and spectra computed ONCE): every model's name, class and
+// Laplace-Beltrami spectrum, the paper's EMD matrix (w_s = 0) and the D2
+// matrix.
 //
 //   SavedSet s = ...;  SaveSet("/tmp/shrec11.mat", s);
 //   absl::StatusOr<SavedSet> t = LoadSet("/tmp/shrec11.mat");

@@ -70,12 +70,14 @@ struct Options {
   // How the mesh graph approximates geodesics, see geodesic.h.
   GeodesicOptions geodesic;
   // Laplace-Beltrami eigenvalues stored in Signature::spectrum (not part
-  // of the paper; issue 9's spectral term); 0 skips the stage. In
-  // [0, 1000]. Default 20: what the searched distance compares by default
-  // (index::SpectralOptions::eigenvalues), at a third of the cost of 50
-  // (see SpectrumOptions::eigenvalues); a search comparing more pads a
-  // shorter spectrum with its Weyl asymptote (indexer/lib/spectral.h).
-  int spectrum_eigenvalues = 20;
+  // of the paper; the spectral and heat-trace terms of the distance,
+  // indexer/lib/spectral.h); 0 skips the stage. In [0, 1000]. Default 50:
+  // the count ShapeDNA's reference scores use and the most the searched
+  // terms compare by default (index::SpectralOptions::eigenvalues,
+  // HeatTraceOptions::eigenvalues, chosen by cross-validation,
+  // docs/results.md); a search comparing more pads a shorter spectrum with
+  // its Weyl asymptote. Cost: see SpectrumOptions::eigenvalues.
+  int spectrum_eigenvalues = 50;
   // The rest of the spectrum's parameters (simplification bound, solver);
   // its `eigenvalues` is ignored in favour of spectrum_eigenvalues.
   // Defaults there.

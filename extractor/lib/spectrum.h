@@ -22,27 +22,27 @@ namespace tpr::extract {
 
 // SpectrumOptions configures LaplaceBeltramiSpectrum.
 struct SpectrumOptions {
-  // Non-zero eigenvalues to return (the N). Must be >= 1.
-  // Default 20: the count the searched distance compares by default
-  // (index::SpectralOptions::eigenvalues, chosen by cross-validation over
-  // every dev set, docs/results.md). The cost grows faster than linearly
-  // with it (more Lanczos steps, each orthogonalized against more
-  // vectors): BM_SpectrumEigenvalues compares 20 with 50, and 50 would put
-  // a whole extraction at 10k vertices over its 150 ms (figures in
+  // Non-zero eigenvalues to return (N). Must be >= 1. Default 50, the
+  // extractor's default (Options::spectrum_eigenvalues says why). The cost
+  // grows faster than linearly with it (more Lanczos steps, each
+  // orthogonalized against more vectors): BM_SpectrumEigenvalues compares
+  // 20 with 50, and a whole extraction at 10k vertices stays within 150
+  // Dijkstra sweeps with 50 (BM_Extract/10000/1 over BM_Dijkstra/10000,
   // docs/benchmarks.md).
-  int eigenvalues = 20;
+  int eigenvalues = 50;
   // Meshes with more (referenced) vertices than this are first simplified
   // to this many vertices with OpenMesh's quadric decimater
-  // (SimplifyMesh). 0 never simplifies. The bound sits above the issue's
-  // 10k vertices because below it simplifying costs more than it saves:
-  // the decimater's collapses cost more than the eigensolve of the whole
-  // mesh (BM_SimplifyMesh against BM_SpectrumFullMesh), and it adds an
-  // error of its own (StableUnderSimplification in
-  // tests/extractor/spectrum_test.cc states it per eigenvalue, at this
-  // bound and at 3000, the former one). OpenMesh's faster McDecimaterT is
-  // not used: it draws from the global rand(), so the same mesh would not
-  // always give the same spectrum. Default 12000.
-  int max_vertices = 12000;
+  // (SimplifyMesh). 0 never simplifies. The bound sits well above 10k
+  // vertices because below it simplifying costs more than it saves: the
+  // decimater's collapses cost more than the eigensolve of the whole mesh
+  // (BM_SimplifyMesh against BM_SpectrumFullMesh), and it adds an error of
+  // its own (StableUnderSimplification in tests/extractor/spectrum_test.cc
+  // states it per eigenvalue, at this bound and at 3000); 16000 also solves
+  // registered bodies such as SCAPE's 12,500-vertex meshes whole, so their
+  // spectrum is the reference ShapeDNA's (docs/results.md). OpenMesh's
+  // faster McDecimaterT is not used: it draws from the global rand(), so
+  // the same mesh would not always give the same spectrum. Default 16000.
+  int max_vertices = 16000;
   // Shift sigma of the shift-invert Lanczos iteration, in the scaled units
   // of the result (lambda * A / (4 pi)); must be negative so that
   // L - sigma M is positive definite and the zero eigenvalues are found
@@ -50,11 +50,13 @@ struct SpectrumOptions {
   // unit sphere's first non-zero value is 2; elongated shapes go well
   // below 0.1. Default -0.01.
   double shift = -0.01;
-  // Relative accuracy of each Ritz value (Spectra's tol). The eigenvalue
-  // error is of the order of the squared residual, far below the
-  // discretization's (percent), and 1e-8 needs one Lanczos restart less
-  // than 1e-10 on 20 values. Default 1e-8.
-  double tolerance = 1e-8;
+  // Relative residual of each Ritz value (Spectra's tol). The eigenvalue
+  // error is of the order of the squared residual (1e-12 here), far below
+  // the discretization's (percent); on the 10k-vertex biped 1e-6 takes 123
+  // Lanczos steps for 50 values against 129 for 1e-8, and
+  // UnrestartedAndRestartedLanczosAgree still finds both iterations within
+  // 1e-9 of each other. Default 1e-6.
+  double tolerance = 1e-6;
   // Vectors the unrestarted Lanczos iteration may hold (V doubles each)
   // before Spectra's implicitly restarted iteration (2 nev + 1 vectors,
   // nev = eigenvalues + components) takes over from scratch; 0 means

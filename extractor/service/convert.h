@@ -22,10 +22,11 @@ namespace tpr::extractor {
 extern const char kExtractorVersion[];
 
 // kSignatureVersion is stamped into every signature
-// (Signature.signature_version): 2, TPR features plus the Laplace-Beltrami
-// spectrum. The indexer compares only this version (indexer/service/
+// (Signature.signature_version): 3, TPR features plus a Laplace-Beltrami
+// spectrum of 50 eigenvalues by default (signature.proto describes the
+// versions). The indexer compares only this version (indexer/service/
 // convert.h holds the same number).
-inline constexpr int kSignatureVersion = 2;
+inline constexpr int kSignatureVersion = 3;
 
 // OptionsFromProto returns the library options for `proto`, a zero field
 // meaning the default documented in extractor/lib/extract.h.

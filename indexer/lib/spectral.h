@@ -1,6 +1,6 @@
 // The spectral term of the combined distance (metric.h): a fixed embedding
 // of a signature's Laplace-Beltrami spectrum ("ShapeDNA", Reuter et al.
-// 2006; issue 9) into R^n, compared with the Euclidean norm. The spectrum
+// 2006) into R^n, compared with the Euclidean norm. The spectrum
 // values are lambda_i A / (4 pi) (indexer/lib/signature.h), which Weyl's law
 // makes grow like i: lambda_i ~ 4 pi i / A for a closed surface of area A.
 //
@@ -50,25 +50,20 @@ inline constexpr int kMaxSpectrum = 1000;
 // SpectralOptions: the spectral term of the combined distance. Every
 // signature of one index is prepared with the same options.
 struct SpectralOptions {
-  // w_s: the term's weight relative to the EMD of Eq. 7 (whose ground
-  // distance is of order 1). 0 gives the paper's TPR distance exactly.
-  // Must be finite and >= 0. Default 1, with phi = by_index and n = 20:
-  // chosen by cross-validation over every dev set together (SHREC'07's 20
-  // classes, SHREC'11, the synthetic identity set; tpr-tune-spectral over
-  // phi x n x w_s, docs/results.md): best summed over the three sets, and
-  // the choice of every held-out fold and set lies within by_index, n 20
-  // to 30, w_s 0.5 to 1. No further normalisation of either term: both are
-  // scale-free already (the EMD of normalized features, by_index values
-  // about 1 by Weyl's law), and dividing each by a constant would only
-  // rescale w_s (its per-set median variant, measured for comparison, is
-  // data-dependent, hence no fixed metric, and scored within 0.001).
+  // w_s: the term's weight in the ground distance's combined form
+  // (ground_distance.h), relative to the EMD of Eq. 7. 0 gives the paper's
+  // TPR distance exactly. Must be finite and >= 0. Default 1. The intents
+  // (intent.h) read the embedding at weight 1 and weigh it themselves.
   double weight = 1.0;
-  // phi. Default kByIndex, see weight.
+  // phi. Default kByIndex: x_i / i, the 1/i weighting of ShapeDNA's
+  // reference form; chosen by cross-validation with n over every dev set
+  // (tpr-tune-intents, docs/results.md: IDENTITY's best over phi in
+  // {by_index, log} x n in {20, 30, 50}).
   SpectralTransform transform = SpectralTransform::kByIndex;
   // n: eigenvalues compared (the first n). Range 1..kMaxSpectrum. Default
-  // 20, see weight (the extractor computes 20 by default; a longer spectrum is
-  // truncated, a shorter one padded).
-  int eigenvalues = 20;
+  // 50, see transform (the extractor stores 50 by default; a longer
+  // spectrum is truncated, a shorter one padded).
+  int eigenvalues = 50;
 };
 
 // ValidateSpectralOptions returns OK when `options` meets the constraints
@@ -91,11 +86,16 @@ struct HeatTraceOptions {
   // Range 0..256. Default 16.
   int scales = 16;
   // t_1 and t_m, dimensionless (the unit of 1 / s_i). 0 < t_min < t_max.
-  // Defaults 0.05 and 5.
-  double t_min = 0.05;
-  double t_max = 5.0;
-  // n: eigenvalues summed (the first n). Range 1..kMaxSpectrum. Default 50.
-  int eigenvalues = 50;
+  // Defaults 0.2 and 20, with eigenvalues 20: chosen by cross-validation
+  // over every dev set (tpr-tune-intents, docs/results.md) among [0.01, 1],
+  // [0.05, 5] and [0.2, 20] x n in {20, 50}. Long times weigh the first
+  // eigenvalues (the coarse build); only BALANCED uses the term, and it
+  // gains little from it.
+  double t_min = 0.2;
+  double t_max = 20.0;
+  // n: eigenvalues summed (the first n). Range 1..kMaxSpectrum. Default 20,
+  // see t_min.
+  int eigenvalues = 20;
 };
 
 // ValidateHeatTraceOptions returns OK when `options` meets the constraints

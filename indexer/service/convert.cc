@@ -45,9 +45,9 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(
     return absl::FailedPreconditionError(absl::StrCat(
         "signature version ", std::max(1, s.signature_version()),
         " is older than version ", kSignatureVersion,
-        " (which adds the Laplace-Beltrami spectrum) that this indexer "
-        "compares; re-extract the model with a current tpr-extractor: `tpr add "
-        "--update`"));
+        " (whose spectrum the spectral and heat-trace terms compare) that "
+        "this indexer compares; re-extract the model with a current "
+        "tpr-extractor: `tpr add --update`"));
   }
   if (s.signature_version() > kSignatureVersion) {
     return absl::FailedPreconditionError(absl::StrCat(

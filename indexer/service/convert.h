@@ -22,9 +22,10 @@ namespace tpr::indexer {
 inline constexpr int kMaxBands = 256;
 
 // kSignatureVersion: the Signature.signature_version this indexer compares
-// (2: TPR features plus the Laplace-Beltrami spectrum). The extractor
-// stamps the same number (extractor/service/convert.h).
-inline constexpr int kSignatureVersion = 2;
+// (3: TPR features plus a Laplace-Beltrami spectrum of 50 eigenvalues by
+// default; signature.proto describes the versions). The extractor stamps
+// the same number (extractor/service/convert.h).
+inline constexpr int kSignatureVersion = 3;
 
 // kMaxBandMagnitude bounds |curvature| and distance band values. Far beyond
 // what a mesh gives (curvature bands are area-weighted curvature integrals,

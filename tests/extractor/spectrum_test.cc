@@ -175,10 +175,10 @@ TEST(SpectrumTest, StableUnderRemeshing) {
 
 // The simplification behind SpectrumOptions::max_vertices, eigenvalue by
 // eigenvalue: the 20k-vertex biped solved whole, and simplified to the
-// default bound and to 3000 vertices (the former bound). Every one of the
-// default 20 values must stay within the stated relative difference of
-// the whole mesh's. Measured (worst / mean over the 20 values): at the
-// default bound (12000) 0.28% / 0.10%, at 3000 1.6% / 0.57%.
+// default bound and to 3000 vertices. Every one of the default 50 values
+// must stay within the stated relative difference of the whole mesh's.
+// Measured worst over the 50 values: 0.59% at 12000 vertices, 4.2% at
+// 3000 (the higher eigenvalues, of shorter wavelength, move most).
 TEST(SpectrumTest, StableUnderSimplification) {
   const Mesh full = Biped(20000, 1);
   SpectrumOptions whole;
@@ -187,8 +187,9 @@ TEST(SpectrumTest, StableUnderSimplification) {
   ASSERT_EQ(reference.size(),
             static_cast<size_t>(SpectrumOptions{}.eigenvalues));
   for (const auto& [bound, tolerance] :
-       {std::pair<int, double>{SpectrumOptions{}.max_vertices, 0.005},
-        std::pair<int, double>{3000, 0.025}}) {
+       {std::pair<int, double>{SpectrumOptions{}.max_vertices, 0.0075},
+        std::pair<int, double>{12000, 0.0075},
+        std::pair<int, double>{3000, 0.05}}) {
     SpectrumOptions simplified;
     simplified.max_vertices = bound;
     absl::StatusOr<Spectrum> s = LaplaceBeltramiSpectrum(full, simplified);

@@ -139,7 +139,7 @@ TEST(CentroidTableTest, AnItemIsAtBoundZeroFromItself) {
 }
 
 // Signatures with 50-value spectra, prepared with the spectral term on
-// (`transform`, weight 1, 20 eigenvalues: the index's default).
+// (`transform`, weight 1, the index's default count of eigenvalues).
 std::vector<PreparedSignature> DrawWithSpectra(int count, uint64_t seed,
                                                SpectralTransform transform) {
   SignatureGeneratorOptions o;
@@ -164,7 +164,7 @@ TEST(CentroidTableTest, SpectralBoundNeverAboveSpectralTermAndWithinRounding) {
         items.size(), [&](uint32_t i) -> const PreparedSignature* {
           return present(i) ? &items[i] : nullptr;
         });
-    ASSERT_EQ(table.spectral_size(), 20);
+    ASSERT_EQ(table.spectral_size(), SpectralOptions().eigenvalues);
     // The oracle of the radius: half a step per value, the step being the
     // table's largest |value| / 32767.
     double largest = 0.0;
@@ -229,8 +229,10 @@ TEST(CentroidTableTest, NoSpectralBoundWithoutOrWithMixedEmbeddings) {
   const CentroidTable table = CentroidTable::Build(
       with.size(),
       [&](uint32_t i) -> const PreparedSignature* { return &with[i]; });
-  EXPECT_EQ(table.MemoryBytes(),
-            without.MemoryBytes() + with.size() * (20 * sizeof(int16_t)));
+  EXPECT_EQ(
+      table.MemoryBytes(),
+      without.MemoryBytes() +
+          with.size() * (SpectralOptions().eigenvalues * sizeof(int16_t)));
   // Items of two spectral sizes in one table (never in one index): the
   // table keeps no embedding and bounds nothing, still a lower bound.
   std::vector<const PreparedSignature*> mixed = {&plain[0], &with[0], &with[1]};

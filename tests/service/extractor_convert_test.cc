@@ -21,7 +21,7 @@ TEST(ExtractorConvertTest, ZeroFieldsGiveTheLibraryDefaults) {
   EXPECT_EQ(o->cycle_min_vertices, defaults.cycle_min_vertices);
   EXPECT_EQ(o->ring_length_threshold, defaults.ring_length_threshold);
   EXPECT_EQ(o->spectrum_eigenvalues, defaults.spectrum_eigenvalues);
-  EXPECT_EQ(o->spectrum_eigenvalues, 20);
+  EXPECT_EQ(o->spectrum_eigenvalues, 50);
   EXPECT_EQ(o->point_min_prominence, defaults.point_min_prominence);
   EXPECT_EQ(o->cut_handles, defaults.cut_handles);
   EXPECT_TRUE(o->cut_handles);
@@ -76,7 +76,7 @@ TEST(ExtractorConvertTest, HandleTreatmentsMapBothWays) {
 TEST(ExtractorConvertTest, DefaultsAreFilledInTheWireForm) {
   const v1::ExtractOptions back =
       OptionsToProto(*OptionsFromProto(v1::ExtractOptions(), 4));
-  EXPECT_EQ(back.spectrum_eigenvalues(), 20);
+  EXPECT_EQ(back.spectrum_eigenvalues(), 50);
   EXPECT_EQ(back.bands(), extract::Options().bands);
   // The stored signature says which treatment made it, never "unspecified".
   EXPECT_EQ(back.handles(), v1::HANDLE_TREATMENT_CUT);

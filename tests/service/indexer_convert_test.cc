@@ -247,7 +247,7 @@ TEST(IndexerConvertTest, SpectrumCarriedAndValidated) {
 }
 
 TEST(IndexerConvertTest, OtherSignatureVersionsAreFailedPrecondition) {
-  for (int version : {0, 1, kSignatureVersion + 1}) {
+  for (int version : {0, 1, 2, kSignatureVersion + 1}) {
     v1::Signature s = Valid();
     s.set_signature_version(version);
     absl::StatusOr<index::Signature> r = ToIndexSignature(s);

@@ -1,5 +1,5 @@
-// Compatibility across signature versions (issue 9 item 6): a data dir
-// holding models of an older signature version (no spectrum) opens, loses
+// Compatibility across signature versions: a data dir holding models of
+// older signature versions (1: no spectrum; 2: a spectrum of 20) opens, loses
 // nothing (every model is listed, counted and returned byte for byte),
 // refuses searches with FAILED_PRECONDITION naming `tpr add --update`, and
 // serves exact answers again once those models are re-extracted
@@ -41,16 +41,22 @@ std::vector<TestModel> Models(int n) {
   return out;
 }
 
-// What an older extractor wrote: no spectrum, no signature_version.
-tpr::v1::Model OldModel(const TestModel& m) {
+// What an older extractor wrote: version 1, no spectrum and no
+// signature_version; version 2, a spectrum of 20.
+tpr::v1::Model OldModel(const TestModel& m, int version) {
   tpr::v1::Model model;
   model.set_id(m.id);
   model.set_label(m.label);
-  tpr::index::Signature features_only = m.signature;
-  features_only.spectrum.clear();
-  *model.mutable_signature() = ToWire(features_only);
-  model.mutable_signature()->clear_signature_version();
-  model.mutable_signature()->mutable_options()->clear_spectrum_eigenvalues();
+  tpr::index::Signature old = m.signature;
+  old.spectrum.resize(version == 1 ? 0 : 20);
+  *model.mutable_signature() = ToWire(old);
+  if (version == 1) {
+    model.mutable_signature()->clear_signature_version();
+    model.mutable_signature()->mutable_options()->clear_spectrum_eigenvalues();
+  } else {
+    model.mutable_signature()->set_signature_version(version);
+    model.mutable_signature()->mutable_options()->set_spectrum_eigenvalues(20);
+  }
   return model;
 }
 
@@ -86,7 +92,7 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
     std::vector<tpr::v1::Model> stored;
     for (size_t i = 0; i < models.size(); ++i) {
       if (i % 3 == 2) {
-        stored.push_back(OldModel(models[i]));
+        stored.push_back(OldModel(models[i], old.size() % 2 == 0 ? 1 : 2));
         old.push_back(stored.back());
       } else {
         tpr::v1::Model m;
@@ -122,10 +128,13 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
   tpr::v1::SearchRequest by_signature;
   *by_signature.mutable_signature() = ToWire(models[0].signature);
   by_signature.set_k(5);
-  tpr::v1::SearchRequest by_old_id;
-  by_old_id.set_id(old[0].id());
-  by_old_id.set_k(5);
-  for (const tpr::v1::SearchRequest& r : {by_signature, by_old_id}) {
+  tpr::v1::SearchRequest by_v1_id;
+  by_v1_id.set_id(old[0].id());
+  by_v1_id.set_k(5);
+  tpr::v1::SearchRequest by_v2_id = by_v1_id;
+  by_v2_id.set_id(old[1].id());
+  ASSERT_EQ(old[1].signature().signature_version(), 2);
+  for (const tpr::v1::SearchRequest& r : {by_signature, by_v1_id, by_v2_id}) {
     absl::StatusOr<std::vector<std::string>> ids = SearchIds(*core, r);
     EXPECT_EQ(ids.status().code(), absl::StatusCode::kFailedPrecondition)
         << ids.status();
@@ -134,13 +143,15 @@ TEST(SignatureVersionTest, OldModelsAreKeptAndSearchSaysToUpdate) {
         << ids.status();
   }
   // An old-version signature is never stored, nor searched with.
-  tpr::v1::UpsertRequest stale;
-  *stale.mutable_model() = old[0];
-  stale.set_overwrite(true);
-  absl::StatusOr<bool> refused = core->Upsert(stale);
-  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_NE(refused.status().message().find("tpr add --update"),
-            std::string::npos);
+  for (const tpr::v1::Model& m : {old[0], old[1]}) {
+    tpr::v1::UpsertRequest stale;
+    *stale.mutable_model() = m;
+    stale.set_overwrite(true);
+    absl::StatusOr<bool> refused = core->Upsert(stale);
+    EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
+    EXPECT_NE(refused.status().message().find("tpr add --update"),
+              std::string::npos);
+  }
 
   // Re-extracting (overwriting) the old ones makes searching work again;
   // Delete of an old one counts too.
