@@ -1,5 +1,5 @@
-// Previews: a mesh simplified for 3D views (OpenMesh's decimater with its
-// quadric error module) and written as a compact binary PLY.
+// Previews: a mesh simplified for 3D views (quadric error edge collapses)
+// and written as a compact binary PLY.
 //
 //   absl::StatusOr<std::string> ply = MakePreviewPly(mesh, PreviewOptions{});
 //   if (ply.ok()) Send(*ply);   // <= 5,000 triangles, float coordinates
@@ -23,16 +23,19 @@ struct PreviewOptions {
 
 // SimplifyForPreview returns `mesh` with at most options.max_faces
 // triangles: unchanged (but for unreferenced vertices, removed) when it has
-// no more; otherwise decimated by OpenMesh's DecimaterT with ModQuadricT
-// (Garland-Heckbert quadrics, halfedge collapses: every vertex kept stays
-// where it was, so the preview shares the mesh's coordinates) until the
-// count is reached. Collapses that would break the surface's topology are
-// refused by the decimater; when the refusals leave it above the limit
-// (many tiny closed components) the result is FAILED_PRECONDITION.
-// Errors: INVALID_ARGUMENT for max_faces out of range, an index out of
-// range or a triangle OpenMesh refuses (non-manifold; the message names
-// it); FAILED_PRECONDITION as above. Cost: O(F log F); see
-// docs/benchmarks.md (BM_Media). Thread-safe (pure function).
+// no more; otherwise decimated by halfedge collapses in the order of
+// Garland and Heckbert's quadric error (area-weighted plane quadrics, as
+// OpenMesh's ModQuadricT; every vertex kept stays where it was, so the
+// preview shares the mesh's coordinates) until the count is reached.
+// Collapses that would break the link condition, pinch a boundary, flip or
+// flatten a triangle or duplicate one are refused, so the topology is
+// kept; when the refusals leave it above the limit (many tiny closed
+// components) the result is FAILED_PRECONDITION. Ties are broken by vertex
+// ids: the same mesh gives the same preview. Precondition: a mesh as
+// intake returns it (manifold, oriented). Errors: INVALID_ARGUMENT for
+// max_faces out of range or an index out of range; FAILED_PRECONDITION as
+// above. Cost: O(F log F), about 10 ms at 20k triangles (docs/
+// benchmarks.md, BM_Preview). Thread-safe (pure function).
 absl::StatusOr<Mesh> SimplifyForPreview(const Mesh& mesh,
                                         const PreviewOptions& options);
 
@@ -44,6 +47,7 @@ absl::StatusOr<Mesh> SimplifyForPreview(const Mesh& mesh,
 std::string EncodePreviewPly(const Mesh& mesh);
 
 // MakePreviewPly is EncodePreviewPly(SimplifyForPreview(...)); same errors.
+// Deterministic.
 absl::StatusOr<std::string> MakePreviewPly(const Mesh& mesh,
                                            const PreviewOptions& options);
 
