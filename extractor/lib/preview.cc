@@ -43,7 +43,7 @@ Mesh Compact(const Mesh& mesh) {
 // alone); legality is checked when the entry comes out, so the few
 // collapses that would break the surface cost a re-scan of one vertex, not
 // a check of every candidate every time (OpenMesh's DecimaterT checks
-// every candidate: about 240 ms at 10k vertices, docs/benchmarks.md).
+// every candidate; docs/benchmarks.md compares them).
 struct Quadric {
   // aa ab ac ad bb bc bd cc cd dd of the symmetric 4 x 4 matrix.
   std::array<double, 10> q{};

@@ -34,8 +34,8 @@ struct PreviewOptions {
 // ids: the same mesh gives the same preview. Precondition: a mesh as
 // intake returns it (manifold, oriented). Errors: INVALID_ARGUMENT for
 // max_faces out of range or an index out of range; FAILED_PRECONDITION as
-// above. Cost: O(F log F), about 10 ms at 20k triangles (docs/
-// benchmarks.md, BM_Preview). Thread-safe (pure function).
+// above. Cost: O(F log F); measured in docs/benchmarks.md (BM_Preview).
+// Thread-safe (pure function).
 absl::StatusOr<Mesh> SimplifyForPreview(const Mesh& mesh,
                                         const PreviewOptions& options);
 

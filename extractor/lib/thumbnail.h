@@ -78,8 +78,8 @@ struct RgbaImage {
 // Errors: INVALID_ARGUMENT when options are out of range, the mesh has no
 // triangle, an index or overlay vertex is out of range, a coordinate is not
 // finite, or the projected mesh has no extent (the message says which).
-// Cost: O(V + F + pixels covered); about 2 ms at 20k triangles (see
-// docs/benchmarks.md). Thread-safe (pure function).
+// Cost: O(V + F + pixels covered); measured in docs/benchmarks.md
+// (BM_Thumbnail). Thread-safe (pure function).
 absl::StatusOr<RgbaImage> RenderThumbnail(const Mesh& mesh,
                                           const ThumbnailOverlay& overlay,
                                           const ThumbnailOptions& options);
