@@ -22,8 +22,10 @@
 #include "extractor/lib/integral_geodesic.h"
 #include "extractor/lib/mesh.h"
 #include "extractor/lib/mesh_io.h"
+#include "extractor/lib/preview.h"
 #include "extractor/lib/source_points.h"
 #include "extractor/lib/spectrum.h"
+#include "extractor/lib/thumbnail.h"
 #include "extractor/synth/synth.h"
 #include "tests/extractor/test_meshes.h"
 
@@ -286,6 +288,79 @@ BENCHMARK(BM_BuildGraph)
     ->Arg(10000)
     ->Arg(100000)
     ->Unit(benchmark::kMillisecond);
+
+// The pictures tpr-extractor adds when asked (ExtractRequest.media), on the
+// same mesh as BM_Extract/<n>: BM_Thumbnail renders and encodes the PNG
+// with the overlay of that mesh's extraction (made once, outside the
+// timing), BM_Preview decimates to 5,000 faces and writes the PLY,
+// BM_Media does both as the extractor does. Target: BM_Media/10000 at most
+// 30 ms on one thread. Counters: PNG and PLY bytes, preview faces.
+const ThumbnailOverlay& BenchOverlay(int64_t n) {
+  static std::mutex mu;
+  static std::map<int64_t, ThumbnailOverlay> cache;
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find(n);
+  if (it != cache.end()) return it->second;
+  const Mesh& mesh = BenchMesh(n);
+  Options options;
+  options.explain = true;
+  absl::StatusOr<ExtractResult> r =
+      ExtractSignature(mesh, ComputeMeshStats(mesh), options);
+  ThumbnailOverlay overlay;
+  if (r.ok() && r->explanation.has_value()) {
+    overlay = OverlayFromExplanation(r->signature, *r->explanation);
+  }
+  return cache.emplace(n, std::move(overlay)).first->second;
+}
+
+void BM_Thumbnail(benchmark::State& state) {
+  const Mesh& mesh = BenchMesh(state.range(0));
+  const ThumbnailOverlay& overlay = BenchOverlay(state.range(0));
+  size_t bytes = 0;
+  for (auto _ : state) {
+    absl::StatusOr<std::string> png =
+        RenderThumbnailPng(mesh, overlay, ThumbnailOptions{});
+    if (!png.ok()) {
+      state.SkipWithError("RenderThumbnailPng failed");
+      break;
+    }
+    bytes = png->size();
+  }
+  state.counters["png_bytes"] = static_cast<double>(bytes);
+}
+
+void BM_Preview(benchmark::State& state) {
+  const Mesh& mesh = BenchMesh(state.range(0));
+  size_t bytes = 0;
+  for (auto _ : state) {
+    absl::StatusOr<std::string> ply = MakePreviewPly(mesh, PreviewOptions{});
+    if (!ply.ok()) {
+      state.SkipWithError("MakePreviewPly failed");
+      break;
+    }
+    bytes = ply->size();
+  }
+  state.counters["ply_bytes"] = static_cast<double>(bytes);
+}
+
+void BM_Media(benchmark::State& state) {
+  const Mesh& mesh = BenchMesh(state.range(0));
+  const ThumbnailOverlay& overlay = BenchOverlay(state.range(0));
+  for (auto _ : state) {
+    absl::StatusOr<std::string> png =
+        RenderThumbnailPng(mesh, overlay, ThumbnailOptions{});
+    absl::StatusOr<std::string> ply = MakePreviewPly(mesh, PreviewOptions{});
+    if (!png.ok() || !ply.ok()) {
+      state.SkipWithError("media failed");
+      break;
+    }
+    benchmark::DoNotOptimize(png->data());
+    benchmark::DoNotOptimize(ply->data());
+  }
+}
+BENCHMARK(BM_Thumbnail)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Preview)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Media)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace tpr::extract
