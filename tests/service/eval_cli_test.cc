@@ -95,7 +95,7 @@ using Matrix = std::vector<std::vector<double>>;
 // term at weight 1 alone, and D2 from the same loaded meshes, the columns
 // of `tpr eval --compare`.
 struct Matrices {
-  Matrix tpr, paper, spectrum, d2;
+  Matrix tpr, identity, kind, paper, spectrum, d2;
 };
 
 absl::StatusOr<Matrices> InProcessMatrices(
@@ -117,12 +117,18 @@ absl::StatusOr<Matrices> InProcessMatrices(
   }
   const size_t n = prepared.size();
   const Matrix zero(n, std::vector<double>(n, 0.0));
-  Matrices d{zero, zero, zero, zero};
+  Matrices d{zero, zero, zero, zero, zero, zero};
   for (size_t i = 0; i < n; ++i) {
     for (size_t j = i + 1; j < n; ++j) {
       d.tpr[i][j] = d.tpr[j][i] =
           index::Distance(prepared[i], prepared[j],
                           index::IntentWeights(index::Intent::kBalanced));
+      d.identity[i][j] = d.identity[j][i] =
+          index::Distance(prepared[i], prepared[j],
+                          index::IntentWeights(index::Intent::kIdentity));
+      d.kind[i][j] = d.kind[j][i] =
+          index::Distance(prepared[i], prepared[j],
+                          index::IntentWeights(index::Intent::kKind));
       d.paper[i][j] = d.paper[j][i] = index::Emd(prepared[i], prepared[j]);
       d.spectrum[i][j] = d.spectrum[j][i] =
           index::SpectralDistance(prepared[i], prepared[j]);
@@ -330,8 +336,9 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
 }
 
 TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
-  // `tpr eval --compare`: the paper's distance and the spectrum alone as
-  // the indexer ranks them (SearchRequest.ranking), and D2 computed by the
+  // `tpr eval --compare`: the other two intents, the paper's distance and
+  // the spectrum alone as the indexer ranks them (SearchRequest.intent and
+  // .ranking), and D2 computed by the
   // client, each scored as the in-process oracle scores its own matrix.
   // The classes are mixed as in the manifest test above (the last pose of
   // each class labelled as the next class), so that no metric is 1.
@@ -349,6 +356,8 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
   ASSERT_NE(compare, std::string::npos);
   const std::pair<const char*, const Matrix*> columns[] = {
       {"default", &d->tpr},
+      {"identity", &d->identity},
+      {"kind", &d->kind},
       {"paper", &d->paper},
       {"spectrum", &d->spectrum},
       {"d2", &d->d2}};
@@ -368,12 +377,32 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
   EXPECT_NE(Score(d->paper, labels).scores.overall.map,
             Score(d->spectrum, labels).scores.overall.map);
 
+  // --intent identity: the run's own column is identity's, and balanced
+  // becomes a column beside it.
+  CommandResult by_identity = RunTpr(
+      cluster_, "--json eval --intent identity --compare --out " +
+                    cluster_.dir() + "/o " + cluster_.dir() + "/MANIFEST.txt");
+  ASSERT_EQ(by_identity.exit_code, 0) << by_identity.out << by_identity.err;
+  const size_t compare2 = by_identity.out.find("\"compare\":{");
+  ASSERT_NE(compare2, std::string::npos);
+  for (const auto& [key, matrix] :
+       {std::pair<const char*, const Matrix*>{"default", &d->identity},
+        {"balanced", &d->tpr},
+        {"kind", &d->kind}}) {
+    const size_t at =
+        by_identity.out.find(absl::StrCat("\"", key, "\":{"), compare2);
+    ASSERT_NE(at, std::string::npos) << key;
+    ExpectMetrics(by_identity.out, at, Score(*matrix, labels).scores.overall,
+                  absl::StrCat("--intent identity ", key));
+  }
+
   // The text report prints them side by side, per class too.
   CommandResult text =
       RunTpr(cluster_, "eval --compare --out " + cluster_.dir() + "/o " +
                            cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(text.exit_code, 0) << text.err;
-  for (const char* want : {"side by side", "paper TPR", "spectrum alone", "D2",
+  for (const char* want : {"side by side", "intent identity", "intent kind",
+                           "paper TPR", "spectrum alone", "D2",
                            "per class, NN / FT", "mix_0"}) {
     EXPECT_NE(text.out.find(want), std::string::npos) << want << text.out;
   }
