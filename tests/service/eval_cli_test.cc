@@ -126,9 +126,8 @@ absl::StatusOr<Matrices> InProcessMatrices(
       d.identity[i][j] = d.identity[j][i] =
           index::Distance(prepared[i], prepared[j],
                           index::IntentWeights(index::Intent::kIdentity));
-      d.kind[i][j] = d.kind[j][i] =
-          index::Distance(prepared[i], prepared[j],
-                          index::IntentWeights(index::Intent::kKind));
+      d.kind[i][j] = d.kind[j][i] = index::Distance(
+          prepared[i], prepared[j], index::IntentWeights(index::Intent::kKind));
       d.paper[i][j] = d.paper[j][i] = index::Emd(prepared[i], prepared[j]);
       d.spectrum[i][j] = d.spectrum[j][i] =
           index::SpectralDistance(prepared[i], prepared[j]);
@@ -355,12 +354,8 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
   const size_t compare = r.out.find("\"compare\":{");
   ASSERT_NE(compare, std::string::npos);
   const std::pair<const char*, const Matrix*> columns[] = {
-      {"default", &d->tpr},
-      {"identity", &d->identity},
-      {"kind", &d->kind},
-      {"paper", &d->paper},
-      {"spectrum", &d->spectrum},
-      {"d2", &d->d2}};
+      {"default", &d->tpr}, {"identity", &d->identity}, {"kind", &d->kind},
+      {"paper", &d->paper}, {"spectrum", &d->spectrum}, {"d2", &d->d2}};
   for (const auto& [key, matrix] : columns) {
     const Oracle oracle = Score(*matrix, labels);
     const size_t at = r.out.find(absl::StrCat("\"", key, "\":{"), compare);
@@ -401,9 +396,9 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
       RunTpr(cluster_, "eval --compare --out " + cluster_.dir() + "/o " +
                            cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(text.exit_code, 0) << text.err;
-  for (const char* want : {"side by side", "intent identity", "intent kind",
-                           "paper TPR", "spectrum alone", "D2",
-                           "per class, NN / FT", "mix_0"}) {
+  for (const char* want :
+       {"side by side", "intent identity", "intent kind", "paper TPR",
+        "spectrum alone", "D2", "per class, NN / FT", "mix_0"}) {
     EXPECT_NE(text.out.find(want), std::string::npos) << want << text.out;
   }
 }
