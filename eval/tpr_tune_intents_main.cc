@@ -73,7 +73,6 @@ std::vector<SpectralOptions> SpectralConfigs() {
        {SpectralTransform::kByIndex, SpectralTransform::kLog}) {
     for (int n : {20, 30, 50}) {
       SpectralOptions o;
-      o.weight = 1.0;
       o.transform = t;
       o.eigenvalues = n;
       out.push_back(o);

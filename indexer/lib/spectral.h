@@ -7,7 +7,7 @@
 // Embedding. For n = options.eigenvalues and s_1 <= s_2 <= ... the stored
 // values (a spectrum shorter than n is padded with its Weyl asymptote
 // s_i = i, so every signature has an image), coordinate i is
-//   E_i(s) = weight * phi_i(s_i) / sqrt(n),        i = 1..n,
+//   E_i(s) = phi_i(s_i) / sqrt(n),        i = 1..n,
 // with phi_i one fixed per-coordinate map chosen by options.transform:
 //   kRaw      phi_i(x) = x                (ShapeDNA's plain Euclidean form)
 //   kByIndex  phi_i(x) = x / i            (normalized by index: every
@@ -50,11 +50,8 @@ inline constexpr int kMaxSpectrum = 1000;
 // SpectralOptions: the spectral term of the combined distance. Every
 // signature of one index is prepared with the same options.
 struct SpectralOptions {
-  // w_s: the term's weight in the ground distance's combined form
-  // (ground_distance.h), relative to the EMD of Eq. 7. 0 gives the paper's
-  // TPR distance exactly. Must be finite and >= 0. Default 1. The intents
-  // (intent.h) read the embedding at weight 1 and weigh it themselves.
-  double weight = 1.0;
+  // The term's factor in a distance is not an option of the embedding: it
+  // is the spectral factor of the search's TermWeights (intent.h).
   // phi. Default kByIndex: x_i / i, the 1/i weighting of ShapeDNA's
   // reference form; chosen by cross-validation with n over every dev set
   // (tpr-tune-intents, docs/results.md: IDENTITY's best over phi in
@@ -109,8 +106,7 @@ std::vector<double> HeatTraceEmbedding(const std::vector<double>& spectrum,
                                        const HeatTraceOptions& options);
 
 // SpectralEmbedding returns E(spectrum) of the file comment: options.
-// eigenvalues values, or an empty vector when options.weight is 0 (the
-// term is then absent). Preconditions: `options` valid and every value of
+// eigenvalues values. Preconditions: `options` valid and every value of
 // `spectrum` finite and > 0 (ValidateSignature checks both); values past
 // the first n are ignored. O(n); thread-safe.
 std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,

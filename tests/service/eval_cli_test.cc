@@ -95,7 +95,7 @@ using Matrix = std::vector<std::vector<double>>;
 // term at weight 1 alone, and D2 from the same loaded meshes, the columns
 // of `tpr eval --compare`.
 struct Matrices {
-  Matrix tpr, paper, spectrum, d2;
+  Matrix tpr, identity, kind, paper, spectrum, d2;
 };
 
 absl::StatusOr<Matrices> InProcessMatrices(
@@ -117,13 +117,17 @@ absl::StatusOr<Matrices> InProcessMatrices(
   }
   const size_t n = prepared.size();
   const Matrix zero(n, std::vector<double>(n, 0.0));
-  Matrices d{zero, zero, zero, zero};
-  // The index's default spectral weight is 1, so its spectral term is the
-  // term at weight 1 (what Ranking{spectral_weight: 1} ranks by).
-  EXPECT_EQ(index::GroundDistanceOptions{}.spectral.weight, 1.0);
+  Matrices d{zero, zero, zero, zero, zero, zero};
   for (size_t i = 0; i < n; ++i) {
     for (size_t j = i + 1; j < n; ++j) {
-      d.tpr[i][j] = d.tpr[j][i] = index::Distance(prepared[i], prepared[j]);
+      d.tpr[i][j] = d.tpr[j][i] =
+          index::Distance(prepared[i], prepared[j],
+                          index::IntentWeights(index::Intent::kBalanced));
+      d.identity[i][j] = d.identity[j][i] =
+          index::Distance(prepared[i], prepared[j],
+                          index::IntentWeights(index::Intent::kIdentity));
+      d.kind[i][j] = d.kind[j][i] = index::Distance(
+          prepared[i], prepared[j], index::IntentWeights(index::Intent::kKind));
       d.paper[i][j] = d.paper[j][i] = index::Emd(prepared[i], prepared[j]);
       d.spectrum[i][j] = d.spectrum[j][i] =
           index::SpectralDistance(prepared[i], prepared[j]);
@@ -331,8 +335,9 @@ TEST_F(EvalCliTest, FolderAndManifestReportTheInProcessMetrics) {
 }
 
 TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
-  // `tpr eval --compare`: the paper's distance and the spectrum alone as
-  // the indexer ranks them (SearchRequest.ranking), and D2 computed by the
+  // `tpr eval --compare`: the other two intents, the paper's distance and
+  // the spectrum alone as the indexer ranks them (SearchRequest.intent and
+  // .ranking), and D2 computed by the
   // client, each scored as the in-process oracle scores its own matrix.
   // The classes are mixed as in the manifest test above (the last pose of
   // each class labelled as the next class), so that no metric is 1.
@@ -349,10 +354,8 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
   const size_t compare = r.out.find("\"compare\":{");
   ASSERT_NE(compare, std::string::npos);
   const std::pair<const char*, const Matrix*> columns[] = {
-      {"default", &d->tpr},
-      {"paper", &d->paper},
-      {"spectrum", &d->spectrum},
-      {"d2", &d->d2}};
+      {"default", &d->tpr}, {"identity", &d->identity}, {"kind", &d->kind},
+      {"paper", &d->paper}, {"spectrum", &d->spectrum}, {"d2", &d->d2}};
   for (const auto& [key, matrix] : columns) {
     const Oracle oracle = Score(*matrix, labels);
     const size_t at = r.out.find(absl::StrCat("\"", key, "\":{"), compare);
@@ -369,13 +372,33 @@ TEST_F(EvalCliTest, CompareShowsPaperSpectrumAndD2BesideTheDefault) {
   EXPECT_NE(Score(d->paper, labels).scores.overall.map,
             Score(d->spectrum, labels).scores.overall.map);
 
+  // --intent identity: the run's own column is identity's, and balanced
+  // becomes a column beside it.
+  CommandResult by_identity = RunTpr(
+      cluster_, "--json eval --intent identity --compare --out " +
+                    cluster_.dir() + "/o " + cluster_.dir() + "/MANIFEST.txt");
+  ASSERT_EQ(by_identity.exit_code, 0) << by_identity.out << by_identity.err;
+  const size_t compare2 = by_identity.out.find("\"compare\":{");
+  ASSERT_NE(compare2, std::string::npos);
+  for (const auto& [key, matrix] :
+       {std::pair<const char*, const Matrix*>{"default", &d->identity},
+        {"balanced", &d->tpr},
+        {"kind", &d->kind}}) {
+    const size_t at =
+        by_identity.out.find(absl::StrCat("\"", key, "\":{"), compare2);
+    ASSERT_NE(at, std::string::npos) << key;
+    ExpectMetrics(by_identity.out, at, Score(*matrix, labels).scores.overall,
+                  absl::StrCat("--intent identity ", key));
+  }
+
   // The text report prints them side by side, per class too.
   CommandResult text =
       RunTpr(cluster_, "eval --compare --out " + cluster_.dir() + "/o " +
                            cluster_.dir() + "/MANIFEST.txt");
   ASSERT_EQ(text.exit_code, 0) << text.err;
-  for (const char* want : {"side by side", "paper TPR", "spectrum alone", "D2",
-                           "per class, NN / FT", "mix_0"}) {
+  for (const char* want :
+       {"side by side", "intent identity", "intent kind", "paper TPR",
+        "spectrum alone", "D2", "per class, NN / FT", "mix_0"}) {
     EXPECT_NE(text.out.find(want), std::string::npos) << want << text.out;
   }
 }
