@@ -168,6 +168,8 @@ Role RequiredRole(absl::string_view method) {
       {"/tpr.v1.Indexer/Get", Role::kRead},
       {"/tpr.v1.Indexer/List", Role::kRead},
       {"/tpr.v1.Indexer/Stats", Role::kRead},
+      {"/tpr.v1.Indexer/GetThumbnail", Role::kRead},
+      {"/tpr.v1.Indexer/GetPreview", Role::kRead},
       {"/tpr.v1.Extractor/Extract", Role::kRead},
       {"/tpr.v1.Indexer/Upsert", Role::kWrite},
       {"/tpr.v1.Indexer/BatchUpsert", Role::kWrite},

@@ -13,7 +13,8 @@
 // hash per call.
 //
 // Roles nest: read < write < admin.
-//   read:  Search, Get, List, Stats (tpr.v1.Indexer),
+//   read:  Search, Get, List, Stats, GetThumbnail, GetPreview
+//          (tpr.v1.Indexer),
 //          Extract (tpr.v1.Extractor)
 //   write: read + Upsert, BatchUpsert, Delete
 //   admin: write + every other method (backup, restore, ... as they come)
