@@ -34,6 +34,7 @@ std::string ToJson(const google::protobuf::Message& message) {
 Reply JsonReply(std::string body) {
   Reply reply;
   reply.body = std::move(body);
+  reply.content_type = kJsonType;
   return reply;
 }
 

@@ -30,6 +30,7 @@
 
 #include "absl/status/status.h"
 #include "web/backends.h"
+#include "web/http_errors.h"
 #include "web/recent_searches.h"
 
 namespace httplib {
@@ -44,7 +45,7 @@ struct Reply {
   // from it: ErrorReply).
   absl::Status status;
   int http_status = 200;
-  std::string content_type = "application/json";
+  std::string content_type = kJsonType;
   std::string body;
   // Extra response headers.
   std::vector<std::pair<std::string, std::string>> headers;

@@ -17,6 +17,20 @@ namespace {
 // 4 MiB default message limit.
 constexpr size_t kChunkBytes = client::kChunkBytes;
 
+// Failed returns the service's status, with a message naming the method
+// when the service sent none (gRPC's own UNIMPLEMENTED has none).
+absl::Status Failed(const grpc::Status& status, const char* method) {
+  absl::Status out = common::FromGrpcStatus(status);
+  if (!status.error_message().empty()) return out;
+  std::string hint;
+  if (status.error_code() == grpc::StatusCode::UNIMPLEMENTED)
+    hint = ": the service does not offer it";
+  return absl::Status(
+      out.code(),
+      absl::StrCat(method, " answered ", absl::StatusCodeToString(out.code()),
+                   " without a message", hint));
+}
+
 std::string Readiness(const std::shared_ptr<grpc::Channel>& channel,
                       const std::string& service) {
   std::unique_ptr<grpc::health::v1::Health::Stub> stub =
@@ -118,7 +132,7 @@ absl::StatusOr<v1::ExtractResponse> Backends::Extract(
   }
   writer->WritesDone();
   const grpc::Status s = writer->Finish();
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Extractor/Extract");
   return response;
 }
 
@@ -137,7 +151,7 @@ absl::StatusOr<SearchResult> Backends::Search(const v1::SearchRequest& request,
     }
   }
   const grpc::Status s = reader->Finish();
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Search");
   return result;
 }
 
@@ -149,7 +163,7 @@ absl::StatusOr<v1::Model> Backends::Get(const std::string& id,
   request.set_id(id);
   v1::Model model;
   const grpc::Status s = indexer_->Get(&context, request, &model);
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Get");
   return model;
 }
 
@@ -159,7 +173,7 @@ absl::StatusOr<v1::ListResponse> Backends::List(const v1::ListRequest& request,
   Prepare(&context, meta);
   v1::ListResponse response;
   const grpc::Status s = indexer_->List(&context, request, &response);
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/List");
   return response;
 }
 
@@ -169,7 +183,7 @@ absl::StatusOr<v1::StatsResponse> Backends::Stats(const CallMeta& meta) const {
   v1::StatsResponse response;
   const grpc::Status s =
       indexer_->Stats(&context, v1::StatsRequest(), &response);
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Stats");
   return response;
 }
 
@@ -182,7 +196,7 @@ absl::StatusOr<bool> Backends::Upsert(const v1::Model& model, bool overwrite,
   request.set_overwrite(overwrite);
   v1::UpsertResponse response;
   const grpc::Status s = indexer_->Upsert(&context, request, &response);
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Upsert");
   return response.created();
 }
 
@@ -193,7 +207,8 @@ absl::Status Backends::Delete(const std::string& id,
   v1::DeleteRequest request;
   request.set_id(id);
   v1::DeleteResponse response;
-  return common::FromGrpcStatus(indexer_->Delete(&context, request, &response));
+  const grpc::Status s = indexer_->Delete(&context, request, &response);
+  return s.ok() ? absl::OkStatus() : Failed(s, "/tpr.v1.Indexer/Delete");
 }
 
 absl::StatusOr<std::string> Backends::Thumbnail(const std::string& id,
@@ -204,7 +219,7 @@ absl::StatusOr<std::string> Backends::Thumbnail(const std::string& id,
   request.set_id(id);
   v1::Thumbnail response;
   const grpc::Status s = indexer_->GetThumbnail(&context, request, &response);
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/GetThumbnail");
   return std::move(*response.mutable_png());
 }
 
@@ -223,7 +238,7 @@ absl::StatusOr<std::string> Backends::Preview(const std::string& id,
     bytes += chunk.data();
   }
   const grpc::Status s = reader->Finish();
-  if (!s.ok()) return common::FromGrpcStatus(s);
+  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/GetPreview");
   return bytes;
 }
 

@@ -4,13 +4,14 @@
 #include <prometheus/counter.h>
 #include <prometheus/gauge.h>
 #include <prometheus/histogram.h>
-#include <sys/stat.h>
 
 #include <chrono>
 
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "common/logging.h"
+#include "web/console_files.h"
 #include "web/http_errors.h"
 #include "web/tls_identity.h"
 
@@ -137,7 +138,7 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(
           return httplib::Server::HandlerResponse::Unhandled;
         const absl::Status status =
             StatusForHttp(response.status, request, max_upload);
-        response.set_content(ErrorJson(status, ""), "application/json");
+        response.set_content(ErrorJson(status, ""), kJsonType);
         return httplib::Server::HandlerResponse::Handled;
       }));
   web->InstallHealth();
@@ -222,7 +223,7 @@ void WebServer::Install(std::vector<Route> routes) {
 
 void WebServer::InstallHealth() {
   server_->Get("/healthz", [](const httplib::Request&, httplib::Response& r) {
-    r.set_content("{\"status\":\"SERVING\"}", "application/json");
+    r.set_content("{\"status\":\"SERVING\"}", kJsonType);
   });
   server_->Get("/readyz", [this](const httplib::Request&,
                                  httplib::Response& r) {
@@ -236,31 +237,54 @@ void WebServer::InstallHealth() {
       reason = absl::StrCat("indexer ", backends_->options().indexer, ": ", i);
     }
     if (reason.empty()) {
-      r.set_content("{\"status\":\"SERVING\"}", "application/json");
+      r.set_content("{\"status\":\"SERVING\"}", kJsonType);
       return;
     }
     r.status = 503;
     r.set_content(
         ErrorJson(absl::UnavailableError(absl::StrCat("not ready: ", reason)),
                   ""),
-        "application/json");
+        kJsonType);
   });
 }
 
 void WebServer::InstallConsole() {
-  struct stat st {};
-  const std::string index = options_.console_dir + "/index.html";
-  if (!options_.console_dir.empty() && stat(index.c_str(), &st) == 0) {
-    server_->set_mount_point("/", options_.console_dir);
+  absl::StatusOr<ConsoleFiles> files =
+      options_.console_dir.empty() ? absl::NotFoundError("no --console-dir")
+                                   : ConsoleFiles::Load(options_.console_dir);
+  if (!files.ok()) {
+    common::LogWarning(
+        options_.log_name,
+        absl::StrCat("console not served: ", files.status().message()));
+    server_->Get("/", [](const httplib::Request&, httplib::Response& r) {
+      r.set_content(
+          "<!doctype html><title>tpr-web</title><p>The console is not built "
+          "(no index.html in tpr-web's --console-dir). Run scripts/setup with "
+          "Node.js installed. The API is at /api/v1/.",
+          "text/html; charset=utf-8");
+    });
     return;
   }
-  server_->Get("/", [](const httplib::Request&, httplib::Response& r) {
-    r.set_content(
-        "<!doctype html><title>tpr-web</title><p>The console is not built "
-        "(no index.html in tpr-web's --console-dir). Run scripts/setup with "
-        "Node.js installed. The API is at /api/v1/.",
-        "text/html");
-  });
+  auto shared = std::make_shared<const ConsoleFiles>(*std::move(files));
+  // Registered after the API routes, so it only sees the other paths.
+  server_->Get("/(.*)",
+               [shared](const httplib::Request& request, httplib::Response& r) {
+                 const ConsoleFiles::File* file = shared->Find(request.path);
+                 if (file == nullptr) {
+                   r.status = 404;
+                   return;  // The error handler writes the JSON body.
+                 }
+                 r.set_header("Cache-Control", file->cache_control);
+                 r.set_header("Vary", "Accept-Encoding");
+                 if (!file->gzip.empty() &&
+                     absl::StrContains(
+                         request.get_header_value("Accept-Encoding"), "gzip")) {
+                   r.set_header("Content-Encoding", "gzip");
+                   r.set_content(file->gzip, file->content_type.c_str());
+                 } else {
+                   r.set_content(file->bytes, file->content_type.c_str());
+                 }
+               });
 }
 
 }  // namespace tpr::web

@@ -223,6 +223,8 @@ export function describe(error: unknown, doing: string): string {
       return `${doing}: too large or the service is busy (${error.message}).`;
     case 'NOT_FOUND':
       return `${doing}: not found (${error.message}).`;
+    case 'UNIMPLEMENTED':
+      return `${doing}: the service does not offer this (${error.message}).`;
     case 'DEADLINE_EXCEEDED':
       return `${doing}: the service took too long (${error.message}).`;
     default:
