@@ -200,7 +200,18 @@ try {
   console.log(`FAIL: ${error.stack ?? error}`);
   failed = true;
 } finally {
-  for (const c of children) c.kill('SIGTERM');
+  // The indexer saves its tree on SIGTERM: wait for every exit before
+  // removing the directory it writes to.
+  await Promise.all(
+    children.map(
+      (c) =>
+        new Promise((done) => {
+          if (c.exitCode !== null || c.signalCode !== null) return done();
+          c.once('exit', done);
+          c.kill('SIGTERM');
+        }),
+    ),
+  );
   rmSync(work, { recursive: true, force: true });
 }
 process.exit(failed ? 1 : 0);
