@@ -188,6 +188,37 @@ async function main() {
   check(/refused/.test(message ?? '') && /broken\.off/.test(message ?? ''), `a broken mesh is refused with a reason: ${message}`);
   await page.screenshot({ path: join(out, '08-refused.png'), fullPage: true });
 
+  // Keyboard only: Tab from the top reaches the mesh picker and the Search
+  // button, each with a visible label.
+  await page.goto(`${base}/#/search`);
+  await page.waitForSelector('#mesh-file');
+  await page.evaluate(() => document.activeElement?.blur());
+  const reached = [];
+  for (let i = 0; i < 20; ++i) {
+    await page.keyboard.press('Tab');
+    reached.push(await page.evaluate(() => document.activeElement?.id || document.activeElement?.tagName.toLowerCase() || ''));
+  }
+  check(reached.includes('mesh-file') && reached.includes('search-button') && reached.indexOf('mesh-file') < reached.indexOf('search-button'), `Tab reaches the mesh picker, then Search (${reached.join(' > ')})`);
+  const unlabelled = await page.$$eval('input, select', (els) => els.filter((e) => !e.labels || e.labels.length === 0).map((e) => e.id));
+  check(unlabelled.length === 0, `every input has a label (${unlabelled.join(', ')})`);
+
+  // A tpr-web that requires keys: the console says a key is missing, and
+  // works once one is entered.
+  const keys = join(work, 'keys.txt');
+  const made = spawnSync(bin('tpr'), ['key', 'new', '--role', 'read', '--keys', keys]);
+  const key = String(made.stdout).trim();
+  const locked = await start('tpr-web', ['--extractor', `127.0.0.1:${extractor}`, '--indexer', `127.0.0.1:${indexer}`, '--console-dir', join(build, 'web/console'), '--api-keys', keys]);
+  await page.goto(`http://127.0.0.1:${locked}/`);
+  await page.waitForSelector('#message:not([hidden])');
+  const keyMessage = await page.textContent('#message');
+  check(/needs an API key/.test(keyMessage ?? ''), `without a key the console says so: ${keyMessage}`);
+  await page.screenshot({ path: join(out, '09-key-missing.png') });
+  await page.fill('#api-key', key);
+  await page.press('#api-key', 'Enter');
+  await page.waitForSelector('#message', { state: 'hidden' });
+  const labelled = await page.$$eval('#label option', (els) => els.length);
+  check(labelled === 9, `with the key the labels load (${labelled - 1} labels)`);
+
   check(consoleErrors.length === 0, `no script errors (${consoleErrors.join('; ')})`);
   await browser.close();
   writeFileSync(join(out, 'timings.json'), `${JSON.stringify(timings, null, 2)}\n`);

@@ -13,22 +13,25 @@ const main = document.getElementById('main') as HTMLElement;
 let labels: string[] = [];
 let first = true;
 
-async function loadLabels(): Promise<void> {
+// loadLabels reads the index's labels; returns what went wrong ("" when
+// nothing did).
+async function loadLabels(): Promise<string> {
   try {
     const s = await api.stats();
     labels = Object.keys(s.labels)
       .filter((l) => l)
       .sort();
+    return '';
   } catch (error) {
-    showMessage(api.describe(error, 'Reading the index'));
+    return api.describe(error, 'Reading the index');
   }
 }
 
-async function route(): Promise<void> {
+async function route(problem = ''): Promise<void> {
   leaveSearch();
   leaveBrowse();
   leaveStatus();
-  showMessage('');
+  showMessage(problem);
   const hash = location.hash.replace(/^#\/?/, '');
   const [screen, ...rest] = hash.split('/');
   const arg = decodeURIComponent(rest.join('/'));
@@ -63,8 +66,8 @@ keyInput.value = api.apiKey();
 keyForm.addEventListener('submit', (e) => {
   e.preventDefault();
   api.setApiKey(keyInput.value.trim());
-  void loadLabels().then(route);
+  void loadLabels().then((problem) => route(problem));
 });
 
 window.addEventListener('hashchange', () => void route());
-void loadLabels().then(route);
+void loadLabels().then((problem) => route(problem));
