@@ -122,6 +122,7 @@ async function main() {
   const images = await page.$$eval('.results .card img', (els) => els.filter((i) => i.naturalWidth > 0).length);
   if (mediaServed) check(images === 24, `24 thumbnails drawn (got ${images})`);
   else check(images === 0 && (await page.isVisible('.results .placeholder')), 'without media, every card says it has no picture');
+  await page.waitForSelector('.query canvas', { timeout: 30000 });
   check(await page.isVisible('.query canvas'), 'the query is drawn in 3D');
   const overlay = await page.textContent('.query p');
   check(/\d+ topological points/.test(overlay ?? ''), `the query's features are listed (${overlay})`);

@@ -42,7 +42,7 @@ export function renderBrowse(main: HTMLElement, labels: string[], label: string)
       prev.disabled = page === 0;
       next.disabled = !nextToken;
       where.textContent = `Page ${page + 1}`;
-      renderGrid(grid, reply.models.map((m) => ({ id: m.id, label: m.label })), (c) => go(c.id), 'Models');
+      void renderGrid(grid, reply.models.map((m) => ({ id: m.id, label: m.label })), (c) => go(c.id), 'Models');
     } catch (error) {
       grid.replaceChildren();
       showMessage(api.describe(error, 'Listing the models'));
@@ -107,14 +107,15 @@ export async function renderModel(main: HTMLElement, id: string): Promise<void> 
     showMessage(api.describe(error, `Opening ${id}`));
     return;
   }
-  viewer = await showPreview(view, id);
   neighbours.append(el('h3', {}, 'Nearest models'));
   const grid = el('div');
   neighbours.append(grid);
   try {
     const reply = await api.searchById(id, { k: 12, label: '', intent: '', excludeSelf: true });
-    renderGrid(grid, cardsOf(reply.neighbors), (c) => go(c.id), 'Nearest models');
+    // The thumbnails first, then the 3D view (see search.ts).
+    await renderGrid(grid, cardsOf(reply.neighbors), (c) => go(c.id), 'Nearest models');
   } catch (error) {
     showMessage(api.describe(error, `Searching near ${id}`));
   }
+  viewer = await showPreview(view, id);
 }

@@ -15,12 +15,16 @@ export function cardsOf(neighbors: Neighbor[]): Card[] {
   return neighbors.map((n) => ({ id: n.id, label: n.label, rank: n.rank, distance: n.distance }));
 }
 
-export function renderGrid(container: HTMLElement, cards: Card[], onOpen: (card: Card) => void, caption: string): void {
+// renderGrid draws the cards; the promise resolves once every thumbnail has
+// arrived (or failed).
+export function renderGrid(container: HTMLElement, cards: Card[], onOpen: (card: Card) => void, caption: string): Promise<void> {
   container.replaceChildren();
   if (cards.length === 0) {
     container.append(el('p', {}, 'No models.'));
-    return;
+    return Promise.resolve();
   }
+  let finished: () => void = () => undefined;
+  const all = new Promise<void>((resolve) => (finished = resolve));
   performance.clearMarks('tpr-results');
   performance.clearMeasures('tpr-thumbnails');
   performance.mark('tpr-results');
@@ -30,6 +34,7 @@ export function renderGrid(container: HTMLElement, cards: Card[], onOpen: (card:
     if (--pending === 0) {
       performance.measure('tpr-thumbnails', 'tpr-results');
       list.dataset.thumbnails = 'done';
+      finished();
     }
   };
   for (const card of cards) {
@@ -58,4 +63,5 @@ export function renderGrid(container: HTMLElement, cards: Card[], onOpen: (card:
       });
   }
   container.append(list);
+  return all;
 }

@@ -150,6 +150,10 @@ export function renderSearch(main: HTMLElement, labels: string[]): void {
     opened.replaceChildren();
     try {
       let reply: api.SearchReply;
+      // The 3D view is drawn after the thumbnails: with software WebGL its
+      // first frame holds the page's thread for about 200 ms, which would
+      // delay every thumbnail still arriving.
+      let draw: () => Promise<void>;
       if (chosen) {
         const bytes = await chosen.arrayBuffer();
         reply = await api.searchByUpload(chosen, opts);
@@ -160,25 +164,31 @@ export function renderSearch(main: HTMLElement, labels: string[]): void {
         const points = features.filter((f) => f.kind === 'FEATURE_KIND_POINT').length;
         query.append(el('p', {}, `${points} topological points (red), ${features.length - points} rings (blue)`));
         for (const w of reply.query?.warnings ?? []) query.append(el('p', { class: 'warning' }, w));
-        try {
-          const geometry = geometryFromFile(chosen.name, bytes);
-          const v = new Viewer(query, `3D view of ${chosen.name} with its topological points and rings`);
-          v.show(geometry, reply.query ? overlayOf(reply.query, geometry) : undefined);
-          viewers.push(v);
-        } catch (error) {
-          query.append(el('p', { class: 'note' }, `Cannot display ${chosen.name}: ${String(error)}`));
-        }
+        const answer = reply;
+        draw = async () => {
+          try {
+            const geometry = geometryFromFile(chosen.name, bytes);
+            const v = new Viewer(query, `3D view of ${chosen.name} with its topological points and rings`);
+            v.show(geometry, answer.query ? overlayOf(answer.query, geometry) : undefined);
+            viewers.unshift(v);
+          } catch (error) {
+            query.append(el('p', { class: 'note' }, `Cannot display ${chosen.name}: ${String(error)}`));
+          }
+        };
       } else {
         reply = await api.searchById(id, opts);
         query.append(el('h3', {}, `Query: ${id}`));
-        const v = await showPreview(query, id);
-        if (v) viewers.push(v);
+        draw = async () => {
+          const v = await showPreview(query, id);
+          if (v) viewers.unshift(v);
+        };
       }
       busy.textContent = `${reply.neighbors.length} nearest models in ${reply.stats.milliseconds.toFixed(1)} ms (indexer time).`;
       results.append(el('h3', {}, 'Nearest models'));
       const grid = el('div');
       results.append(grid);
-      renderGrid(grid, cardsOf(reply.neighbors), open, 'Nearest models');
+      await renderGrid(grid, cardsOf(reply.neighbors), open, 'Nearest models');
+      await draw();
     } catch (error) {
       busy.textContent = '';
       showMessage(api.describe(error, chosen ? `Searching with ${chosen.name}` : `Searching with ${id}`));
