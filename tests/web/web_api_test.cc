@@ -590,6 +590,9 @@ TEST(WebBackendsTest, DownAndSlowServices) {
   ASSERT_TRUE(r);
   EXPECT_EQ(r->status, 504) << r->body;
   EXPECT_EQ(ErrorCode(r->body), "DEADLINE_EXCEEDED");
+  // SIGTERM: stops accepting, finishes, exits 0.
+  EXPECT_EQ(slow.Stop(SIGTERM), 0);
+  EXPECT_TRUE(absl::StrContains(ReadText(slow.log_path()), "stopped"));
 }
 
 // The indexer's RESOURCE_EXHAUSTED (k above its --max-k) is 429.
