@@ -128,6 +128,18 @@ async function main() {
   check(/\d+ topological points/.test(overlay ?? ''), `the query's features are listed (${overlay})`);
   await page.screenshot({ path: join(out, '02-results.png'), fullPage: true });
 
+  // The same mesh as OBJ: the same nearest model.
+  const off = readFileSync(join(shapes, queryId), 'utf8').split('\n').filter((l) => l.trim() && !l.startsWith('OFF'));
+  const [nv] = off[0].split(/\s+/).map(Number);
+  const obj = [...off.slice(1, 1 + nv).map((l) => `v ${l}`), ...off.slice(1 + nv).map((l) => `f ${l.trim().split(/\s+/).slice(1).map((i) => Number(i) + 1).join(' ')}`)].join('\n');
+  await page.setInputFiles('#mesh-file', { name: 'query.obj', mimeType: 'text/plain', buffer: Buffer.from(obj) });
+  await page.waitForSelector('.query h3 >> text=query.obj');
+  await page.waitForSelector('.results .grid[data-thumbnails="done"]', { timeout: 60000 });
+  await page.waitForSelector('.query canvas', { timeout: 30000 });
+  const objFirst = await page.$eval('.results .card', (e) => e.dataset.id);
+  check(objFirst === cards[0]?.id, `the OBJ upload finds the same nearest model (${objFirst})`);
+  await page.screenshot({ path: join(out, '02b-obj-results.png') });
+
   // Open one neighbour: its own 3D view (its preview mesh).
   await page.focus('.results .card >> nth=1');
   await page.keyboard.press('Enter');

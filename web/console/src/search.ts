@@ -15,21 +15,39 @@ function clearViewers(): void {
   viewers = [];
 }
 
+// fileVertices returns a vertex lookup in the file's own order: the
+// displayed geometry's for indexed formats (OFF, PLY), the "v" lines for
+// OBJ (its loader unrolls faces), none for STL (no shared vertices).
+function fileVertices(name: string, bytes: ArrayBuffer, geometry: THREE.BufferGeometry): THREE.Vector3[] | null {
+  if (name.toLowerCase().endsWith('.obj')) {
+    const out: THREE.Vector3[] = [];
+    for (const line of new TextDecoder().decode(bytes).split('\n')) {
+      const m = /^v\s+(\S+)\s+(\S+)\s+(\S+)/.exec(line);
+      if (m) out.push(new THREE.Vector3(Number(m[1]), Number(m[2]), Number(m[3])));
+    }
+    return out;
+  }
+  if (!geometry.index) return null;
+  const position = geometry.getAttribute('position');
+  const out: THREE.Vector3[] = [];
+  for (let i = 0; i < position.count; ++i) out.push(new THREE.Vector3().fromBufferAttribute(position, i));
+  return out;
+}
+
 // overlayOf places each feature of the query: from the explanation's
 // positions when the extractor sent them, else from its vertex indices
-// into the file as displayed (indexed formats keep the file's order).
-function overlayOf(reply: api.ExtractResponse, geometry: THREE.BufferGeometry): Overlay {
+// into the file's vertices (the extractor numbers them in file order).
+function overlayOf(reply: api.ExtractResponse, vertices: THREE.Vector3[] | null): Overlay {
   const overlay: Overlay = { points: [], rings: [] };
   const features = reply.signature?.features ?? [];
   const placed = reply.explanation?.featureVertices ?? [];
-  const position = geometry.getAttribute('position');
   placed.forEach((f, i) => {
     const pts: THREE.Vector3[] = [];
     const p = f.positions ?? [];
     if (p.length >= 3) {
       for (let j = 0; j + 2 < p.length; j += 3) pts.push(new THREE.Vector3(p[j], p[j + 1], p[j + 2]));
-    } else if (geometry.index) {
-      for (const v of f.vertices ?? []) if (v < position.count) pts.push(new THREE.Vector3().fromBufferAttribute(position, v));
+    } else if (vertices) {
+      for (const v of f.vertices ?? []) if (v < vertices.length) pts.push(vertices[v]);
     }
     if (pts.length === 0) return;
     if (features[i]?.kind === 'FEATURE_KIND_POINT') overlay.points.push(pts[0]);
@@ -169,7 +187,7 @@ export function renderSearch(main: HTMLElement, labels: string[]): void {
           try {
             const geometry = geometryFromFile(chosen.name, bytes);
             const v = new Viewer(query, `3D view of ${chosen.name} with its topological points and rings`);
-            v.show(geometry, answer.query ? overlayOf(answer.query, geometry) : undefined);
+            v.show(geometry, answer.query ? overlayOf(answer.query, fileVertices(chosen.name, bytes, geometry)) : undefined);
             viewers.unshift(v);
           } catch (error) {
             query.append(el('p', { class: 'note' }, `Cannot display ${chosen.name}: ${String(error)}`));
