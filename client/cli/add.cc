@@ -41,7 +41,7 @@ absl::StatusOr<std::vector<AddOutcome>> AddItems(
     absl::Status status;
     bool created = false;
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        extractor.ExtractFile(item.path, options.extract, &call);
+        extractor.ExtractFile(item.path, options.extract, options.media, &call);
     if (r.ok()) {
       tpr::v1::Model model;
       model.set_id(item.id);
@@ -49,6 +49,8 @@ absl::StatusOr<std::vector<AddOutcome>> AddItems(
       (*model.mutable_metadata())["file_name"] =
           fs::path(item.path).filename().string();
       *model.mutable_signature() = std::move(*r->mutable_signature());
+      if (r->has_media())
+        *model.mutable_media() = std::move(*r->mutable_media());
       absl::StatusOr<bool> c = indexer.Upsert(model, options.update, &call);
       status = c.status();
       created = c.ok() && *c;
@@ -78,10 +80,15 @@ struct AddFlags {
   std::vector<std::string> paths;
   std::string manifest;
   AddOptions options;
+  bool no_media = false;
+  bool no_overlay = false;
 };
 
 int RunAdd(const Globals& g, const AddFlags& flags) {
-  const AddOptions& options = flags.options;
+  AddOptions options = flags.options;
+  options.media.set_thumbnail(!flags.no_media);
+  options.media.set_thumbnail_overlay(!flags.no_media && !flags.no_overlay);
+  options.media.set_preview(!flags.no_media);
   absl::StatusOr<std::vector<Item>> items = eval::CollectItems(flags.paths);
   if (!items.ok()) return Fail("add", items.status());
   if (!flags.manifest.empty()) {
@@ -158,7 +165,15 @@ const bool kRegistered = RegisterCommand(
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
        sub.add_flag("--update", flags->options.update,
-                    "replace ids already present (default: skip them)");
+                    "replace ids already present (default: skip them); also "
+                    "makes the thumbnails and previews of models stored "
+                    "without them");
+       sub.add_flag("--no-media", flags->no_media,
+                    "store no thumbnail or preview (default: both, made by "
+                    "the extractor)");
+       sub.add_flag("--no-overlay", flags->no_overlay,
+                    "thumbnails without the TPR overlay (default: points as "
+                    "red dots, rings as dark lines)");
        AddHandlesOption(sub, &flags->options.extract);
        return [flags](const Globals& g) { return RunAdd(g, *flags); };
      }});

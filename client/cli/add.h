@@ -32,6 +32,10 @@ struct AddOptions {
   // Extraction options sent with every mesh (ExtractOptions; zero fields:
   // the extractor's defaults). Default: all defaults.
   tpr::v1::ExtractOptions extract;
+  // Pictures asked of the extractor with every mesh and stored with its
+  // model (Model.media). Default: none; `tpr add` asks for the thumbnail
+  // with the TPR overlay and the preview (--no-media, --no-overlay).
+  tpr::v1::MediaOptions media;
 };
 
 // AddOutcome is what happened to one item.

@@ -4,7 +4,9 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <utility>
 
@@ -17,6 +19,36 @@ int Fail(const std::string& what, const absl::Status& status) {
   std::fprintf(stderr, "tpr: %s: %s\n", TextField(what).c_str(),
                TextField(status.ToString()).c_str());
   return 1;
+}
+
+absl::Status WriteBytesToFile(const std::string& path,
+                              absl::string_view bytes) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  bool ok = f != nullptr;
+  int error = ok ? 0 : errno;
+  if (ok && std::fwrite(bytes.data(), 1, bytes.size(), f) != bytes.size()) {
+    ok = false;
+    error = errno;
+  }
+  if (f != nullptr && std::fclose(f) != 0 && ok) {
+    ok = false;
+    error = errno;
+  }
+  if (ok) return absl::OkStatus();
+  const std::string message =
+      absl::StrCat("cannot write ", path, ": ", std::strerror(error));
+  switch (error) {
+    case ENOENT:
+      return absl::NotFoundError(message);
+    case EACCES:
+    case EPERM:
+      return absl::PermissionDeniedError(message);
+    case ENOSPC:
+    case EDQUOT:
+      return absl::ResourceExhaustedError(message);
+    default:
+      return absl::FailedPreconditionError(message);
+  }
 }
 
 std::string FailuresJson(const Failures& failures) {

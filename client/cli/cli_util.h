@@ -41,6 +41,12 @@ using tpr::eval::TextField;
 // Fail prints "tpr: WHAT: STATUS" on stderr and returns exit code 1.
 int Fail(const std::string& what, const absl::Status& status);
 
+// WriteBytesToFile writes `bytes` to `path`, replacing it. Errors: the
+// file cannot be opened or written (the message names the path and the
+// system's reason): NOT_FOUND for a missing directory, PERMISSION_DENIED,
+// RESOURCE_EXHAUSTED for a full disk, FAILED_PRECONDITION otherwise.
+absl::Status WriteBytesToFile(const std::string& path, absl::string_view bytes);
+
 // Failures: (id, reason) of each item a command could not handle.
 using Failures = std::vector<std::pair<std::string, std::string>>;
 

@@ -1,5 +1,6 @@
 // `tpr extract MESH...`: the signature summary of meshes, extracted by
-// tpr-extractor (points, rings, mesh statistics, stage timings, warnings).
+// tpr-extractor (points, rings, mesh statistics, stage timings, warnings);
+// with --thumbnail and --preview, one mesh's pictures saved to files.
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <memory>
@@ -18,7 +19,31 @@ struct ExtractFlags {
   std::vector<std::string> meshes;
   // Sent with every mesh; --bands and --handles fill it.
   tpr::v1::ExtractOptions options;
+  std::string thumbnail;  // where to save the thumbnail PNG
+  std::string preview;    // where to save the preview PLY
+  bool no_overlay = false;
 };
+
+// Saves the pictures of `r` that the flags ask for; returns the failures.
+int SavePictures(const std::string& path, const ExtractFlags& flags,
+                 const tpr::v1::ExtractResponse& r) {
+  int failures = 0;
+  if (!flags.thumbnail.empty()) {
+    absl::Status s =
+        r.media().thumbnail_png().empty()
+            ? absl::InternalError("the extractor returned no thumbnail")
+            : WriteBytesToFile(flags.thumbnail, r.media().thumbnail_png());
+    if (!s.ok()) failures += Fail(path, s);
+  }
+  if (!flags.preview.empty()) {
+    absl::Status s =
+        r.media().preview_ply().empty()
+            ? absl::InternalError("the extractor returned no preview")
+            : WriteBytesToFile(flags.preview, r.media().preview_ply());
+    if (!s.ok()) failures += Fail(path, s);
+  }
+  return failures;
+}
 
 void PrintSummary(const std::string& path, const tpr::v1::ExtractResponse& r) {
   const tpr::v1::Signature& s = r.signature();
@@ -43,12 +68,28 @@ void PrintSummary(const std::string& path, const tpr::v1::ExtractResponse& r) {
 }
 
 int RunExtract(const Globals& g, const ExtractFlags& flags) {
+  tpr::v1::MediaOptions media;
+  media.set_thumbnail(!flags.thumbnail.empty());
+  media.set_thumbnail_overlay(!flags.no_overlay);
+  media.set_preview(!flags.preview.empty());
+  const bool pictures = media.thumbnail() || media.preview();
+  if (pictures && flags.meshes.size() != 1) {
+    std::fprintf(stderr,
+                 "tpr extract: --thumbnail and --preview take exactly one "
+                 "MESH\n");
+    return 2;
+  }
   std::optional<tpr::client::ExtractorClient> client = ConnectExtractor(g);
   if (!client) return 1;
   int failures = 0;
   for (const std::string& path : flags.meshes) {
     absl::StatusOr<tpr::v1::ExtractResponse> r =
-        client->ExtractFile(path, flags.options);
+        client->ExtractFile(path, flags.options, media);
+    if (r.ok() && pictures) {
+      failures += SavePictures(path, flags, *r);
+      // The pictures are in the files; keep the JSON line short.
+      r->clear_media();
+    }
     if (!r.ok()) {
       ++failures;
       if (g.json) {
@@ -77,6 +118,13 @@ const bool kRegistered = RegisterCommand(
            [flags](const int& bands) { flags->options.set_bands(bands); },
            "geodesic bands per feature (0: default 20)");
        AddHandlesOption(sub, &flags->options);
+       sub.add_option("--thumbnail", flags->thumbnail,
+                      "save the mesh's thumbnail (256 x 256 PNG) to FILE");
+       sub.add_option("--preview", flags->preview,
+                      "save the mesh's preview (binary PLY, at most 5,000 "
+                      "triangles) to FILE");
+       sub.add_flag("--no-overlay", flags->no_overlay,
+                    "thumbnail without the TPR overlay");
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
      }});
 

@@ -237,7 +237,8 @@ class FileSource final : public ChunkSource {
 absl::StatusOr<v1::ExtractResponse> ExtractFrom(
     grpc::Channel* channel, v1::Extractor::Stub* stub, ChunkSource& source,
     absl::string_view file_name, const v1::ExtractOptions& options,
-    v1::MeshFormat format, const CallOptions& call) {
+    const v1::MediaOptions* media, v1::MeshFormat format,
+    const CallOptions& call) {
   v1::ExtractResponse response;
   absl::Status local =
       absl::OkStatus();  // a failure of the source, not the call
@@ -266,6 +267,7 @@ absl::StatusOr<v1::ExtractResponse> ExtractFrom(
             request.set_format(format);
             request.set_file_name(std::string(file_name));
             *request.mutable_options() = options;
+            if (media != nullptr) *request.mutable_media() = *media;
           }
           first = false;
           // A failed write means the server already ended the call (for
@@ -290,7 +292,8 @@ absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
       slash == std::string::npos ? path : path.substr(slash + 1);
   FileSource source(path);
   return ExtractFrom(channel_.get(), stub_.get(), source, name, options,
-                     v1::MESH_FORMAT_UNSPECIFIED, call ? *call : defaults_);
+                     nullptr, v1::MESH_FORMAT_UNSPECIFIED,
+                     call ? *call : defaults_);
 }
 
 absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
@@ -299,7 +302,27 @@ absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
     const CallOptions* call) const {
   BytesSource source(bytes);
   return ExtractFrom(channel_.get(), stub_.get(), source, file_name, options,
-                     format, call ? *call : defaults_);
+                     nullptr, format, call ? *call : defaults_);
+}
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractFile(
+    const std::string& path, const v1::ExtractOptions& options,
+    const v1::MediaOptions& media, const CallOptions* call) const {
+  const size_t slash = path.find_last_of('/');
+  const std::string name =
+      slash == std::string::npos ? path : path.substr(slash + 1);
+  FileSource source(path);
+  return ExtractFrom(channel_.get(), stub_.get(), source, name, options, &media,
+                     v1::MESH_FORMAT_UNSPECIFIED, call ? *call : defaults_);
+}
+
+absl::StatusOr<v1::ExtractResponse> ExtractorClient::ExtractBytes(
+    absl::string_view bytes, absl::string_view file_name,
+    const v1::ExtractOptions& options, const v1::MediaOptions& media,
+    v1::MeshFormat format, const CallOptions* call) const {
+  BytesSource source(bytes);
+  return ExtractFrom(channel_.get(), stub_.get(), source, file_name, options,
+                     &media, format, call ? *call : defaults_);
 }
 
 // --- IndexerClient
@@ -506,6 +529,49 @@ absl::StatusOr<v1::Model> IndexerClient::Get(const std::string& id,
                   });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
+}
+
+absl::StatusOr<std::string> IndexerClient::GetThumbnail(
+    const std::string& id, const CallOptions* call) const {
+  v1::GetThumbnailRequest request;
+  request.set_id(id);
+  v1::Thumbnail response;
+  grpc::Status status =
+      WithRetries(channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
+                  [&](grpc::ClientContext* context) {
+                    return stub_->GetThumbnail(context, request, &response);
+                  });
+  if (!status.ok()) return common::FromGrpcStatus(status);
+  return std::move(*response.mutable_png());
+}
+
+absl::StatusOr<std::string> IndexerClient::GetPreview(
+    const std::string& id, const CallOptions* call) const {
+  v1::GetPreviewRequest request;
+  request.set_id(id);
+  std::string ply;
+  int64_t announced = -1;
+  grpc::Status status = WithRetries(
+      channel_.get(), call ? *call : defaults_, /*idempotent=*/true,
+      [&](grpc::ClientContext* context) {
+        ply.clear();
+        announced = -1;
+        std::unique_ptr<grpc::ClientReader<v1::PreviewChunk>> reader =
+            stub_->GetPreview(context, request);
+        v1::PreviewChunk chunk;
+        while (reader->Read(&chunk)) {
+          if (announced < 0) announced = chunk.total_bytes();
+          ply.append(chunk.data());
+        }
+        return reader->Finish();
+      });
+  if (!status.ok()) return common::FromGrpcStatus(status);
+  if (announced != static_cast<int64_t>(ply.size())) {
+    return absl::DataLossError(absl::StrCat("preview of '", id, "': received ",
+                                            ply.size(), " bytes of ", announced,
+                                            " announced"));
+  }
+  return ply;
 }
 
 absl::StatusOr<v1::ListResponse> IndexerClient::List(

@@ -151,13 +151,22 @@ v1::Signature SignatureToProto(const extract::Signature& signature,
   return proto;
 }
 
-v1::Explanation ExplanationToProto(const extract::Explanation& explanation) {
+v1::Explanation ExplanationToProto(const extract::Explanation& explanation,
+                                   const extract::Mesh& mesh) {
   v1::Explanation proto;
   proto.mutable_vertex_region()->Add(explanation.vertex_region.begin(),
                                      explanation.vertex_region.end());
+  const int64_t n = static_cast<int64_t>(mesh.positions.size());
   for (const std::vector<int32_t>& vertices : explanation.feature_vertices) {
-    proto.add_feature_vertices()->mutable_vertices()->Add(vertices.begin(),
-                                                          vertices.end());
+    v1::Explanation::FeatureVertices* out = proto.add_feature_vertices();
+    out->mutable_vertices()->Add(vertices.begin(), vertices.end());
+    out->mutable_positions()->Reserve(static_cast<int>(vertices.size() * 3));
+    for (int32_t v : vertices) {
+      if (v < 0 || v >= n) continue;
+      for (int c = 0; c < 3; ++c) {
+        out->add_positions(static_cast<float>(mesh.positions[v][c]));
+      }
+    }
   }
   return proto;
 }

@@ -56,8 +56,12 @@ v1::MeshStats StatsToProto(const extract::MeshStats& stats);
 v1::Signature SignatureToProto(const extract::Signature& signature,
                                const extract::Options& options);
 
-// ExplanationToProto returns `explanation` in wire form.
-v1::Explanation ExplanationToProto(const extract::Explanation& explanation);
+// ExplanationToProto returns `explanation` in wire form, each feature's
+// vertices with their positions in `mesh` (the mesh the explanation's ids
+// refer to: intake's; an id out of range gets no position, which cannot
+// happen for an explanation of `mesh`). O(vertices listed). Thread-safe.
+v1::Explanation ExplanationToProto(const extract::Explanation& explanation,
+                                   const extract::Mesh& mesh);
 
 }  // namespace tpr::extractor
 

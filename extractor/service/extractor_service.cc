@@ -18,6 +18,7 @@
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/service/convert.h"
+#include "extractor/service/media.h"
 
 namespace tpr::extractor {
 namespace {
@@ -110,9 +111,13 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(
   if (cancelled())
     return absl::CancelledError("extraction cancelled after intake");
 
+  // The overlay draws the features: explain for it, without changing the
+  // options the signature records or the explanation returned.
+  extract::Options run_options = extract_options;
+  run_options.explain |= NeedsExplanation(header.media());
   TPR_ASSIGN_OR_RETURN(
       extract::ExtractResult result,
-      extract::ExtractSignature(loaded.mesh, loaded.stats, extract_options));
+      extract::ExtractSignature(loaded.mesh, loaded.stats, run_options));
   if (cancelled())
     return absl::CancelledError("extraction cancelled after extraction");
 
@@ -132,7 +137,14 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(
   for (const std::string& w : loaded.warnings) response.add_warnings(w);
   for (const std::string& w : result.warnings) response.add_warnings(w);
   if (extract_options.explain && result.explanation.has_value()) {
-    *response.mutable_explanation() = ExplanationToProto(*result.explanation);
+    *response.mutable_explanation() =
+        ExplanationToProto(*result.explanation, loaded.mesh);
+  }
+  if (WantsMedia(header.media())) {
+    std::vector<std::string> warnings;
+    *response.mutable_media() =
+        MakeMedia(loaded.mesh, result, header.media(), &warnings);
+    for (std::string& w : warnings) response.add_warnings(std::move(w));
   }
   return response;
 }
@@ -238,6 +250,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       header_.set_format(request_.format());
       header_.set_file_name(request_.file_name());
       *header_.mutable_options() = request_.options();
+      *header_.mutable_media() = request_.media();
     }
     std::string* chunk = request_.mutable_data();
     if (static_cast<int64_t>(bytes_.size() + chunk->size()) >

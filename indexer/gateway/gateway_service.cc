@@ -448,6 +448,40 @@ grpc::Status GatewayService::Get(grpc::ServerContext* context,
                 }));
 }
 
+grpc::Status GatewayService::GetThumbnail(
+    grpc::ServerContext* context, const tpr::v1::GetThumbnailRequest* request,
+    tpr::v1::Thumbnail* response) {
+  const int shard = ShardOf(request->id(), shards_.count());
+  return Finish("GetThumbnail",
+                Read(context, shard, [&](Endpoint& e, grpc::ClientContext* c) {
+                  return e.stub->GetThumbnail(c, *request, response);
+                }));
+}
+
+grpc::Status GatewayService::GetPreview(
+    grpc::ServerContext* context, const tpr::v1::GetPreviewRequest* request,
+    grpc::ServerWriter<tpr::v1::PreviewChunk>* writer) {
+  const int shard = ShardOf(request->id(), shards_.count());
+  std::vector<tpr::v1::PreviewChunk> chunks;
+  absl::Status status =
+      Read(context, shard, [&](Endpoint& e, grpc::ClientContext* c) {
+        chunks.clear();  // a failed address's part, before the next one
+        std::unique_ptr<grpc::ClientReader<tpr::v1::PreviewChunk>> reader =
+            e.stub->GetPreview(c, *request);
+        tpr::v1::PreviewChunk chunk;
+        while (reader->Read(&chunk)) chunks.push_back(std::move(chunk));
+        return reader->Finish();
+      });
+  if (!status.ok()) return Finish("GetPreview", status);
+  for (const tpr::v1::PreviewChunk& chunk : chunks) {
+    if (!writer->Write(chunk)) {
+      return Finish("GetPreview",
+                    absl::CancelledError("client stopped reading the stream"));
+    }
+  }
+  return grpc::Status::OK;
+}
+
 grpc::Status GatewayService::Stats(grpc::ServerContext* context,
                                    const tpr::v1::StatsRequest* request,
                                    tpr::v1::StatsResponse* response) {

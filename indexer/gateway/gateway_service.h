@@ -6,8 +6,11 @@
 //                          ──> shard 1 ...
 //
 // Routing (issue 10):
-// - Upsert, Get and Delete go to the owning shard, ShardOf(id, S). Writes go
-//   to its primary; reads to any serving address of the shard.
+// - Upsert, Get, GetThumbnail, GetPreview and Delete go to the owning
+//   shard, ShardOf(id, S). Writes go to its primary; reads to any serving
+//   address of the shard. GetPreview reads the shard's whole stream (at
+//   most a preview's 2 MiB) before relaying it, so that a failover to
+//   another address never sends a chunk twice.
 // - BatchUpsert splits the stream by shard (one BatchUpsert stream per shard
 //   primary) and answers OK only when every shard acknowledged its part; the
 //   counts are the sums. On an error the call fails naming the shard; what
@@ -225,6 +228,12 @@ class GatewayService final : public tpr::v1::Indexer::Service {
   grpc::Status Search(
       grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
       grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
+  grpc::Status GetThumbnail(grpc::ServerContext* context,
+                            const tpr::v1::GetThumbnailRequest* request,
+                            tpr::v1::Thumbnail* response) override;
+  grpc::Status GetPreview(
+      grpc::ServerContext* context, const tpr::v1::GetPreviewRequest* request,
+      grpc::ServerWriter<tpr::v1::PreviewChunk>* writer) override;
 
   // shards gives tests access to the health state (CheckNow).
   Shards& shards() { return shards_; }

@@ -83,6 +83,30 @@ absl::Status CheckId(const std::string& id) {
   return absl::OkStatus();
 }
 
+// Media are opaque bytes to the indexer; the checks keep an upload of the
+// wrong file in the wrong field out (the first bytes of each format).
+absl::Status CheckMedia(const tpr::v1::Model& model) {
+  if (!model.has_media()) return absl::OkStatus();
+  const std::string& png = model.media().thumbnail_png();
+  const std::string& ply = model.media().preview_ply();
+  if (png.size() > kMaxThumbnailBytes || ply.size() > kMaxPreviewBytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "model '", model.id(), "' has a ", png.size(), "-byte thumbnail and a ",
+        ply.size(), "-byte preview; at most ", kMaxThumbnailBytes, " and ",
+        kMaxPreviewBytes, " allowed"));
+  }
+  static constexpr char kPngMagic[] = "\x89PNG\r\n\x1a\n";
+  if (!png.empty() && png.compare(0, 8, kPngMagic, 8) != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "model '", model.id(), "': media.thumbnail_png is not a PNG image"));
+  }
+  if (!ply.empty() && ply.compare(0, 4, "ply\n") != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "model '", model.id(), "': media.preview_ply is not a PLY file"));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -254,6 +278,7 @@ absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
         "model '", model.id(), "' has ", metadata_bytes,
         " bytes of metadata; at most ", kMaxMetadataBytes, " allowed"));
   }
+  TPR_RETURN_IF_ERROR(CheckMedia(model));
   absl::StatusOr<tpr::index::Signature> sig =
       ToIndexSignature(model.signature());
   if (!sig.ok()) {
@@ -281,6 +306,9 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
   std::unordered_map<std::string, int64_t> in_group;
   std::vector<ModelWrite> writes;
   writes.reserve(requests.size());
+  // Each written model's media, moved out of the request: the models
+  // family stores the model without them.
+  std::vector<tpr::v1::ModelMedia> media(requests.size());
   const int64_t now = NowMicros();
   for (size_t i = 0; i < requests.size(); ++i) {
     tpr::v1::Model* model = requests[i].mutable_model();
@@ -296,7 +324,13 @@ absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroupLocked(
     model->set_added_unix_micros(added.value_or(now));
     in_group[model->id()] = model->added_unix_micros();
     outcome[i] = exists ? WriteOutcome::kReplaced : WriteOutcome::kCreated;
-    writes.push_back({model->id(), model});
+    if (model->has_media()) {
+      media[i] = std::move(*model->mutable_media());
+      model->clear_media();
+    }
+    model->set_media_stored(!media[i].thumbnail_png().empty() ||
+                            !media[i].preview_ply().empty());
+    writes.push_back({model->id(), model, &media[i]});
   }
   if (writes.empty()) return outcome;
   TPR_RETURN_IF_ERROR(storage_->Write(writes));
@@ -372,6 +406,38 @@ absl::Status IndexerCore::Delete(const std::string& id) {
 absl::StatusOr<tpr::v1::Model> IndexerCore::Get(const std::string& id) const {
   TPR_RETURN_IF_ERROR(CheckId(id));
   return storage_->GetModel(id);
+}
+
+absl::StatusOr<tpr::v1::ModelMedia> IndexerCore::MediaOf(
+    const std::string& id, const char* what) const {
+  TPR_RETURN_IF_ERROR(CheckId(id));
+  if (!table_.AddedTime(id).has_value()) {
+    return absl::NotFoundError(absl::StrCat("no model with id '", id, "'"));
+  }
+  absl::StatusOr<tpr::v1::ModelMedia> media = storage_->GetMedia(id);
+  if (absl::IsNotFound(media.status())) media = tpr::v1::ModelMedia();
+  if (!media.ok()) return media.status();
+  const bool missing = std::string(what) == "thumbnail"
+                           ? media->thumbnail_png().empty()
+                           : media->preview_ply().empty();
+  if (missing) {
+    return absl::NotFoundError(absl::StrCat(
+        "model '", id, "' has no ", what,
+        " (it was added without media; `tpr add --update` makes them)"));
+  }
+  return media;
+}
+
+absl::StatusOr<std::string> IndexerCore::GetThumbnail(
+    const std::string& id) const {
+  TPR_ASSIGN_OR_RETURN(tpr::v1::ModelMedia media, MediaOf(id, "thumbnail"));
+  return std::move(*media.mutable_thumbnail_png());
+}
+
+absl::StatusOr<std::string> IndexerCore::GetPreview(
+    const std::string& id) const {
+  TPR_ASSIGN_OR_RETURN(tpr::v1::ModelMedia media, MediaOf(id, "preview"));
+  return std::move(*media.mutable_preview_ply());
 }
 
 absl::StatusOr<tpr::v1::ListResponse> IndexerCore::List(

@@ -53,6 +53,11 @@ namespace tpr::indexer {
 inline constexpr size_t kMaxIdBytes = 1024;
 inline constexpr size_t kMaxLabelBytes = 256;
 inline constexpr size_t kMaxMetadataBytes = 64 << 10;
+// Largest media accepted on Upsert (ModelMedia): a 256 x 256 RGBA PNG is
+// at most about 260 KiB, a 5,000-triangle PLY about 100 KiB. Both stay
+// under gRPC's default 4 MiB message limit together with a signature.
+inline constexpr size_t kMaxThumbnailBytes = 1 << 20;
+inline constexpr size_t kMaxPreviewBytes = 2 << 20;
 // Bounds of the List and Stats answers, chosen so that each stays under
 // gRPC's default 4 MiB receive limit whatever is stored. A List page ends
 // before its models reach kMaxListPageBytes; one model adds at most an id,
@@ -120,8 +125,12 @@ class IndexerCore {
   IndexerCore& operator=(const IndexerCore&) = delete;
 
   // Upsert stores request.model and indexes it; durable on return. Returns
-  // whether the id was new. INVALID_ARGUMENT for an empty or too long id or a
-  // malformed signature; RESOURCE_EXHAUSTED for metadata above 64 KiB or too
+  // whether the id was new. The model's media (Model.media) are stored
+  // apart, in the same atomic write; an upsert without media removes the
+  // id's earlier ones (they would show another mesh). INVALID_ARGUMENT for
+  // an empty or too long id, a malformed signature, a thumbnail that is not
+  // a PNG or a preview that is not a PLY; RESOURCE_EXHAUSTED for metadata
+  // above 64 KiB, media above kMaxThumbnailBytes / kMaxPreviewBytes or too
   // many features; INVALID_ARGUMENT for a label above kMaxLabelBytes, and
   // for an id or label outside the alphabet (valid UTF-8 without control
   // characters), naming the byte;
@@ -141,7 +150,9 @@ class IndexerCore {
   // them with one SignatureIndex::UpsertBatch and updates the label map and
   // the table. Returns each request's outcome; an existing id without
   // overwrite is skipped. Sets each written model's added_unix_micros (a
-  // replacement keeps the first time). Moves from `signatures`. Errors:
+  // replacement keeps the first time) and media_stored, and moves its
+  // media out of the request into the media family. Moves from
+  // `signatures`. Errors:
   // the store's (UNAVAILABLE/INTERNAL/DATA_LOSS; nothing written then).
   // Cost: one fsync + O(group size). Thread-safe (serialized with every
   // other write).
@@ -156,9 +167,18 @@ class IndexerCore {
   // INVALID_ARGUMENT for an empty id. Cost: one fsync.
   absl::Status Delete(const std::string& id);
 
-  // Get returns model `id` with its signature. NOT_FOUND when unknown,
+  // Get returns model `id` with its signature, without its media
+  // (media_stored says whether it has them). NOT_FOUND when unknown,
   // INVALID_ARGUMENT for an empty id. Cost: one RocksDB lookup.
   absl::StatusOr<tpr::v1::Model> Get(const std::string& id) const;
+
+  // GetThumbnail returns model `id`'s thumbnail PNG, GetPreview its preview
+  // PLY. NOT_FOUND when the id is unknown, or when the model has no such
+  // media (added without them; the message names `tpr add --update`,
+  // which makes them); INVALID_ARGUMENT for an empty id. Cost: one
+  // RocksDB lookup plus the media's bytes. Thread-safe.
+  absl::StatusOr<std::string> GetThumbnail(const std::string& id) const;
+  absl::StatusOr<std::string> GetPreview(const std::string& id) const;
 
   // List returns one page of models in ascending id order, signatures
   // omitted. A page size of 0 means 100; above 1000 means 1000. A page ends
@@ -256,6 +276,9 @@ class IndexerCore {
   // equal to it), which the VP-tree answers.
   bool UsesOwnDistance(const tpr::v1::SearchRequest& request) const;
   absl::Status LoadIndex();
+  // The stored media of `id`, or NOT_FOUND naming `what` is missing.
+  absl::StatusOr<tpr::v1::ModelMedia> MediaOf(const std::string& id,
+                                              const char* what) const;
   absl::StatusOr<std::vector<WriteOutcome>> WriteGroupLocked(
       std::vector<tpr::v1::UpsertRequest>& requests,
       std::vector<tpr::index::Signature>& signatures)

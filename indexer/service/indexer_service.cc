@@ -131,6 +131,37 @@ grpc::Status IndexerService::Stats(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
+grpc::Status IndexerService::GetThumbnail(
+    grpc::ServerContext* context, const tpr::v1::GetThumbnailRequest* request,
+    tpr::v1::Thumbnail* response) {
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("GetThumbnail", c);
+  absl::StatusOr<std::string> png = core_->GetThumbnail(request->id());
+  if (png.ok()) response->set_png(std::move(*png));
+  return Finish("GetThumbnail", png.status());
+}
+
+grpc::Status IndexerService::GetPreview(
+    grpc::ServerContext* context, const tpr::v1::GetPreviewRequest* request,
+    grpc::ServerWriter<tpr::v1::PreviewChunk>* writer) {
+  if (absl::Status c = CancelledStatus(context); !c.ok())
+    return Finish("GetPreview", c);
+  absl::StatusOr<std::string> ply = core_->GetPreview(request->id());
+  if (!ply.ok()) return Finish("GetPreview", ply.status());
+  tpr::v1::PreviewChunk chunk;
+  for (size_t at = 0; at < ply->size(); at += kPreviewChunkBytes) {
+    if (absl::Status c = CancelledStatus(context); !c.ok())
+      return Finish("GetPreview", c);
+    chunk.set_data(ply->substr(at, kPreviewChunkBytes));
+    chunk.set_total_bytes(at == 0 ? static_cast<int64_t>(ply->size()) : 0);
+    if (!writer->Write(chunk)) {
+      return Finish("GetPreview",
+                    absl::CancelledError("client stopped reading the stream"));
+    }
+  }
+  return grpc::Status::OK;
+}
+
 grpc::Status IndexerService::Search(
     grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
     grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {

@@ -61,6 +61,17 @@ class IndexerService final : public tpr::v1::Indexer::Service {
   grpc::Status Search(
       grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
       grpc::ServerWriter<tpr::v1::SearchResponse>* writer) override;
+  grpc::Status GetThumbnail(grpc::ServerContext* context,
+                            const tpr::v1::GetThumbnailRequest* request,
+                            tpr::v1::Thumbnail* response) override;
+  // GetPreview writes the preview in chunks of kPreviewChunkBytes, checking
+  // between chunks whether the client is still there.
+  grpc::Status GetPreview(
+      grpc::ServerContext* context, const tpr::v1::GetPreviewRequest* request,
+      grpc::ServerWriter<tpr::v1::PreviewChunk>* writer) override;
+
+  // kPreviewChunkBytes: the size of every GetPreview chunk but the last.
+  static constexpr size_t kPreviewChunkBytes = 64 << 10;
 
   // SearchCounters: the work of the searches this service ran, for health
   // and metrics. Read at any time from any thread.

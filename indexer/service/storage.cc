@@ -34,6 +34,7 @@ namespace tpr::indexer {
 namespace {
 
 constexpr char kModelsFamily[] = "models";
+constexpr char kMediaFamily[] = "media";
 constexpr char kTreeKey[] = "tree";
 constexpr char kTreeSeqKey[] = "tree_seq";
 constexpr char kLastSeqKey[] = "last_seq";
@@ -254,8 +255,30 @@ std::vector<rocksdb::ColumnFamilyDescriptor> Families() {
   models_options.table_factory.reset(rocksdb::NewBlockBasedTableFactory(table));
   rocksdb::ColumnFamilyOptions meta_options;
   meta_options.compression = rocksdb::kNoCompression;
+  // PNGs are compressed already; read one model at a time.
+  rocksdb::ColumnFamilyOptions media_options;
+  media_options.compression = rocksdb::kNoCompression;
   return {{rocksdb::kDefaultColumnFamilyName, meta_options},
-          {kModelsFamily, models_options}};
+          {kModelsFamily, models_options},
+          {kMediaFamily, media_options}};
+}
+
+// The families of Families() that the database in `dir` already has: a
+// read-only open cannot create one, and a database written before the
+// media family existed gets it at the read-write open.
+std::vector<rocksdb::ColumnFamilyDescriptor> ExistingFamilies(
+    const rocksdb::Options& options, const std::string& dir) {
+  std::vector<std::string> names;
+  std::vector<rocksdb::ColumnFamilyDescriptor> out;
+  if (!rocksdb::DB::ListColumnFamilies(options, dir, &names).ok()) {
+    return Families();  // the open reports the reason
+  }
+  for (rocksdb::ColumnFamilyDescriptor& family : Families()) {
+    if (std::find(names.begin(), names.end(), family.name) != names.end()) {
+      out.push_back(std::move(family));
+    }
+  }
+  return out;
 }
 
 // Counts write stalls and times the write-ahead log's syncs for metrics
@@ -297,6 +320,7 @@ struct Storage::Impl {
   std::unique_ptr<rocksdb::DB> db;
   rocksdb::ColumnFamilyHandle* meta = nullptr;    // "default"
   rocksdb::ColumnFamilyHandle* models = nullptr;  // "models"
+  rocksdb::ColumnFamilyHandle* media = nullptr;   // "media"
   // RocksDB's statistics and our listener (EngineStats), read-write open.
   std::shared_ptr<rocksdb::Statistics> statistics;
   std::shared_ptr<EngineListener> listener;
@@ -330,6 +354,7 @@ struct Storage::Impl {
       std::vector<rocksdb::ColumnFamilyHandle*> families;
       if (meta) families.push_back(meta);
       if (models) families.push_back(models);
+      if (media) families.push_back(media);
       if (!families.empty()) {
         db->Flush(rocksdb::FlushOptions(), families).PermitUncheckedError();
       }
@@ -340,6 +365,7 @@ struct Storage::Impl {
       }
       if (meta) db->DestroyColumnFamilyHandle(meta);
       if (models) db->DestroyColumnFamilyHandle(models);
+      if (media) db->DestroyColumnFamilyHandle(media);
       db->Close().PermitUncheckedError();
     }
   }
@@ -413,8 +439,8 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(
     rocksdb::FileLock* lock = nullptr;
     rocksdb::Status s = env->LockFile(dir + "/LOCK", &lock);
     if (!s.ok()) return FromRocks(s, "cannot open the model database", dir);
-    s = rocksdb::DB::OpenForReadOnly(db_options, dir, Families(), &handles,
-                                     &raw);
+    s = rocksdb::DB::OpenForReadOnly(
+        db_options, dir, ExistingFamilies(db_options, dir), &handles, &raw);
     absl::Status checked;
     if (!s.ok()) {
       checked = open_failed(s);
@@ -448,6 +474,7 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(
   impl->db.reset(raw);
   impl->meta = handles[0];
   impl->models = handles[1];
+  impl->media = handles[2];
 
   // The next sequence number continues after everything on disk: every
   // model write records the last number it used in the same atomic batch, so
@@ -516,6 +543,7 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
     if (!was.ok()) return was.status();
     if (w.model == nullptr) {
       batch.Delete(impl_->models, w.id);
+      batch.Delete(impl_->media, w.id);
       if (*was) --models;
       present[w.id] = false;
       continue;
@@ -526,6 +554,16 @@ absl::Status Storage::Write(const std::vector<ModelWrite>& writes) {
           absl::StrCat("cannot serialize model '", w.id, "'"));
     }
     batch.Put(impl_->models, w.id, value);
+    if (w.media != nullptr && (!w.media->thumbnail_png().empty() ||
+                               !w.media->preview_ply().empty())) {
+      if (!w.media->SerializeToString(&value)) {
+        return absl::InternalError(
+            absl::StrCat("cannot serialize the media of model '", w.id, "'"));
+      }
+      batch.Put(impl_->media, w.id, value);
+    } else {
+      batch.Delete(impl_->media, w.id);
+    }
     if (!*was) ++models;
     present[w.id] = true;
   }
@@ -571,6 +609,23 @@ absl::StatusOr<tpr::v1::Model> Storage::GetModel(const std::string& id) const {
   auto decoded = DecodeModel(value, id);
   if (!decoded.ok()) return decoded.status();
   return std::move(decoded->second);
+}
+
+absl::StatusOr<tpr::v1::ModelMedia> Storage::GetMedia(
+    const std::string& id) const {
+  rocksdb::PinnableSlice value;
+  rocksdb::Status s =
+      impl_->db->Get(rocksdb::ReadOptions(), impl_->media, id, &value);
+  if (s.IsNotFound()) {
+    return absl::NotFoundError(absl::StrCat("no media for id '", id, "'"));
+  }
+  if (!s.ok()) return FromRocks(s, "cannot read media");
+  tpr::v1::ModelMedia media;
+  if (!media.ParseFromArray(value.data(), static_cast<int>(value.size()))) {
+    return absl::DataLossError(
+        absl::StrCat("stored media of model '", id, "' do not parse"));
+  }
+  return media;
 }
 
 absl::Status Storage::ForEachModel(
@@ -751,7 +806,7 @@ absl::Status Storage::CheckScanned(uint64_t scanned) const {
 }
 
 RocksHandles Storage::rocks() const {
-  return {impl_->db.get(), impl_->meta, impl_->models};
+  return {impl_->db.get(), impl_->meta, impl_->models, impl_->media};
 }
 
 const std::string& Storage::dir() const { return impl_->dir; }
@@ -794,7 +849,8 @@ EngineStats Storage::engine_stats() const {
     stats.delayed_stalls = impl_->listener->delayed.load();
     stats.stopped_stalls = impl_->listener->stopped.load();
   }
-  for (rocksdb::ColumnFamilyHandle* family : {impl_->meta, impl_->models}) {
+  for (rocksdb::ColumnFamilyHandle* family :
+       {impl_->meta, impl_->models, impl_->media}) {
     if (family == nullptr) continue;
     uint64_t value = 0;
     if (impl_->db->GetIntProperty(family, "rocksdb.estimate-live-data-size",

@@ -12,6 +12,11 @@
 //              order), value = 8-byte little-endian write sequence number
 //              followed by the serialized tpr.v1.Model (signature, label,
 //              metadata, added_unix_micros).
+//   "media"    key = model id, value = the serialized tpr.v1.ModelMedia
+//              (thumbnail PNG, preview PLY) of the models that have them:
+//              kept apart so that the scan at open and every model read
+//              skip their bytes. Written and deleted in the same batch as
+//              the model (a put without media deletes them).
 //   "default"  key "tree" = the VP-tree bytes of the last persist
 //              (SignatureIndex::SerializeTree), key "tree_seq" = 8-byte
 //              little-endian write sequence number that tree reflects,
@@ -95,7 +100,7 @@ struct EngineStats {
   uint64_t stopped_stalls = 0;
   // Syncs of the write-ahead log (ticker WAL_FILE_SYNCED).
   uint64_t wal_syncs = 0;
-  // Sum over both column families of the properties
+  // Sum over the column families of the properties
   // rocksdb.estimate-live-data-size, rocksdb.total-sst-files-size and
   // rocksdb.cur-size-all-mem-tables.
   uint64_t live_data_bytes = 0;
@@ -109,6 +114,7 @@ struct RocksHandles {
   rocksdb::DB* db = nullptr;
   rocksdb::ColumnFamilyHandle* meta = nullptr;    // "default"
   rocksdb::ColumnFamilyHandle* models = nullptr;  // "models"
+  rocksdb::ColumnFamilyHandle* media = nullptr;   // "media"
 };
 
 // PersistedTree: the VP-tree bytes of the last persist and the write
@@ -119,10 +125,14 @@ struct PersistedTree {
 };
 
 // ModelWrite: one mutation of a Storage::Write batch: a put when `model` is
-// non-null, else a delete of `id`.
+// non-null, else a delete of `id` and its media. A put stores `media` in
+// the media family when it is non-null and holds bytes, and deletes the
+// id's earlier media otherwise. `model` itself should carry no media (its
+// `media` field is stored as given, in the models family).
 struct ModelWrite {
   std::string id;
   const tpr::v1::Model* model = nullptr;
+  const tpr::v1::ModelMedia* media = nullptr;
 };
 
 // Storage: RocksDB-backed model store. Thread-safe (RocksDB is); the caller
@@ -161,6 +171,12 @@ class Storage {
   // GetModel returns the stored model `id`; NOT_FOUND when absent, DATA_LOSS
   // when its bytes do not parse. Cost: one point lookup. Thread-safe.
   absl::StatusOr<tpr::v1::Model> GetModel(const std::string& id) const;
+
+  // GetMedia returns the media stored for model `id`; NOT_FOUND when it
+  // has none (whether or not the model exists), DATA_LOSS when the bytes
+  // do not parse. Cost: one point lookup plus the media's bytes.
+  // Thread-safe.
+  absl::StatusOr<tpr::v1::ModelMedia> GetMedia(const std::string& id) const;
 
   // ForEachModel calls `fn(seq, model)` for every stored model, stopping at
   // the first non-OK status, which it returns (DATA_LOSS for a record that

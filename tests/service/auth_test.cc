@@ -47,6 +47,7 @@ const std::vector<Rpc>& Rpcs() {
       {"Extract", Role::kRead},      {"Upsert", Role::kWrite},
       {"BatchUpsert", Role::kWrite}, {"Delete", Role::kWrite},
       {"Health", Role::kNone},       {"Reflection", Role::kNone},
+      {"GetThumbnail", Role::kRead}, {"GetPreview", Role::kRead},
   };
   return *rpcs;
 }
@@ -81,6 +82,21 @@ grpc::StatusCode Call(const std::string& rpc, const std::string& header,
     request.set_id("no/such/id");
     tpr::v1::Model model;
     return index->Get(&context, request, &model).error_code();
+  }
+  if (rpc == "GetThumbnail") {
+    tpr::v1::GetThumbnailRequest request;
+    request.set_id("no/such/id");  // NOT_FOUND once past auth
+    tpr::v1::Thumbnail thumbnail;
+    return index->GetThumbnail(&context, request, &thumbnail).error_code();
+  }
+  if (rpc == "GetPreview") {
+    tpr::v1::GetPreviewRequest request;
+    request.set_id("no/such/id");
+    auto reader = index->GetPreview(&context, request);
+    tpr::v1::PreviewChunk chunk;
+    while (reader->Read(&chunk)) {
+    }
+    return reader->Finish().error_code();
   }
   if (rpc == "List") {
     tpr::v1::ListResponse response;
@@ -248,7 +264,7 @@ TEST_F(AuthTest, EveryCallerAgainstEveryRpc) {
       ++checked;
     }
   }
-  EXPECT_EQ(checked, 60);
+  EXPECT_EQ(checked, 72);
   // The logs name refusals but never a key.
   ASSERT_EQ(indexer_.Stop(SIGTERM), 0);
   const std::string log = ReadText(indexer_.log_path());

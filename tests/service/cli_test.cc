@@ -54,6 +54,13 @@ bool ParseNeighbor(const std::string& line, int* rank, std::string* id,
   return true;
 }
 
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream bytes;
+  bytes << in.rdbuf();
+  return bytes.str();
+}
+
 int JsonInt(const std::string& json, const std::string& key) {
   const size_t at = json.find("\"" + key + "\":");
   if (at == std::string::npos) return -1;
@@ -262,6 +269,73 @@ TEST_F(CliTest, HandlesOptionSelectsCutOrKeep) {
   stored = RunTpr(cluster_, "--json get " + torus);
   EXPECT_NE(stored.out.find("HANDLE_TREATMENT_CUT"), std::string::npos)
       << stored.out;
+}
+
+// Media through the command: `tpr add` stores a thumbnail (with the
+// overlay) and a preview per model, `tpr get ID --thumbnail --preview`
+// saves them, byte for byte what the extractor returns for the same file
+// (`tpr extract --thumbnail --preview`, and the extractor called directly);
+// `--no-media` stores none, and then `tpr get --thumbnail` fails naming
+// `tpr add --update`, which makes them.
+TEST_F(CliTest, AddStoresMediaAndGetSavesThem) {
+  const std::string set = cluster_.dir() + "/set";
+  absl::StatusOr<std::vector<testing::GeneratedFile>> files =
+      testing::GenerateSet(set, 2, 1, 1500);
+  ASSERT_TRUE(files.ok()) << files.status();
+  // A file argument's id is its path as given.
+  const std::string id_a = set + "/" + (*files)[0].relative_path;
+  const std::string id_b = set + "/" + (*files)[1].relative_path;
+  ASSERT_EQ(RunTpr(cluster_, "add " + id_a).exit_code, 0);
+  ASSERT_EQ(RunTpr(cluster_, "add --no-media " + id_b).exit_code, 0);
+
+  const std::string png = cluster_.dir() + "/a.png";
+  const std::string ply = cluster_.dir() + "/a.ply";
+  CommandResult got = RunTpr(
+      cluster_, "get " + id_a + " --thumbnail " + png + " --preview " + ply);
+  ASSERT_EQ(got.exit_code, 0) << got.err;
+  EXPECT_NE(got.out.find("thumbnail and preview stored"), std::string::npos)
+      << got.out;
+  // The oracle: the extractor asked for the same pictures of the same file.
+  absl::StatusOr<client::ExtractorClient> extractor =
+      client::ExtractorClient::Connect(cluster_.extractor(0).address());
+  ASSERT_TRUE(extractor.ok());
+  v1::MediaOptions media;
+  media.set_thumbnail(true);
+  media.set_thumbnail_overlay(true);
+  media.set_preview(true);
+  absl::StatusOr<v1::ExtractResponse> direct =
+      extractor->ExtractFile(id_a, {}, media);
+  ASSERT_TRUE(direct.ok()) << direct.status();
+  ASSERT_FALSE(direct->media().thumbnail_png().empty());
+  EXPECT_EQ(ReadBytes(png), direct->media().thumbnail_png());
+  EXPECT_EQ(ReadBytes(ply), direct->media().preview_ply());
+  // tpr extract writes the same files without the indexer.
+  const std::string png2 = cluster_.dir() + "/a2.png";
+  const std::string ply2 = cluster_.dir() + "/a2.ply";
+  CommandResult extracted =
+      RunTpr(cluster_,
+             "extract " + id_a + " --thumbnail " + png2 + " --preview " + ply2);
+  ASSERT_EQ(extracted.exit_code, 0) << extracted.err;
+  EXPECT_EQ(ReadBytes(png2), direct->media().thumbnail_png());
+  EXPECT_EQ(ReadBytes(ply2), direct->media().preview_ply());
+  // The preview reads back through intake.
+  absl::StatusOr<extract::LoadedMesh> back =
+      extract::LoadMeshFromFile(ply, extract::IntakeOptions{});
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_LE(back->mesh.triangles.size(), 5000u);
+
+  // Without media: a clear refusal, then --update makes them.
+  CommandResult none = RunTpr(cluster_, "get " + id_b + " --thumbnail " + png);
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_NE(none.err.find("NOT_FOUND"), std::string::npos) << none.err;
+  EXPECT_NE(none.err.find("tpr add --update"), std::string::npos) << none.err;
+  ASSERT_EQ(RunTpr(cluster_, "add --update " + id_b).exit_code, 0);
+  EXPECT_EQ(RunTpr(cluster_, "get " + id_b + " --thumbnail " + png).exit_code,
+            0);
+  // Usage: media flags take one id.
+  EXPECT_EQ(RunTpr(cluster_, "get " + id_a + " " + id_b + " --preview " + ply)
+                .exit_code,
+            2);
 }
 
 // Labels from --manifest; then SIGTERM while a search stream is open: the

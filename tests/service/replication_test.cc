@@ -327,6 +327,108 @@ TEST(FollowerTest, CopiesTailsRefusesWritesAndPromotes) {
   EXPECT_TRUE(absl::IsFailedPrecondition(refused_dir)) << refused_dir;
 }
 
+// Media live in their own column family: a backup restores them, a
+// follower's checkpoint copies them and its log tailing brings in later
+// ones, replacements and deletes, byte for byte as the primary serves them.
+tpr::v1::ModelMedia MediaFor(int i) {
+  tpr::v1::ModelMedia media;
+  media.set_thumbnail_png(
+      std::string("\x89PNG\r\n\x1a\n", 8) +
+      std::string(500 + i, static_cast<char>('a' + i % 26)));
+  media.set_preview_ply(
+      "ply\n" + std::string(70000 + i, static_cast<char>('A' + i % 26)));
+  return media;
+}
+
+void IngestWithMedia(IndexerCore* core, const std::vector<TestModel>& models,
+                     int first, int last) {
+  for (int i = first; i < last; ++i) {
+    tpr::v1::UpsertRequest request = ToRequest(models[i], true);
+    *request.mutable_model()->mutable_media() = MediaFor(i);
+    ASSERT_TRUE(core->Upsert(request).ok()) << models[i].id;
+  }
+}
+
+// What `node` serves of each model's media: "thumbnail|preview", or the
+// error code.
+std::vector<std::string> MediaAnswers(Node& node,
+                                      const std::vector<TestModel>& models) {
+  std::vector<std::string> out;
+  for (const TestModel& m : models) {
+    absl::StatusOr<std::string> png = node.core()->GetThumbnail(m.id);
+    absl::StatusOr<std::string> ply = node.core()->GetPreview(m.id);
+    out.push_back(absl::StrCat(
+        png.ok() ? *png : absl::StrCat("error ", png.status().code()), "|",
+        ply.ok() ? *ply : absl::StrCat("error ", ply.status().code())));
+  }
+  return out;
+}
+
+TEST(BackupTest, RestoreCarriesMedia) {
+  TempDir tmp;
+  Node primary(tmp.path() + "/primary");
+  ASSERT_TRUE(primary.Start().ok());
+  const std::vector<TestModel> models = MakeModels(20, 2, 31);
+  IngestWithMedia(primary.core(), models, 0, 15);
+  Ingest(primary.core(), {models.begin() + 15, models.end()});  // none
+  const std::vector<std::string> before = MediaAnswers(primary, models);
+  ASSERT_EQ(before[0], absl::StrCat(MediaFor(0).thumbnail_png(), "|",
+                                    MediaFor(0).preview_ply()));
+
+  tpr::v1::BackupRequest request;
+  request.set_backup_dir(tmp.path() + "/backups");
+  tpr::v1::BackupResponse backup;
+  ASSERT_TRUE(Call(primary, request, &backup).ok());
+  // Changed after the backup: the restore must not see these.
+  ASSERT_TRUE(primary.core()->Delete(models[1].id).ok());
+  IngestWithMedia(primary.core(), models, 16, 17);
+
+  tpr::v1::RestoreRequest restore;
+  restore.set_backup_dir(tmp.path() + "/backups");
+  restore.set_data_dir(tmp.path() + "/restored");
+  tpr::v1::RestoreResponse restored;
+  grpc::Status s = Call(primary, restore, &restored);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  Node copy(tmp.path() + "/restored");
+  ASSERT_TRUE(copy.Start().ok());
+  EXPECT_EQ(MediaAnswers(copy, models), before);
+  EXPECT_TRUE(copy.core()->Get(models[0].id)->media_stored());
+  EXPECT_FALSE(copy.core()->Get(models[16].id)->media_stored());
+}
+
+TEST(FollowerTest, CarriesMediaFromTheCheckpointAndTheLog) {
+  TempDir tmp;
+  Node primary(tmp.path() + "/primary");
+  ASSERT_TRUE(primary.Start().ok());
+  const std::vector<TestModel> models = MakeModels(30, 3, 37);
+  IngestWithMedia(primary.core(), models, 0, 10);  // in the checkpoint
+
+  Node follower(tmp.path() + "/follower", primary.address());
+  {
+    absl::Status started = follower.Start();
+    ASSERT_TRUE(started.ok()) << started;
+  }
+  ASSERT_TRUE(
+      WaitFor([&] { return follower.follower()->Readiness().empty(); }));
+  EXPECT_EQ(MediaAnswers(follower, models), MediaAnswers(primary, models));
+
+  // Tailed: new media, a replacement without media, a delete.
+  IngestWithMedia(primary.core(), models, 10, 30);
+  ASSERT_TRUE(primary.core()->Upsert(ToRequest(models[2], true)).ok());
+  ASSERT_TRUE(primary.core()->Delete(models[3].id).ok());
+  ASSERT_TRUE(WaitFor([&] {
+    return follower.follower()->Status().applied_sequence() >=
+           LatestSequence(primary.core()->storage());
+  }));
+  const std::vector<std::string> want = MediaAnswers(primary, models);
+  EXPECT_EQ(MediaAnswers(follower, models), want);
+  EXPECT_NE(want[2].find("error"), std::string::npos);
+  EXPECT_EQ(want[20], absl::StrCat(MediaFor(20).thumbnail_png(), "|",
+                                   MediaFor(20).preview_ply()));
+  EXPECT_FALSE(follower.core()->Get(models[2].id)->media_stored());
+  EXPECT_TRUE(follower.core()->Get(models[20].id)->media_stored());
+}
+
 TEST(FollowerTest, FallenBehindTheKeptLogStartsAgainFromACheckpoint) {
   TempDir tmp;
   Node primary(tmp.path() + "/primary", "", NoArchive());

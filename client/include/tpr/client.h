@@ -178,6 +178,18 @@ class ExtractorClient {
       v1::MeshFormat format = v1::MESH_FORMAT_UNSPECIFIED,
       const CallOptions* call = nullptr) const;
 
+  // ExtractFile and ExtractBytes asking for pictures too
+  // (ExtractRequest.media): the response's `media` then holds those
+  // `media` asks for. Errors as above.
+  absl::StatusOr<v1::ExtractResponse> ExtractFile(
+      const std::string& path, const v1::ExtractOptions& options,
+      const v1::MediaOptions& media, const CallOptions* call = nullptr) const;
+  absl::StatusOr<v1::ExtractResponse> ExtractBytes(
+      absl::string_view bytes, absl::string_view file_name,
+      const v1::ExtractOptions& options, const v1::MediaOptions& media,
+      v1::MeshFormat format = v1::MESH_FORMAT_UNSPECIFIED,
+      const CallOptions* call = nullptr) const;
+
  private:
   std::shared_ptr<grpc::Channel> channel_;
   std::shared_ptr<v1::Extractor::Stub> stub_;
@@ -261,6 +273,19 @@ class IndexerClient {
   // Get returns the model `id` with its signature. NOT_FOUND when unknown.
   absl::StatusOr<v1::Model> Get(const std::string& id,
                                 const CallOptions* call = nullptr) const;
+
+  // GetThumbnail returns model `id`'s thumbnail PNG. NOT_FOUND when the id
+  // is unknown or the model has no media (the message says which).
+  // Retried on UNAVAILABLE.
+  absl::StatusOr<std::string> GetThumbnail(
+      const std::string& id, const CallOptions* call = nullptr) const;
+
+  // GetPreview returns model `id`'s preview PLY, the chunks of the stream
+  // joined. NOT_FOUND as GetThumbnail; DATA_LOSS when the bytes received
+  // differ from the size the server announced. Retried on UNAVAILABLE
+  // (from the start). Memory: the whole file (a few hundred KB at most).
+  absl::StatusOr<std::string> GetPreview(
+      const std::string& id, const CallOptions* call = nullptr) const;
 
   // List returns one page (see ListRequest). Retried on UNAVAILABLE.
   absl::StatusOr<v1::ListResponse> List(
