@@ -148,6 +148,8 @@ absl::StatusOr<std::vector<Model>> SyntheticModels(const std::string& spec) {
 struct Config {
   extract::Options extract;
   index::GroundDistanceOptions ground;
+  // w_s: the spectral term's factor in the TPR column (the EMD's is 1).
+  double spectral_weight = 1.0;
   D2Options d2;
   int synthetic_vertices = 5000;
   // Identity mode's surfaces (synth.h, IdentitySurface).
@@ -349,7 +351,7 @@ void DeclareFlags(CLI::App* app, Flags* f) {
                   "smallest protrusion holding a topological point, / "
                   "sqrt(area) (0 = paper)");
   app->add_option(
-      "--spectral-weight", c.ground.spectral.weight,
+      "--spectral-weight", c.spectral_weight,
       "w_s: weight of the spectral term (0: the paper's TPR distance)");
   app->add_option("--spectral-transform", f->spectral_transform,
                   "phi of the spectral term: raw, by_index or log");
@@ -550,7 +552,6 @@ DistanceMatrix SpectralMatrix(const std::vector<Described>& described,
                               const std::vector<int>& kept,
                               index::SpectralOptions options,
                               index::SpectralTransform t, int threads) {
-  options.weight = 1.0;
   options.transform = t;
   std::vector<std::vector<double>> e(kept.size());
   for (size_t a = 0; a < kept.size(); ++a) {
@@ -591,7 +592,7 @@ Matching MatchAll(const std::vector<Described>& described,
       &m.tpr_thread_ms);
   m.spectral = SpectralMatrix(described, kept, config.ground.spectral,
                               config.ground.spectral.transform, threads);
-  m.tpr = Sum(m.emd, config.ground.spectral.weight, m.spectral);
+  m.tpr = Sum(m.emd, config.spectral_weight, m.spectral);
   m.d2 = PairwiseDistances(
       kept.size(), threads,
       [&] {
@@ -793,7 +794,7 @@ std::string TprTitle(const Config& c) {
   return absl::StrFormat(
       "TPR + spectrum (EMD of Eq. 7 + %g x ||phi(spec)||, phi = %s, %d "
       "eigenvalues)",
-      c.ground.spectral.weight,
+      c.spectral_weight,
       index::SpectralTransformName(c.ground.spectral.transform),
       c.ground.spectral.eigenvalues);
 }

@@ -127,7 +127,6 @@ bool LoadAll(const std::vector<std::string>& args, int folds, int threads,
           SpectralTransform::kLog}) {
       for (int count : EigenvalueCounts()) {
         index::SpectralOptions o;
-        o.weight = 1.0;
         o.transform = t;
         o.eigenvalues = count;
         std::vector<std::vector<double>> e(n);

@@ -10,6 +10,7 @@
 #include <map>
 #include <utility>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
@@ -127,6 +128,33 @@ std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name) {
     return std::nullopt;
   }
   return ranking;
+}
+
+void AddIntentOption(CLI::App& command, tpr::v1::Intent* intent) {
+  command
+      .add_option_function<std::string>(
+          "--intent",
+          [intent](const std::string& name) {
+            const std::string lower = absl::AsciiStrToLower(name);
+            *intent = lower == "identity" ? tpr::v1::INTENT_IDENTITY
+                      : lower == "kind"   ? tpr::v1::INTENT_KIND
+                                          : tpr::v1::INTENT_BALANCED;
+          },
+          "what to search for: balanced (default), identity (this model in "
+          "any pose) or kind (models of this kind)")
+      ->check(
+          CLI::IsMember({"balanced", "identity", "kind"}, CLI::ignore_case));
+}
+
+const char* IntentTitle(tpr::v1::Intent intent) {
+  switch (intent) {
+    case tpr::v1::INTENT_IDENTITY:
+      return "identity";
+    case tpr::v1::INTENT_KIND:
+      return "kind";
+    default:
+      return "balanced";
+  }
 }
 
 void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options) {

@@ -61,10 +61,21 @@ int CountKind(const tpr::v1::Signature& signature, tpr::v1::FeatureKind kind);
 
 // NamedRanking returns the SearchRequest.ranking that a `--rank-by` name
 // stands for: "paper" ranks by the EMD of Eq. 7 alone, "spectrum" by the
-// spectral term alone (both make the indexer compare the query with every
-// model). "default", "" and any other name give nullopt: the index's own
-// distance, served by its VP-tree. Thread-safe.
+// spectral term alone. "default", "" and any other name give nullopt: the
+// intent's weighting. Every one is served by the indexer's VP-tree.
+// Thread-safe.
 std::optional<tpr::v1::Ranking> NamedRanking(absl::string_view name);
+
+// AddIntentOption adds `--intent balanced|identity|kind` (case ignored) to
+// a command that searches; when given, it sets *intent (SearchRequest.
+// intent): balanced, the default, or identity ("this model in any pose")
+// or kind ("models of this kind"). CLI11 refuses any other word, naming
+// it. `intent` must outlive the parse.
+void AddIntentOption(CLI::App& command, tpr::v1::Intent* intent);
+
+// IntentTitle returns "balanced", "identity" or "kind" for a wire intent
+// (INTENT_UNSPECIFIED reads as balanced). Thread-safe.
+const char* IntentTitle(tpr::v1::Intent intent);
 
 // AddHandlesOption adds `--handles cut|keep` (case ignored) to a command
 // that extracts meshes; when given, it sets options->handles: what the

@@ -63,12 +63,14 @@ absl::StatusOr<eval::Query> SearchOne(
     const IndexerClient& indexer, const std::vector<Item>& items,
     const std::vector<int>& evaluated,
     const std::unordered_map<std::string, int>& index_of, int query, int k,
-    const tpr::v1::Ranking* ranking, const tpr::client::CallOptions& call) {
+    const tpr::v1::Ranking* ranking, tpr::v1::Intent intent,
+    const tpr::client::CallOptions& call) {
   const std::string& id = items[evaluated[query]].id;
   tpr::v1::SearchRequest request;
   request.set_id(id);
   request.set_exclude_self(true);
   request.set_k(k);
+  request.set_intent(intent);
   if (ranking != nullptr) *request.mutable_ranking() = *ranking;
   std::unique_ptr<tpr::client::SearchStream> stream =
       indexer.Search(request, &call);
@@ -88,20 +90,20 @@ absl::StatusOr<eval::Query> SearchOne(
 }
 
 // RankAll runs SearchOne for every evaluated model (`jobs` at a time) under
-// `ranking` (null: the index's own distance). Failed queries are added to
+// `ranking` (null: `intent`). Failed queries are added to
 // `failures` with `what` in front; the model stays in the others' rankings.
 std::vector<eval::Query> RankAll(
     const IndexerClient& indexer, const std::vector<Item>& items,
     const std::vector<int>& evaluated,
     const std::unordered_map<std::string, int>& index_of, int k,
-    const tpr::v1::Ranking* ranking, int jobs,
+    const tpr::v1::Ranking* ranking, tpr::v1::Intent intent, int jobs,
     const tpr::client::CallOptions& call, const std::string& what,
     Failures* failures) {
   std::vector<absl::StatusOr<eval::Query>> results(evaluated.size());
   Progress progress(evaluated.size(), absl::StrFormat("%-10s", what));
   ParallelFor(evaluated.size(), jobs, [&](size_t e) {
     results[e] = SearchOne(indexer, items, evaluated, index_of,
-                           static_cast<int>(e), k, ranking, call);
+                           static_cast<int>(e), k, ranking, intent, call);
     progress.Step(items[evaluated[e]].id,
                   results[e].ok() ? "queried" : "FAILED");
   });
@@ -278,29 +280,43 @@ int RunEval(const Globals& g, const std::string& dataset,
       index_of[(*items)[evaluated[e]].id] = static_cast<int>(e);
     }
     const auto start = std::chrono::steady_clock::now();
-    queries =
-        RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
-                nullptr, options.add.jobs, call, "query", &failures);
+    queries = RankAll(*indexer, *items, evaluated, index_of,
+                      static_cast<int>(k), nullptr, options.intent,
+                      options.add.jobs, call, "query", &failures);
     query_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
             .count();
     if (options.compare) {
-      // The side-by-side columns of issue 9: the paper's distance and the
-      // spectrum alone ranked by the indexer (SearchRequest.ranking), D2
-      // here.
+      // The side-by-side columns: the other two intents, the paper's
+      // distance and the spectrum alone, ranked by the indexer
+      // (SearchRequest.intent and .ranking), D2 here.
       const tpr::v1::Ranking paper = *NamedRanking("paper");
       const tpr::v1::Ranking spectrum = *NamedRanking("spectrum");
-      for (const auto& [key, title, ranking] :
-           {std::tuple<std::string, std::string, const tpr::v1::Ranking*>{
-                "paper", "paper TPR (EMD of Eq. 7 alone)", &paper},
-            {"spectrum", "spectrum alone (ShapeDNA)", &spectrum}}) {
+      std::vector<std::tuple<std::string, std::string, const tpr::v1::Ranking*,
+                             tpr::v1::Intent>>
+          columns;
+      for (tpr::v1::Intent intent :
+           {tpr::v1::INTENT_BALANCED, tpr::v1::INTENT_IDENTITY,
+            tpr::v1::INTENT_KIND}) {
+        if (IntentTitle(intent) == std::string(IntentTitle(options.intent))) {
+          continue;  // the default column
+        }
+        columns.emplace_back(IntentTitle(intent),
+                             absl::StrCat("intent ", IntentTitle(intent)),
+                             nullptr, intent);
+      }
+      columns.emplace_back("paper", "paper TPR (EMD of Eq. 7 alone)", &paper,
+                           tpr::v1::INTENT_UNSPECIFIED);
+      columns.emplace_back("spectrum", "spectrum alone (ShapeDNA)", &spectrum,
+                           tpr::v1::INTENT_UNSPECIFIED);
+      for (const auto& [key, title, ranking, intent] : columns) {
         Failures column_failures;
         Column c;
         c.key = key;
         c.title = title;
-        c.queries =
-            RankAll(*indexer, *items, evaluated, index_of, static_cast<int>(k),
-                    ranking, options.add.jobs, call, key, &column_failures);
+        c.queries = RankAll(*indexer, *items, evaluated, index_of,
+                            static_cast<int>(k), ranking, intent,
+                            options.add.jobs, call, key, &column_failures);
         if (c.queries.empty() && !column_failures.empty()) {
           c.unavailable = column_failures.front().second;
         } else {
@@ -337,7 +353,8 @@ int RunEval(const Globals& g, const std::string& dataset,
     }
     Column own;
     own.key = "default";
-    own.title = "default (the index's distance)";
+    own.title =
+        absl::StrCat("default (intent ", IntentTitle(options.intent), ")");
     own.scores = scores;
     compare.insert(compare.begin(), std::move(own));
   }
@@ -455,11 +472,12 @@ const bool kRegistered = RegisterCommand(
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
        sub.add_flag("--compare", flags->options.compare,
-                    "also rank by the paper's distance alone and by the "
-                    "spectrum alone (the indexer ranks every model: about "
-                    "N^2 more EMDs) and by D2 (computed here from the "
-                    "files), and print the four side by side, overall and "
-                    "per class");
+                    "also rank by the other two intents, the paper's "
+                    "distance alone and the spectrum alone (each one more "
+                    "leave-one-out pass through the indexer's tree) and by "
+                    "D2 (computed here from the files), and print them side "
+                    "by side, overall and per class");
+       AddIntentOption(sub, &flags->options.intent);
        sub.add_flag("--update", flags->options.add.update,
                     "re-extract ids already in the indexer (default: use them "
                     "as they are)");

@@ -30,11 +30,15 @@ struct EvalOptions {
   // temporary folder (mkdtemp under $TMPDIR, else /tmp), named in the
   // output, so that a run never litters the working tree.
   std::string out_dir;
-  // Also score, side by side with the index's distance: the paper's
-  // distance alone and the spectrum alone (SearchRequest.ranking, ranked
-  // exhaustively by the indexer) and D2 (eval/lib/d2.h, computed by the
-  // client from the files). Default false.
+  // Also score, side by side with the run's intent: the other two intents
+  // (SearchRequest.intent), the paper's distance alone and the spectrum
+  // alone (SearchRequest.ranking; every one searched with the indexer's
+  // tree) and D2 (eval/lib/d2.h, computed by the client from the files).
+  // Default false.
   bool compare = false;
+  // What the queries search for (SearchRequest.intent; --intent). Default
+  // INTENT_UNSPECIFIED: balanced.
+  tpr::v1::Intent intent = tpr::v1::INTENT_UNSPECIFIED;
 };
 
 // RunEval evaluates `dataset` (a folder of class subfolders, or a manifest
@@ -45,7 +49,8 @@ struct EvalOptions {
 // class and overall (models, NN, FT, ST, E, DCG, mAP), or with g.json one
 // object {"models", "classes", "nn", "ft", "st", "e", "dcg", "map", "pr",
 // "per_class": {class: {...}}, "failures": [...], ...; with
-// options.compare also "compare": {"default"|"paper"|"spectrum"|"d2":
+// options.compare also "compare": {"default"|<the two other intents>|
+// "paper"|"spectrum"|"d2":
 // {"title", metrics, "per_class"} or {"title", "unavailable": why}}}, and
 // writes
 // OUT/precision_recall.svg and OUT/similarity.svg (OUT: options.out_dir,

@@ -19,10 +19,12 @@ struct QueryFlags {
   int k = 10;
   double radius = 0;
   bool exclude_self = false;
-  // --rank-by: "" or "default" (the index's distance, the VP-tree),
-  // "paper" (the EMD of Eq. 7 alone) or "spectrum" (the spectrum alone);
-  // the last two rank every model (SearchRequest.ranking).
+  // --rank-by: "" or "default" (the intent's weighting), "paper" (the EMD
+  // of Eq. 7 alone) or "spectrum" (the spectrum alone; both
+  // SearchRequest.ranking). Every one is searched with the VP-tree.
   std::string rank_by;
+  // --intent (SearchRequest.intent; --rank-by paper|spectrum overrides it).
+  tpr::v1::Intent intent = tpr::v1::INTENT_UNSPECIFIED;
   // Extraction of MESH (--handles).
   tpr::v1::ExtractOptions extract;
 };
@@ -49,6 +51,7 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
   request.set_k(flags.k);
   request.set_radius(flags.radius);
   request.set_label(flags.label);
+  request.set_intent(flags.intent);
   if (std::optional<tpr::v1::Ranking> ranking = NamedRanking(flags.rank_by)) {
     *request.mutable_ranking() = *std::move(ranking);
   }
@@ -99,10 +102,11 @@ const bool kRegistered = RegisterCommand(
        sub.add_flag("--exclude-self", flags->exclude_self,
                     "with --id, leave the query model out");
        sub.add_option("--rank-by", flags->rank_by,
-                      "default: the index's distance (VP-tree); paper: the "
-                      "EMD of Eq. 7 alone; spectrum: the spectrum alone "
-                      "(these two compare the query with every model)")
+                      "default: the intent's distance; paper: the EMD of Eq. "
+                      "7 alone; spectrum: the spectrum alone (overrides "
+                      "--intent)")
            ->check(CLI::IsMember({"default", "paper", "spectrum"}));
+       AddIntentOption(sub, &flags->intent);
        AddHandlesOption(sub, &flags->extract);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});

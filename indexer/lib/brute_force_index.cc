@@ -37,7 +37,12 @@ std::unique_ptr<NeighborCursor> BruteForceIndex::Search(QuerySpec spec) const {
   std::vector<ItemNeighbor> results;
   for (uint32_t item : items) {
     if (spec.accept && !spec.accept(item)) continue;
-    const double d = spec.distance(item);
+    double terms[kMaxTerms] = {};
+    spec.distance(item, terms);
+    double d = 0.0;
+    for (size_t t = 0; t < kMaxTerms; ++t) {
+      if (spec.weights[t] > 0.0) d += spec.weights[t] * terms[t];
+    }
     ++stats.emd_computations;
     if (std::isnan(d) || d > spec.radius) continue;
     results.push_back({item, d});

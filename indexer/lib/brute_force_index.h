@@ -4,7 +4,8 @@
 // benchmarks measure the tree against it.
 //
 //   BruteForceIndex oracle(n);
-//   QuerySpec q; q.distance = [&](uint32_t i) { return Dist(query, item[i]); };
+//   QuerySpec q;
+//   q.distance = [&](uint32_t i, double* d) { d[0] = Dist(query, item[i]); };
 //   std::vector<ItemNeighbor> exact = oracle.Knn(q, 10);
 #ifndef TPR_INDEXER_LIB_BRUTE_FORCE_INDEX_H_
 #define TPR_INDEXER_LIB_BRUTE_FORCE_INDEX_H_
@@ -24,9 +25,11 @@ class BruteForceIndex {
   explicit BruteForceIndex(size_t n) : n_(n) {}
   // size returns n.
   size_t size() const { return n_; }
-  // Search computes spec.distance for every accepted item up front (O(n)
-  // metric calls; spec.lower_bound is ignored), drops NaN and those beyond
-  // spec.radius, and sorts by (distance, tie_less): O(n log n).
+  // Search computes d_w = sum_t spec.weights[t] d_t (in term order, over
+  // the terms with weights[t] > 0) from spec.distance for every accepted
+  // item up front (O(n) metric calls; spec.lower_bounds is ignored), drops
+  // NaN and those beyond spec.radius, and sorts by (distance, tie_less):
+  // O(n log n).
   std::unique_ptr<NeighborCursor> Search(QuerySpec spec) const;
   // Knn returns the first min(k, available) results of Search.
   std::vector<ItemNeighbor> Knn(QuerySpec spec, size_t k,

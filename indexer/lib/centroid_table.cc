@@ -56,6 +56,72 @@ float RoundUp(double x) {
   return up;
 }
 
+// Quantize writes x (n float32 values) as int16 multiples of `step` at
+// `values` and returns the rounded-up radius ||x - x~||_2 (inflated by a
+// relative 1e-12 for the roundings of its sum): each x~_k = step x int16 is
+// exact in double.
+float Quantize(const float* x, int n, double step, unsigned char* values) {
+  double s = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double v = static_cast<double>(x[k]);
+    double level = step > 0.0 ? std::nearbyint(v / step) : 0.0;
+    level = std::clamp(level, -kLevels, kLevels);
+    const int16_t q = static_cast<int16_t>(level);
+    std::memcpy(values + static_cast<size_t>(k) * sizeof q, &q, sizeof q);
+    const double diff = v - step * q;
+    s += diff * diff;
+  }
+  return RoundUp(std::sqrt(s) * (1.0 + 1e-12));
+}
+
+// QuantizedBound returns ||query - x~||_2 - radius, at least 0, for a
+// row written by Quantize (radius first, then the values).
+double QuantizedBound(const float* query, int n, double step,
+                      const unsigned char* row) {
+  const double radius = static_cast<double>(LoadFloat(row));
+  const unsigned char* values = row + sizeof(float);
+  double s = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double diff =
+        static_cast<double>(query[k]) -
+        step * LoadInt16(values + static_cast<size_t>(k) * sizeof(int16_t));
+    s += diff * diff;
+  }
+  const double bound = std::sqrt(s) - radius;
+  return bound > 0.0 ? bound : 0.0;
+}
+
+// BuildHeat returns the heat-trace array of the present items.
+CentroidTable::QuantizedEmbeddings BuildHeat(
+    const std::vector<const PreparedSignature*>& items) {
+  CentroidTable::QuantizedEmbeddings h;
+  int size = -1;
+  for (const PreparedSignature* p : items) {
+    if (p == nullptr) continue;
+    if (size == -1) size = p->heat_size();
+    if (p->heat_size() != size) size = 0;  // mixed: keep none
+  }
+  h.size = std::max(size, 0);
+  if (h.size == 0) return h;
+  double largest = 0.0;
+  for (const PreparedSignature* p : items) {
+    if (p == nullptr) continue;
+    for (int k = 0; k < h.size; ++k) {
+      largest = std::max(largest, std::abs(static_cast<double>(p->heat()[k])));
+    }
+  }
+  h.step = RoundUp(largest / kLevels);
+  h.row_bytes = sizeof(float) + static_cast<size_t>(h.size) * sizeof(int16_t);
+  h.rows.assign(items.size() * h.row_bytes, 0);
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (items[i] == nullptr) continue;
+    unsigned char* row = h.rows.data() + i * h.row_bytes;
+    StoreFloat(row,
+               Quantize(items[i]->heat(), h.size, h.step, row + sizeof(float)));
+  }
+  return h;
+}
+
 }  // namespace
 
 CentroidTable CentroidTable::Build(
@@ -138,7 +204,30 @@ CentroidTable CentroidTable::Build(
     }
     StoreFloat(row + kSpectralRadiusAt, RoundUp(std::sqrt(s) * (1.0 + 1e-12)));
   }
+  t.heat_ = BuildHeat(items);
   return t;
+}
+
+void CentroidTable::PrefetchHeat(uint32_t i) const {
+#if defined(__GNUC__)
+  if (heat_.row_bytes == 0) return;
+  const unsigned char* row =
+      heat_.rows.data() + static_cast<size_t>(i) * heat_.row_bytes;
+  __builtin_prefetch(row);
+  __builtin_prefetch(row + heat_.row_bytes - 1);
+#else
+  (void)i;
+#endif
+}
+
+double CentroidTable::HeatLowerBound(const float* query_heat,
+                                     int query_heat_size, uint32_t i) const {
+  if (heat_.size == 0 || query_heat_size != heat_.size) return 0.0;
+  if (std::isnan(LoadFloat(rows_.data() + static_cast<size_t>(i) * row_bytes_)))
+    return 0.0;  // absent slot
+  return QuantizedBound(
+      query_heat, heat_.size, heat_.step,
+      heat_.rows.data() + static_cast<size_t>(i) * heat_.row_bytes);
 }
 
 void CentroidTable::Prefetch(uint32_t i) const {

@@ -17,7 +17,9 @@
 //
 // The row also keeps the item's spectral embedding (quantized the same
 // way), so that the level-1 bound of the default metric (centroid bound
-// plus spectral term, metric.h) reads no signature at all.
+// plus spectral term, metric.h) reads no signature at all. The heat-trace
+// embedding is kept likewise in a second array of its own (HeatLowerBound),
+// read only by searches that weigh the heat-trace term.
 #ifndef TPR_INDEXER_LIB_CENTROID_TABLE_H_
 #define TPR_INDEXER_LIB_CENTROID_TABLE_H_
 
@@ -45,9 +47,10 @@ class CentroidTable {
   // slot order, from the calling thread. The spectral embeddings are kept
   // when every present item has the same spectral_size() > 0 (items of one
   // index are prepared with the same options); otherwise none is (then
-  // spectral_size() is 0). Cost O(n x features x bands) time and
-  // (24 + 6 B + 2 S) n bytes, B the largest bands() of the items and S
-  // their spectral_size(); no EMD.
+  // spectral_size() is 0); the heat-trace embeddings likewise
+  // (heat_size()). Cost O(n x features x bands) time and
+  // (28 + 6 B + 2 S + 2 M) n bytes, B the largest bands() of the items, S
+  // their spectral_size() and M their heat_size(); no EMD.
   static CentroidTable Build(
       size_t n, const std::function<const PreparedSignature*(uint32_t)>& item);
 
@@ -58,8 +61,13 @@ class CentroidTable {
   // spectral_size returns the length of the spectral embeddings the rows
   // keep: the items' common spectral_size(), or 0 (none kept).
   int spectral_size() const { return spectral_size_; }
+  // heat_size returns the length of the heat-trace embeddings kept: the
+  // items' common heat_size(), or 0 (none kept).
+  int heat_size() const { return heat_.size; }
   // MemoryBytes returns the heap bytes this table holds.
-  size_t MemoryBytes() const { return rows_.capacity(); }
+  size_t MemoryBytes() const {
+    return rows_.capacity() + heat_.rows.capacity();
+  }
 
   // LowerBound returns a lower bound of EmdLowerBound(query, s) (emd.h),
   // hence of Emd(query, s), for the signature s of slot i, given the
@@ -92,11 +100,31 @@ class CentroidTable {
   double SpectralLowerBound(const float* query_spectral,
                             int query_spectral_size, uint32_t i) const;
 
+  // HeatLowerBound is SpectralLowerBound for the heat-trace term
+  // HeatDistance(query, s) (metric.h), from the second array: a lower
+  // bound, below it by at most twice the stored radius; 0.0 when the slot
+  // is absent or the sizes differ from heat_size(). Precondition: i <
+  // size(). Cost O(heat_size()), no allocation; thread-safe.
+  double HeatLowerBound(const float* query_heat, int query_heat_size,
+                        uint32_t i) const;
+
   // Prefetch asks the CPU to start loading row i (the only read of
   // LowerBound and SpectralLowerBound)
   // into cache, without waiting (QuerySpec::prefetch). Precondition: i <
   // size(). No effect on any result; thread-safe.
   void Prefetch(uint32_t i) const;
+  // PrefetchHeat does the same for row i of the heat-trace array (the only
+  // read of HeatLowerBound besides the slot's presence).
+  void PrefetchHeat(uint32_t i) const;
+
+  // QuantizedEmbeddings: one embedding per slot, each row a float32 radius
+  // (rounded up) then size int16 multiples of one step (see Build).
+  struct QuantizedEmbeddings {
+    int size = 0;
+    double step = 0.0;
+    size_t row_bytes = 0;
+    HugeVector<unsigned char> rows;
+  };
 
  private:
   int bands_ = 0;          // largest bands() over present items
@@ -118,6 +146,9 @@ class CentroidTable {
   // Huge-page advised (huge_pages.h): 184 MB at 1M rows, one random row
   // read per level-1 bound.
   HugeVector<unsigned char> rows_;
+  // The heat-trace embeddings, apart from rows_ so that a search that does
+  // not weigh the term reads nothing more per row.
+  QuantizedEmbeddings heat_;
 };
 
 }  // namespace tpr::index

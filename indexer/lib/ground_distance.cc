@@ -51,7 +51,8 @@ absl::Status ValidateOptions(const GroundDistanceOptions& o) {
                        " must be finite and > 0"));
     }
   }
-  return ValidateSpectralOptions(o.spectral);
+  if (absl::Status s = ValidateSpectralOptions(o.spectral); !s.ok()) return s;
+  return ValidateHeatTraceOptions(o.heat);
 }
 
 absl::Status ValidateSignature(const Signature& signature) {
@@ -116,7 +117,8 @@ void PreparedSignature::Release() noexcept {
   if (owns_block_) delete[] block_;
   block_ = nullptr;
   owns_block_ = false;
-  size_ = bands_ = spectral_size_ = 0;
+  size_ = bands_ = 0;
+  spectral_size_ = heat_size_ = 0;
   serial_ = 0;
 }
 
@@ -124,6 +126,7 @@ PreparedSignature::PreparedSignature(const PreparedSignature& other)
     : size_(other.size_),
       bands_(other.bands_),
       spectral_size_(other.spectral_size_),
+      heat_size_(other.heat_size_),
       serial_(other.serial_) {
   if (other.block_ != nullptr) {
     block_ = new std::byte[BlockBytes()];
@@ -142,6 +145,7 @@ PreparedSignature::PreparedSignature(PreparedSignature&& other) noexcept
     : size_(other.size_),
       bands_(other.bands_),
       spectral_size_(other.spectral_size_),
+      heat_size_(other.heat_size_),
       owns_block_(other.owns_block_),
       serial_(other.serial_),
       block_(other.block_) {
@@ -157,6 +161,7 @@ PreparedSignature& PreparedSignature::operator=(
     size_ = other.size_;
     bands_ = other.bands_;
     spectral_size_ = other.spectral_size_;
+    heat_size_ = other.heat_size_;
     owns_block_ = other.owns_block_;
     serial_ = other.serial_;
     block_ = other.block_;
@@ -174,6 +179,7 @@ PreparedSignature PreparedSignature::CopyInto(std::byte* storage) const {
   view.size_ = size_;
   view.bands_ = bands_;
   view.spectral_size_ = spectral_size_;
+  view.heat_size_ = heat_size_;
   view.serial_ = serial_;
   std::memcpy(storage, block_, BlockBytes());
   view.block_ = storage;
@@ -197,12 +203,16 @@ absl::StatusOr<PreparedSignature> Prepare(
   const size_t rows = static_cast<size_t>(p.rows());
   std::vector<double> spectral =
       SpectralEmbedding(signature.spectrum, options.spectral);
-  p.spectral_size_ = static_cast<int>(spectral.size());
+  std::vector<double> heat =
+      HeatTraceEmbedding(signature.spectrum, options.heat);
+  p.spectral_size_ = static_cast<uint16_t>(spectral.size());
+  p.heat_size_ = static_cast<uint16_t>(heat.size());
   p.block_ = new std::byte[p.BlockBytes()];
   p.owns_block_ = true;
   double* weights = reinterpret_cast<double*>(p.block_);
   float* spectral32 = reinterpret_cast<float*>(p.block_ + sizeof(double) * un);
-  float* coords = spectral32 + spectral.size();
+  float* heat32 = spectral32 + spectral.size();
+  float* coords = heat32 + heat.size();
 
   double sum = 0.0;
   for (const Feature& x : f) sum += x.weight;
@@ -213,6 +223,16 @@ absl::StatusOr<PreparedSignature> Prepare(
       return absl::InvalidArgumentError(
           absl::StrCat("spectrum[", i,
                        "] is too large (beyond float32 range once embedded)"));
+    }
+  }
+  // A heat-trace coordinate is log(t Z(t)): -infinity when every exp(-s t)
+  // underflows (a spectrum of huge values only).
+  for (size_t i = 0; i < heat.size(); ++i) {
+    heat32[i] = static_cast<float>(heat[i]);
+    if (!std::isfinite(heat32[i])) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("spectrum: heat trace at scale ", i,
+                       " is not finite (every eigenvalue too large)"));
     }
   }
 

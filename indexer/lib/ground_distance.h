@@ -79,13 +79,16 @@ struct GroundDistanceOptions {
   // c_H: H holds segment thickness / sqrt(total area), already of order 1
   // or less. Must be > 0 and finite. Default 1.
   double h_scale = 1.0;
-  // The spectral term that metric.h adds to the EMD (not part of Eq. 7;
-  // weight 0 leaves the paper's distance). Prepare stores its embedding.
+  // The spectral term S and the heat-trace term H that metric.h adds to the
+  // EMD (neither is part of Eq. 7; a weighting whose factors of S and H are
+  // 0 is the paper's distance). Prepare stores both embeddings.
   SpectralOptions spectral;
+  HeatTraceOptions heat;
 };
 
 // ValidateOptions returns OK when `options` meets the constraints above
-// (spectral ones included, ValidateSpectralOptions), INVALID_ARGUMENT naming
+// (spectral and heat-trace ones included, ValidateSpectralOptions and
+// ValidateHeatTraceOptions), INVALID_ARGUMENT naming
 // the offending field otherwise. O(1); thread-safe.
 absl::Status ValidateOptions(const GroundDistanceOptions& options);
 
@@ -106,17 +109,17 @@ inline constexpr int kMaxFeatures = 200;
 // PreparedSignature: what the index stores for one signature. An immutable,
 // flat structure-of-arrays copy holding the scaled coordinates phi(U) of
 // every feature (dimension-major), the masses normalized to sum to 1 and
-// the spectral embedding. Copyable and movable; built only by Prepare.
-// Thread-safe to read from any number of threads.
+// the spectral and heat-trace embeddings. Copyable and movable; built only by
+// Prepare. Thread-safe to read from any number of threads.
 //
 // Compact storage (issue 14: at most 4 KB per model). One block per model
-// holds the masses in double, then the spectral embedding and the
-// coordinates in float32, unpadded: the coordinates (1 + 3 bands values per
-// feature) are the bulk of a signature. The index keeps its tree's blocks
-// side by side in one SignatureArena (signature_arena.h). The centroid sum_i
-// w_i phi(U_i) of the centroid bound is not stored: Centroid (emd.h) computes
-// it in O(size x bands) when a query starts, and the index keeps its items'
-// centroids once, in its CentroidTable.
+// holds the masses in double, then the spectral embedding, the heat-trace
+// embedding and the coordinates in float32, unpadded: the coordinates (1 + 3
+// bands values per feature) are the bulk of a signature. The index keeps its
+// tree's blocks side by side in one SignatureArena (signature_arena.h). The
+// centroid sum_i w_i phi(U_i) of the centroid bound is not stored: Centroid
+// (emd.h) computes it in O(size x bands) when a query starts, and the index
+// keeps its items' centroids once, in its CentroidTable.
 //
 // Every distance is computed in double from the float32 values, so the
 // index's distance is exactly the distance of metric.h between the rounded
@@ -128,7 +131,8 @@ inline constexpr int kMaxFeatures = 200;
 // (each coordinate moves by at most 2^-24 of itself, so each ground
 // distance by at most the norms of the two moves, and an EMD is a convex
 // combination of ground distances), its spectral term by at most
-// 2^-24 (||E(a)|| + ||E(b)||): EmdTest.Float32StorageErrorWithinBound and
+// 2^-24 (||E(a)|| + ||E(b)||) and its heat-trace term likewise:
+// EmdTest.Float32StorageErrorWithinBound and
 // MetricTest.DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper check the
 // bounds, ExtractedSignaturesTest that rankings on real signatures do not
 // change.
@@ -173,21 +177,25 @@ class PreparedSignature {
   // holds when it owns them; arena bytes it refers to when a view).
   size_t MemoryBytes() const { return BlockBytes(); }
   // spectral returns the spectral embedding E(spectrum) (spectral.h),
-  // rounded to float32, of spectral_size() values:
-  // options.spectral.eigenvalues, or 0 when the spectral weight is 0.
-  // metric.h compares it.
+  // rounded to float32, of spectral_size() values
+  // (options.spectral.eigenvalues). metric.h compares it.
   const float* spectral() const {
     return reinterpret_cast<const float*>(block_ +
                                           sizeof(double) * Size(size_));
   }
   int spectral_size() const { return spectral_size_; }
+  // heat returns the heat-trace embedding F(spectrum) (spectral.h,
+  // HeatTraceEmbedding), rounded to float32, of heat_size() values
+  // (options.heat.scales; 0 when the term is absent). metric.h compares it.
+  const float* heat() const { return spectral() + spectral_size_; }
+  int heat_size() const { return heat_size_; }
 
   // Layout (for emd.cc and the lower bound; not a stable interface):
   // coords() holds 1 + 3 bands() rows of size() float32 values each
   // (dimension-major, no padding): row 0 holds W1 G'; rows 1 .. bands()
   // hold W2 c_K K; the next bands() rows W3 c_A A; the next bands() rows
   // W4 c_H H. Row r, feature i is coords()[r * size() + i].
-  const float* coords() const { return spectral() + spectral_size_; }
+  const float* coords() const { return heat() + heat_size_; }
   // stride returns the row length of this signature's ground-distance
   // matrix as the column side (GroundDistanceMatrix's out_stride): size()
   // rounded up to a multiple of 8, so that matrix rows are whole SIMD
@@ -208,7 +216,8 @@ class PreparedSignature {
   static size_t Size(int n) { return static_cast<size_t>(n); }
   size_t BlockBytes() const {
     return sizeof(double) * Size(size_) +
-           sizeof(float) * (Size(spectral_size_) + Size(rows()) * Size(size_));
+           sizeof(float) * (Size(spectral_size_) + Size(heat_size_) +
+                            Size(rows()) * Size(size_));
   }
 
   // Frees block_ when owned; leaves *this default-constructed.
@@ -216,15 +225,18 @@ class PreparedSignature {
 
   int size_ = 0;
   int bands_ = 0;
-  int spectral_size_ = 0;
-  // Whether block_ came from new[] here (in the padding before serial_:
-  // the object stays 32 bytes).
+  // At most kMaxSpectrum and 256 (ValidateOptions): 16 bits each keep the
+  // object at 32 bytes.
+  uint16_t spectral_size_ = 0;
+  uint16_t heat_size_ = 0;
+  // Whether block_ came from new[] here (in the padding before serial_).
   bool owns_block_ = false;
   uint64_t serial_ = 0;
   // BlockBytes() bytes: weights (size_ doubles), then the spectral
-  // embedding (spectral_size_ floats), then the coordinates (rows() x size_
-  // floats). operator new[] (or CopyInto's caller) aligns it for double;
-  // size_ doubles keep the floats aligned.
+  // embedding (spectral_size_ floats), the heat-trace embedding (heat_size_
+  // floats), then the coordinates (rows() x size_ floats). operator new[] (or
+  // CopyInto's caller) aligns it for double; size_ doubles keep the floats
+  // aligned.
   std::byte* block_ = nullptr;
 };
 

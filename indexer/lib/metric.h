@@ -1,55 +1,53 @@
-// The distance the index searches with (issue 9, item 3): the EMD of Tam &
-// Lau 2007 (section 6.1, ground distance of Eq. 7) plus the weighted
-// spectral term of spectral.h:
+// The distances the index searches with: non-negative weightings of three
+// terms (intent.h),
 //
-//   d(A, B) = EMD(A, B) + S(A, B),   S(A, B) = ||E(s_A) - E(s_B)||_2,
+//   d_w(A, B) = w.emd EMD(A, B) + w.spectral S(A, B) + w.heat H(A, B),
 //
-// with s_X the Laplace-Beltrami spectrum of X and E the fixed embedding of
-// spectral.h (w_s * phi(s) / sqrt(n), phi one per-coordinate map, padded).
-// With w_s = 0, S = 0 and d is the paper's distance exactly. The defaults
-// (spectral.h: w_s = 1, phi(x) = x / i, the first n = 20 values) were
-// chosen by cross-validation over every dev set together (docs/results.md).
+// EMD the distance of Tam & Lau 2007 (section 6.1, ground distance of Eq.
+// 7), S(A, B) = ||E(s_A) - E(s_B)||_2 the spectral term and H(A, B) =
+// ||F(s_A) - F(s_B)||_2 the heat-trace term, with s_X the Laplace-Beltrami
+// spectrum of X and E, F the fixed embeddings of spectral.h. w = {1, 0, 0}
+// is the paper's distance exactly. The index's own distance, which its
+// VP-tree splits on, is IndexOptions::build_weights (signature_index.h;
+// IntentWeights(Intent::kBalanced) by default).
 //
-// Why d is still a metric (so the VP-tree of section 6.2 stays exact).
+// Why every d_w is a metric (so the VP-tree of section 6.2 stays exact).
 //  1. EMD is a pseudometric on signatures: ground_distance.h shows that Eq.
 //     7 is a difference norm N(phi(U1) - phi(U2)) of a fixed feature
 //     embedding, hence a pseudometric; Rubner et al. [22] prove that the EMD
 //     between equal total masses (Prepare normalizes to 1) under such a
 //     ground distance satisfies non-negativity, symmetry and the triangle
 //     inequality, with EMD(A, A) = 0.
-//  2. S is a pseudometric: it is the Euclidean distance between the images
-//     E(s_A), E(s_B) of one fixed map E that depends on nothing but the
-//     spectrum and the (index-wide) options. Non-negativity, symmetry,
-//     S(A, A) = 0 and S(A, C) <= S(A, B) + S(B, C) are those of the norm.
-//  3. The sum of two pseudometrics is a pseudometric: each of the four
-//     properties adds termwise; in particular
-//     d(A, C) = EMD(A, C) + S(A, C)
-//             <= [EMD(A, B) + EMD(B, C)] + [S(A, B) + S(B, C)]
-//             =  d(A, B) + d(B, C).
-//  Identity of indiscernibles: d(A, B) = 0 iff EMD(A, B) = 0 AND S(A, B) =
-//  0, i.e. the features have the same images and masses (see
-//  ground_distance.h) and the first n spectrum values agree (after the
-//  Weyl padding of a short spectrum; values past n are not compared). So
-//  adding S can only separate signatures the EMD alone confused, never the
-//  reverse; d is a true metric on the classes of signatures at distance 0.
-//  The VP-tree needs only symmetry and the triangle inequality (its pruning
-//  rule |d(q, v) - d(v, x)| <= d(q, x) holds for pseudometrics); distinct
-//  signatures at distance 0 are ties, ordered by id like any other tie.
+//  2. S and H are pseudometrics: each is the Euclidean distance between the
+//     images of one fixed map that depends on nothing but the spectrum and
+//     the (index-wide) options. Non-negativity, symmetry, T(A, A) = 0 and
+//     T(A, C) <= T(A, B) + T(B, C) are those of the norm.
+//  3. A non-negative weighting of pseudometrics is a pseudometric, term by
+//     term (intent.h):
+//     d_w(A, C) = sum_t w_t T(A, C) <= sum_t w_t [T(A, B) + T(B, C)]
+//               = d_w(A, B) + d_w(B, C).
+//  Identity of indiscernibles: d_w(A, B) = 0 iff every term with w_t > 0 is
+//  0. Distinct signatures at distance 0 are ties, ordered by id like any
+//  other tie; the VP-tree needs only symmetry and the triangle inequality.
 //
-// Lower bounds. EmdLowerBound (emd.h, the centroid bound) is <= EMD and S
-// is computed exactly in O(n), so
-//   S(A, B) <= DistanceLowerBound(A, B) = EmdLowerBound(A, B) + S(A, B)
-//          <= d(A, B);
+// Lower bounds. With L_t <= T for each term, sum_t w_t L_t <= d_w. The
+// index bounds each term separately (vp_tree.h: stored per-term distances
+// to the vantage points); EmdLowerBound (emd.h, the centroid bound) is <=
+// EMD, and S and H are computed exactly in O(n), so
+//   DistanceLowerBound(A, B, w) = w.emd EmdLowerBound(A, B) + w.spectral S
+//                                 + w.heat H <= d_w(A, B);
 // a search checks this O(bands + n) bound before any EMD.
 //
-//   GroundDistanceOptions o;                    // Eq. 7 + spectral options
+//   GroundDistanceOptions o;                    // Eq. 7 + embeddings
 //   PreparedSignature a = *Prepare(x, o), b = *Prepare(y, o);
-//   if (DistanceLowerBound(a, b) <= radius) Use(Distance(a, b));
+//   TermWeights w = IntentWeights(Intent::kKind);
+//   if (DistanceLowerBound(a, b, w) <= radius) Use(Distance(a, b, w));
 #ifndef TPR_INDEXER_LIB_METRIC_H_
 #define TPR_INDEXER_LIB_METRIC_H_
 
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/intent.h"
 
 namespace tpr::index {
 
@@ -61,19 +59,32 @@ inline double SpectralDistance(const PreparedSignature& a,
                           static_cast<size_t>(a.spectral_size()));
 }
 
-// Distance returns d(a, b) = EMD(a, b) + S(a, b), computed with `solver`
-// (one per thread). Preconditions: those of EmdSolver::Distance and of
-// SpectralDistance. Cost: one EMD plus O(n). Not thread-safe in `solver`.
+// HeatDistance returns H(a, b) above (0 when the heat-trace term is absent,
+// HeatTraceOptions::scales 0). Precondition: a and b prepared with the same
+// options. O(m); thread-safe.
+inline double HeatDistance(const PreparedSignature& a,
+                           const PreparedSignature& b) {
+  return SpectralDistance(a.heat(), b.heat(),
+                          static_cast<size_t>(a.heat_size()));
+}
+
+// Distance returns d_w(a, b), computed with `solver` (one per thread) and
+// summed in the order emd, spectral, heat; a term whose factor is 0 is not
+// computed (so no EMD when w.emd is 0). Preconditions: w valid
+// (ValidateTermWeights), those of EmdSolver::Distance and SpectralDistance.
+// Cost: one EMD (when w.emd > 0) plus O(n). Not thread-safe in `solver`.
 double Distance(EmdSolver& solver, const PreparedSignature& a,
-                const PreparedSignature& b);
+                const PreparedSignature& b, const TermWeights& w);
 
 // Distance with a thread_local solver (like Emd). Thread-safe.
-double Distance(const PreparedSignature& a, const PreparedSignature& b);
+double Distance(const PreparedSignature& a, const PreparedSignature& b,
+                const TermWeights& w);
 
-// DistanceLowerBound returns EmdLowerBound(a, b) + S(a, b) <= d(a, b).
-// Cost O(bands + n), no allocation; thread-safe.
+// DistanceLowerBound returns w.emd EmdLowerBound(a, b) + w.spectral S(a, b)
+// + w.heat H(a, b) <= d_w(a, b). Cost O(bands + n), no allocation;
+// thread-safe.
 double DistanceLowerBound(const PreparedSignature& a,
-                          const PreparedSignature& b);
+                          const PreparedSignature& b, const TermWeights& w);
 
 }  // namespace tpr::index
 

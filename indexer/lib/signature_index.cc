@@ -57,6 +57,7 @@ uint64_t Fingerprint(const PreparedSignature& p) {
             h);
   h = Fnv1a(p.spectral(),
             sizeof(float) * static_cast<size_t>(p.spectral_size()), h);
+  h = Fnv1a(p.heat(), sizeof(float) * static_cast<size_t>(p.heat_size()), h);
   return h;
 }
 
@@ -69,6 +70,15 @@ struct BufferEntry {
 bool IdLess(const BufferEntry& e, const std::string& id) { return e.id < id; }
 
 }  // namespace
+
+absl::Status ValidateIndexOptions(const IndexOptions& options) {
+  TPR_RETURN_IF_ERROR(ValidateOptions(options.ground));
+  if (absl::Status s = ValidateTermWeights(options.build_weights); !s.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("index build_weights: ", s.message()));
+  }
+  return absl::OkStatus();
+}
 
 // The tree and what it was built over; shared by every snapshot until the
 // next rebuild.
@@ -215,67 +225,34 @@ std::shared_ptr<TreePart> EmptyTree() { return std::make_shared<TreePart>(); }
 class IndexCursor : public SignatureIndex::Cursor {
  public:
   IndexCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
-              PreparedSignature query, double radius,
-              std::function<bool(const std::string&)> filter,
+              PreparedSignature query, const TermWeights& weights,
+              double radius, std::function<bool(const std::string&)> filter,
               bool relaxed_bound, std::function<bool()> stop,
               std::shared_ptr<SignatureIndex::SearchPool> pool, size_t batch)
       : pool_(std::move(pool)),
         snapshot_(std::move(snapshot)),
         query_(std::move(query)),
         query_centroid_(Centroid(query_)),
+        w_(weights),
         filter_(std::move(filter)) {
     const SignatureIndex::Snapshot* s = snapshot_.get();
     const TreePart* t = s->tree.get();
     n_tree_ = static_cast<uint32_t>(t->ids.size());
     QuerySpec spec;
-    spec.distance = [this](uint32_t i) {
+    spec.weights = {w_.emd, w_.spectral, w_.heat};
+    // The tree's terms: 0 the EMD, 1 the spectral term, 2 the heat trace
+    // (SignatureIndex::Rebuild); only those the weighting uses are computed.
+    spec.distance = [this](uint32_t i, double* out) {
       const PreparedSignature* p = Item(i);
-      return p == nullptr ? std::numeric_limits<double>::quiet_NaN()
-                          : Distance(query_, *p);
+      if (p == nullptr) {
+        out[0] = out[1] = out[2] = std::numeric_limits<double>::quiet_NaN();
+        return;
+      }
+      if (w_.emd > 0.0) out[0] = Emd(query_, *p);
+      if (w_.spectral > 0.0) out[1] = SpectralDistance(query_, *p);
+      if (w_.heat > 0.0) out[2] = HeatDistance(query_, *p);
     };
-    // Tree items read the flat centroid table (one contiguous row, no
-    // pointer chase); the small buffer is read directly.
-    // The cascade of lower bounds (emd.h), cheapest first: the centroid
-    // bound (O(bands)), then the relaxed transport bound with capacities
-    // on a float32 ground matrix (ConstrainedTransportBound32: half the
-    // arithmetic of the double one; the few items that go on to the EMD
-    // pay a double matrix of their own). Each adds
-    // the O(n) spectral term of the distance (metric.h; nothing when its
-    // weight is 0), so the spectrum is checked before any EMD: at level 1
-    // a lower bound of it from the table's row (CentroidTable::
-    // SpectralLowerBound), so that level 1 reads no signature, at level 2
-    // the exact term.
-    const bool spectral = query_.spectral_size() > 0;
-    const bool table_spectral =
-        spectral && t->centroids.spectral_size() == query_.spectral_size();
-    spec.lower_bounds.push_back([this, t, spectral,
-                                 table_spectral](uint32_t i) {
-      level1_.fetch_add(1, std::memory_order_relaxed);
-      if (i >= n_tree_) {
-        const PreparedSignature& p = *snapshot_->buffer[i - n_tree_].prepared;
-        return EmdLowerBound(query_centroid_.data(), query_.bands(), p) +
-               SpectralDistance(query_, p);
-      }
-      const double centroid =
-          t->centroids.LowerBound(query_centroid_.data(), query_.bands(), i);
-      if (table_spectral) {
-        return centroid + t->centroids.SpectralLowerBound(
-                              query_.spectral(), query_.spectral_size(), i);
-      }
-      // A table without the embeddings (items of mixed spectral sizes,
-      // which one index never holds): read them from the signature.
-      const PreparedSignature* p = spectral ? t->Prepared(i) : nullptr;
-      return p == nullptr ? centroid : centroid + SpectralDistance(query_, *p);
-    });
-    if (relaxed_bound) {
-      spec.lower_bounds.push_back([this](uint32_t i) {
-        level2_.fetch_add(1, std::memory_order_relaxed);
-        const PreparedSignature* p = Item(i);
-        return p == nullptr ? 0.0
-                            : ConstrainedTransportBound32(query_, *p) +
-                                  SpectralDistance(query_, *p);
-      });
-    }
+    AddLowerBounds(t, relaxed_bound, &spec);
     // While one item is refined, the next one's data start loading
     // (QuerySpec::prefetch): beyond a few thousand models they are not in
     // cache, and waiting for them was about a quarter of a 10-NN query's
@@ -287,6 +264,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       if (i >= n_tree_) return;
       if (level == 0) {
         t->centroids.Prefetch(i);
+        if (w_.heat > 0.0) t->centroids.PrefetchHeat(i);
         if (!PrefetchSignatureEarly(level1_.load(std::memory_order_relaxed),
                                     level2_.load(std::memory_order_relaxed))) {
           return;
@@ -295,7 +273,7 @@ class IndexCursor : public SignatureIndex::Cursor {
       // Through the PreparedSignature object: the block's address kept in
       // a flat array of the centroid table (8 B per model), together with
       // the vantage points' prefetch, measured slower at 1M
-      // (docs/search-cost.md, session 5), and was dropped.
+      // (docs/search-cost.md), and was dropped.
       if (const PreparedSignature* p = t->Prepared(i)) {
         PrefetchSignature(*p);
       }
@@ -327,12 +305,79 @@ class IndexCursor : public SignatureIndex::Cursor {
     if (!next) return std::nullopt;
     return Neighbor{Id(next->item), next->distance};
   }
-  const SearchStats& stats() const override { return inner_->stats(); }
+  // The tree counts every distance it computes; without the EMD term (w.emd
+  // 0) none of them is an EMD.
+  const SearchStats& stats() const override {
+    if (w_.emd > 0.0) return inner_->stats();
+    stats_ = inner_->stats();
+    stats_.emd_computations = 0;
+    return stats_;
+  }
 
  private:
   const PreparedSignature* Item(uint32_t i) const {
     if (i < n_tree_) return snapshot_->tree->Prepared(i);
     return snapshot_->buffer[i - n_tree_].prepared.get();
+  }
+
+  // The weighted spectral and heat-trace terms of item p, exact (O(n)).
+  double Embeddings(const PreparedSignature& p) const {
+    double sum = 0.0;
+    if (w_.spectral > 0.0) sum += w_.spectral * SpectralDistance(query_, p);
+    if (w_.heat > 0.0) sum += w_.heat * HeatDistance(query_, p);
+    return sum;
+  }
+
+  // Appends the cascade of lower bounds on d_w (emd.h, metric.h), cheapest
+  // first. Level 1: the centroid bound (O(bands)) plus lower bounds of the
+  // spectral and heat-trace terms, all from the table's rows
+  // (CentroidTable: SpectralLowerBound, HeatLowerBound), so that level 1
+  // reads no signature. Level 2, only when the EMD is weighed: the relaxed
+  // transport bound with capacities on a float32 ground matrix
+  // (ConstrainedTransportBound32: half the arithmetic of the double one;
+  // the few items that go on to the EMD pay a double matrix of their own)
+  // plus the exact embedding terms. Each term enters with its weight, and
+  // a term of weight 0 is not computed.
+  void AddLowerBounds(const TreePart* t, bool relaxed_bound, QuerySpec* spec) {
+    const bool table_spectral =
+        t->centroids.spectral_size() == query_.spectral_size();
+    const bool table_heat = t->centroids.heat_size() == query_.heat_size();
+    spec->lower_bounds.push_back([this, t, table_spectral,
+                                  table_heat](uint32_t i) {
+      level1_.fetch_add(1, std::memory_order_relaxed);
+      if (i >= n_tree_) {
+        const PreparedSignature& p = *snapshot_->buffer[i - n_tree_].prepared;
+        const double emd = w_.emd > 0.0
+                               ? w_.emd * EmdLowerBound(query_centroid_.data(),
+                                                        query_.bands(), p)
+                               : 0.0;
+        return emd + Embeddings(p);
+      }
+      double sum = w_.emd > 0.0
+                       ? w_.emd * t->centroids.LowerBound(
+                                      query_centroid_.data(), query_.bands(), i)
+                       : 0.0;
+      // A table without the embeddings (items of mixed sizes, which one
+      // index never holds) gives 0 for their terms.
+      if (w_.spectral > 0.0 && table_spectral) {
+        sum += w_.spectral * t->centroids.SpectralLowerBound(
+                                 query_.spectral(), query_.spectral_size(), i);
+      }
+      if (w_.heat > 0.0 && table_heat) {
+        sum += w_.heat * t->centroids.HeatLowerBound(query_.heat(),
+                                                     query_.heat_size(), i);
+      }
+      return sum;
+    });
+    if (relaxed_bound && w_.emd > 0.0) {
+      spec->lower_bounds.push_back([this](uint32_t i) {
+        level2_.fetch_add(1, std::memory_order_relaxed);
+        const PreparedSignature* p = Item(i);
+        return p == nullptr ? 0.0
+                            : w_.emd * ConstrainedTransportBound32(query_, *p) +
+                                  Embeddings(*p);
+      });
+    }
   }
   const std::string& Id(uint32_t i) const {
     if (i < n_tree_) return snapshot_->tree->ids[i];
@@ -343,6 +388,8 @@ class IndexCursor : public SignatureIndex::Cursor {
   std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
   PreparedSignature query_;
   std::vector<double> query_centroid_;  // Centroid(query_), for the table
+  const TermWeights w_;
+  mutable SearchStats stats_;  // stats() without the EMD term
   // Level-1 and level-2 bounds computed so far (for the prefetch policy;
   // atomic because a parallel search computes bounds on several threads).
   std::atomic<int64_t> level1_{0};
@@ -522,143 +569,23 @@ size_t SignatureIndex::MemoryBytes() const {
 }
 
 absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> SignatureIndex::Search(
-    const Signature& query, double radius,
+    const Signature& query, const TermWeights& weights, double radius,
     std::function<bool(const std::string& id)> filter,
     std::function<bool()> stop) const {
+  TPR_RETURN_IF_ERROR(ValidateTermWeights(weights));
+  if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
   if (!prepared.ok()) {
     return absl::Status(
         prepared.status().code(),
         absl::StrCat("query signature: ", prepared.status().message()));
   }
-  if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
   return std::unique_ptr<Cursor>(std::make_unique<IndexCursor>(
-      snapshot(), *std::move(prepared), radius, std::move(filter),
+      snapshot(), *std::move(prepared), weights, radius, std::move(filter),
       options_.relaxed_bound, std::move(stop), pool_,
       options_.search_batch > 0
           ? options_.search_batch
           : 2 * static_cast<size_t>(std::max(options_.search_threads, 1))));
-}
-
-namespace {
-
-// ExhaustiveCursor: SearchExhaustive's cursor. Ranks every live entry of
-// its snapshot under d_w on the first Next() (so that the caller's locks,
-// held while the search starts, are not held for O(n) EMDs), then streams.
-class ExhaustiveCursor final : public SignatureIndex::Cursor {
- public:
-  ExhaustiveCursor(std::shared_ptr<const SignatureIndex::Snapshot> snapshot,
-                   PreparedSignature query, double emd_weight,
-                   double spectral_factor, double radius,
-                   std::function<bool(const std::string&)> filter,
-                   std::function<bool()> stop)
-      : snapshot_(std::move(snapshot)),
-        query_(std::move(query)),
-        emd_weight_(emd_weight),
-        spectral_factor_(spectral_factor),
-        radius_(radius),
-        filter_(std::move(filter)),
-        stop_(std::move(stop)) {}
-
-  std::optional<Neighbor> Next() override {
-    if (!ranked_) Rank();
-    if (stopped_ || next_ >= ranked_list_.size()) return std::nullopt;
-    return ranked_list_[next_++];
-  }
-  const SearchStats& stats() const override { return stats_; }
-
- private:
-  // Returns false once `stop_` asked to end.
-  bool Consider(const std::string& id, const PreparedSignature& p) {
-    if (stop_ && stop_()) {
-      stopped_ = true;
-      return false;
-    }
-    if (filter_ && !filter_(id)) return true;
-    double d = 0.0;
-    if (emd_weight_ > 0.0) {
-      d += emd_weight_ * Emd(query_, p);
-      ++stats_.emd_computations;
-    }
-    if (spectral_factor_ > 0.0)
-      d += spectral_factor_ * SpectralDistance(query_, p);
-    if (std::isnan(d) || (radius_ > 0.0 && d > radius_)) return true;
-    ranked_list_.push_back({id, d});
-    return true;
-  }
-
-  void Rank() {
-    ranked_ = true;
-    const SignatureIndex::Snapshot& s = *snapshot_;
-    const TreePart& t = *s.tree;
-    for (uint32_t i = 0; i < t.ids.size(); ++i) {
-      const PreparedSignature* p = t.Prepared(i);
-      if (p == nullptr || s.Dead(i)) continue;
-      if (!Consider(t.ids[i], *p)) return;
-    }
-    for (const BufferEntry& e : s.buffer) {
-      if (!Consider(e.id, *e.prepared)) return;
-    }
-    std::sort(ranked_list_.begin(), ranked_list_.end(),
-              [](const Neighbor& a, const Neighbor& b) {
-                return a.distance != b.distance ? a.distance < b.distance
-                                                : a.id < b.id;
-              });
-  }
-
-  std::shared_ptr<const SignatureIndex::Snapshot> snapshot_;
-  PreparedSignature query_;
-  const double emd_weight_;
-  // The weighting's spectral factor over the index's own spectral weight:
-  // the prepared embeddings already carry w_s (spectral.h).
-  const double spectral_factor_;
-  const double radius_;
-  std::function<bool(const std::string&)> filter_;
-  std::function<bool()> stop_;
-  bool ranked_ = false;
-  bool stopped_ = false;
-  std::vector<Neighbor> ranked_list_;
-  size_t next_ = 0;
-  SearchStats stats_;
-};
-
-}  // namespace
-
-absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>>
-SignatureIndex::SearchExhaustive(
-    const Signature& query, const Weighting& weighting, double radius,
-    std::function<bool(const std::string& id)> filter,
-    std::function<bool()> stop) const {
-  for (const auto& [name, w] :
-       {std::pair<const char*, double>{"emd weight", weighting.emd},
-        {"spectral weight", weighting.spectral}}) {
-    if (!std::isfinite(w) || w < 0.0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(name, " is ", w, "; it must be finite and >= 0"));
-    }
-  }
-  if (weighting.emd == 0.0 && weighting.spectral == 0.0) {
-    return absl::InvalidArgumentError(
-        "emd weight and spectral weight are both 0; at least one must be "
-        "positive");
-  }
-  const double own = options_.ground.spectral.weight;
-  if (weighting.spectral > 0.0 && own == 0.0) {
-    return absl::FailedPreconditionError(
-        "a spectral weight needs the index's spectral term, but this index "
-        "ranks with spectral weight 0 and keeps no spectra");
-  }
-  if (std::isnan(radius)) return absl::InvalidArgumentError("radius is NaN");
-  absl::StatusOr<PreparedSignature> prepared = Prepare(query, options_.ground);
-  if (!prepared.ok()) {
-    return absl::Status(
-        prepared.status().code(),
-        absl::StrCat("query signature: ", prepared.status().message()));
-  }
-  return std::unique_ptr<Cursor>(std::make_unique<ExhaustiveCursor>(
-      snapshot(), *std::move(prepared), weighting.emd,
-      own > 0.0 ? weighting.spectral / own : 0.0, radius, std::move(filter),
-      std::move(stop)));
 }
 
 std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,
@@ -666,7 +593,8 @@ std::vector<Neighbor> SignatureIndex::Knn(const Signature& query, size_t k,
   std::vector<Neighbor> out;
   if (stats != nullptr) *stats = SearchStats{};
   if (k == 0) return out;
-  absl::StatusOr<std::unique_ptr<Cursor>> cursor = Search(query, 0.0, nullptr);
+  absl::StatusOr<std::unique_ptr<Cursor>> cursor =
+      Search(query, options_.build_weights, 0.0, nullptr);
   if (!cursor.ok()) return out;
   while (out.size() < k) {
     std::optional<Neighbor> next = (*cursor)->Next();
@@ -712,12 +640,19 @@ void SignatureIndex::Rebuild() {
     part->ids.push_back(*l.id);
     part->fingerprints.push_back(l.fingerprint);
   }
+  // Every term is stored, whatever the build weights, so that any
+  // weighting can be bounded (the terms' order is IndexCursor's).
+  const TermWeights& b = options_.build_weights;
   absl::StatusOr<VpTree> tree = VpTree::Build(
-      live.size(),
-      [&live](uint32_t i, uint32_t j) {
-        return Distance(*live[i].prepared, *live[j].prepared);
+      live.size(), 3,
+      [&live](uint32_t i, uint32_t j, double* out) {
+        const PreparedSignature& x = *live[i].prepared;
+        const PreparedSignature& y = *live[j].prepared;
+        out[0] = Emd(x, y);
+        out[1] = SpectralDistance(x, y);
+        out[2] = HeatDistance(x, y);
       },
-      options_.tree, &cancel_);
+      {b.emd, b.spectral, b.heat}, options_.tree, &cancel_);
   if (tree.ok()) {
     // Outside mu_, like the tree: the copy into the arena and the centroids.
     part->tree = *std::move(tree);
@@ -749,7 +684,7 @@ void SignatureIndex::Rebuild() {
 
 namespace {
 
-constexpr Frame kFrame{"TPRSIX", /*version=*/1, "signature-index",
+constexpr Frame kFrame{"TPRSIX", /*version=*/2, "signature-index",
                        "corrupt index bytes"};
 
 std::vector<double> OptionValues(const GroundDistanceOptions& g) {
@@ -788,7 +723,7 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
     absl::string_view tree_bytes,
     const std::vector<std::pair<std::string, Signature>>& items,
     IndexOptions options) {
-  TPR_RETURN_IF_ERROR(ValidateOptions(options.ground));
+  TPR_RETURN_IF_ERROR(ValidateIndexOptions(options));
   TPR_ASSIGN_OR_RETURN(const absl::string_view payload,
                        OpenFrame(tree_bytes, kFrame));
   ByteReader r(payload);
@@ -830,6 +765,13 @@ absl::StatusOr<std::unique_ptr<SignatureIndex>> SignatureIndex::Load(
   }
   TPR_ASSIGN_OR_RETURN(part->tree, VpTree::Deserialize(tree_part));
   if (part->tree.size() != n) return Corrupt("tree size differs from id table");
+  const TermWeights& b = options.build_weights;
+  if (n > 0 &&
+      (part->tree.terms() != 3 ||
+       part->tree.build_weights() != TermVector{b.emd, b.spectral, b.heat})) {
+    return absl::FailedPreconditionError(
+        "the tree was built with other build weights; rebuild it");
+  }
 
   auto index = std::make_unique<SignatureIndex>(std::move(options));
   auto snap = std::make_shared<Snapshot>();

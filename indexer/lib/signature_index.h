@@ -1,8 +1,11 @@
 // SignatureIndex: the service-facing similarity index over TPR signatures.
-// Signatures are compared with the Earth Mover's Distance (Tam & Lau 2007,
-// section 6.1) and indexed with a VP-tree (section 6.2, vp_tree.h); inserts
-// and deletes go to a small unindexed buffer plus tombstones until the next
-// rebuild, so every answer stays exact.
+// Signatures are compared with a non-negative weighting of three terms
+// (metric.h, intent.h): the Earth Mover's Distance of Tam & Lau 2007
+// (section 6.1), the spectral term and the heat-trace term; they are indexed
+// with one VP-tree (section 6.2, vp_tree.h) that keeps each term's bounds
+// apart, so every weighting (every intent, every Ranking) is searched exactly
+// from it. Inserts and deletes go to a small unindexed buffer plus
+// tombstones until the next rebuild, so every answer stays exact.
 //
 //   SignatureIndex index(IndexOptions{});
 //   TPR_RETURN_IF_ERROR(index.Upsert("dog-3", signature));
@@ -27,6 +30,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/intent.h"
 #include "indexer/lib/signature.h"
 #include "indexer/lib/vp_tree.h"
 
@@ -35,7 +39,8 @@ namespace tpr::index {
 // SearchStats (declared in vp_tree.h) counts the work of one search: full
 // EMDs computed, cheap EMD lower bounds computed, tree nodes visited.
 
-// Neighbor is one search result: a model id and its EMD to the query.
+// Neighbor is one search result: a model id and its distance to the query
+// under the search's weighting.
 struct Neighbor {
   std::string id;
   double distance = 0.0;
@@ -43,9 +48,15 @@ struct Neighbor {
 
 // IndexOptions configures a SignatureIndex.
 struct IndexOptions {
-  // The ground distance of Eq. 7 (weights W1..W4); every signature in one
-  // index is compared with the same options. Default: GroundDistanceOptions{}.
+  // The ground distance of Eq. 7 (weights W1..W4) and the spectral and
+  // heat-trace embeddings; every signature in one index is prepared with the
+  // same options. Default: GroundDistanceOptions{}.
   GroundDistanceOptions ground;
+  // The weighting the VP-tree splits on (its own distance, and that of Knn).
+  // Searches under any valid weighting are exact; those under this one
+  // prune best. Must be valid (ValidateTermWeights). Default:
+  // IntentWeights(Intent::kBalanced), the default of every search.
+  TermWeights build_weights = IntentWeights(Intent::kBalanced);
   // Number of buffered inserts plus tombstoned tree entries past which the
   // index rebuilds its tree. The buffer is searched linearly (one EMD lower
   // bound per entry and an EMD where the bound cannot exclude it), so the
@@ -75,7 +86,12 @@ struct IndexOptions {
   size_t search_batch = 0;
 };
 
-// SignatureIndex maps ids to signatures and answers exact EMD searches.
+// ValidateIndexOptions returns OK when `options` can build an index:
+// INVALID_ARGUMENT naming the field (ground: ValidateOptions; build_weights:
+// ValidateTermWeights) otherwise. O(1); thread-safe.
+absl::Status ValidateIndexOptions(const IndexOptions& options);
+
+// SignatureIndex maps ids to signatures and answers exact searches.
 // Thread-safety: every method may be called concurrently. A search works on
 // an immutable snapshot (the tree, shared, plus a copy of the small buffer
 // and tombstone set), so writers never wait for searches and a search never
@@ -98,6 +114,9 @@ class SignatureIndex {
   };
 
   // Creates an empty index. Options are fixed for the index's lifetime.
+  // Precondition: ValidateIndexOptions(options) is OK (with invalid
+  // build_weights no tree is ever built: searches stay exact, over the
+  // buffer).
   explicit SignatureIndex(IndexOptions options);
   // Waits for (and abandons) a running background rebuild.
   ~SignatureIndex();
@@ -139,50 +158,29 @@ class SignatureIndex {
   // the containers' node overheads). O(size()); thread-safe.
   size_t MemoryBytes() const;
 
-  // Search starts a ranked search: neighbours in ascending (distance, id)
-  // order with distance <= radius (radius <= 0: unlimited) and, when
-  // `filter` is set, filter(id) true. filter is called at most once per
-  // candidate, from the thread calling Next(), and must stay valid while the
-  // cursor lives. `stop`, when set, is polled from the same thread before
-  // each step that may compute an EMD; once it returns true the cursor ends
-  // (Next() returns nullopt), so a cancelled search stops within one EMD
-  // (QuerySpec::stop). Returns INVALID_ARGUMENT for a malformed query.
+  // Search starts a ranked search under d_w, w = `weights` (metric.h):
+  // neighbours in ascending (d_w, id) order with d_w <= radius (radius <= 0:
+  // unlimited) and, when `filter` is set, filter(id) true. Every valid
+  // weighting is served by the tree (its per-term bounds, vp_tree.h), and
+  // the EMD is computed only when weights.emd > 0 (the cursor's
+  // stats().emd_computations is then 0); {1, 0, 0} is the
+  // paper's distance, IntentWeights(intent) an intent. filter is called at
+  // most once per candidate, from the thread calling Next(), and must stay
+  // valid while the cursor lives. `stop`, when set, is polled from the same
+  // thread before each step that may compute an EMD; once it returns true
+  // the cursor ends (Next() returns nullopt), so a cancelled search stops
+  // within one EMD (QuerySpec::stop). Returns INVALID_ARGUMENT for a
+  // malformed query, a NaN radius or invalid weights (ValidateTermWeights,
+  // the message names the term).
   absl::StatusOr<std::unique_ptr<Cursor>> Search(
-      const Signature& query, double radius,
+      const Signature& query, const TermWeights& weights, double radius,
       std::function<bool(const std::string& id)> filter,
       std::function<bool()> stop = nullptr) const;
-  // Weighting: another distance over the index's two terms, for one search
-  // (proto tpr.v1.Ranking):
-  //   d_w(A, B) = emd * EMD(A, B) + spectral * S1(A, B),
-  // EMD the paper's distance (Eq. 7) and S1 the spectral term of metric.h
-  // at weight 1 (the index's own phi and length). With emd, spectral >= 0
-  // d_w is a sum of two scaled pseudometrics, hence a pseudometric (the
-  // proof of metric.h, term by term). {1, 0} is the paper's TPR distance;
-  // {0, 1} the spectrum alone (ShapeDNA).
-  struct Weighting {
-    double emd = 1.0;
-    double spectral = 0.0;
-  };
-
-  // SearchExhaustive is Search under `weighting` instead of the index's own
-  // distance. The VP-tree's pruning holds only for the distance it was
-  // built with, so this computes d_w to every live entry that passes
-  // `filter` (the EMD only where weighting.emd > 0), drops NaN and those
-  // beyond `radius` (<= 0: unlimited), sorts by (distance, id) and streams:
-  // exact for any weighting, as BruteForceIndex is. The work is done on the
-  // first Next(), from the calling thread; `stop` is polled before each
-  // distance, and once it returns true the cursor ends. Returns
-  // INVALID_ARGUMENT for a malformed query or weights that are negative,
-  // not finite or both 0; FAILED_PRECONDITION when weighting.spectral > 0
-  // and the index's spectral weight is 0 (it keeps no spectra). Cost: O(n)
-  // distances and O(n log n) on the first Next(), O(n) memory.
-  absl::StatusOr<std::unique_ptr<Cursor>> SearchExhaustive(
-      const Signature& query, const Weighting& weighting, double radius,
-      std::function<bool(const std::string& id)> filter,
-      std::function<bool()> stop = nullptr) const;
-  // Knn returns the min(k, size()) nearest neighbours in ascending
-  // (distance, id) order; empty for k == 0 or a malformed query. `stats`,
-  // when set, receives the work done.
+  // build_weights returns options.build_weights: the tree's own distance.
+  const TermWeights& build_weights() const { return options_.build_weights; }
+  // Knn returns the min(k, size()) nearest neighbours under build_weights()
+  // in ascending (distance, id) order; empty for k == 0 or a malformed
+  // query. `stats`, when set, receives the work done.
   std::vector<Neighbor> Knn(const Signature& query, size_t k,
                             SearchStats* stats = nullptr) const;
 
@@ -200,10 +198,12 @@ class SignatureIndex {
   // Load reopens an index from SerializeTree() bytes without a rebuild.
   // `items` are all live entries: those not in the tree (or whose signature
   // changed since the tree was built) go to the buffer; tree ids missing
-  // from `items` are tombstoned. Returns DATA_LOSS or INVALID_ARGUMENT for
-  // corrupt bytes, FAILED_PRECONDITION when the tree was built with other
-  // ground-distance options, INVALID_ARGUMENT for a malformed signature in
-  // `items`. Cost: O(bytes + items), no EMD.
+  // from `items` are tombstoned. Returns DATA_LOSS for corrupt bytes,
+  // INVALID_ARGUMENT for bytes of another format version (an older build's
+  // tree: the caller rebuilds it from the signatures) or a malformed
+  // signature in `items`, FAILED_PRECONDITION when the tree was built with
+  // other ground-distance options or other build_weights. Cost: O(bytes +
+  // items), no EMD.
   static absl::StatusOr<std::unique_ptr<SignatureIndex>> Load(
       absl::string_view tree_bytes,
       const std::vector<std::pair<std::string, Signature>>& items,

@@ -30,10 +30,6 @@ absl::StatusOr<SpectralTransform> ParseSpectralTransform(
 }
 
 absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
-  if (!std::isfinite(o.weight) || o.weight < 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("spectral weight ", o.weight, " must be finite and >= 0"));
-  }
   if (o.eigenvalues < 1 || o.eigenvalues > kMaxSpectrum) {
     return absl::InvalidArgumentError(
         absl::StrCat("spectral eigenvalues ", o.eigenvalues, " must be in 1..",
@@ -51,9 +47,8 @@ absl::Status ValidateSpectralOptions(const SpectralOptions& o) {
 
 std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,
                                       const SpectralOptions& options) {
-  if (options.weight == 0.0) return {};
   const size_t n = static_cast<size_t>(options.eigenvalues);
-  const double scale = options.weight / std::sqrt(static_cast<double>(n));
+  const double scale = 1.0 / std::sqrt(static_cast<double>(n));
   std::vector<double> e(n);
   for (size_t k = 0; k < n; ++k) {
     const double i = static_cast<double>(k + 1);

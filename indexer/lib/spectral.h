@@ -7,7 +7,7 @@
 // Embedding. For n = options.eigenvalues and s_1 <= s_2 <= ... the stored
 // values (a spectrum shorter than n is padded with its Weyl asymptote
 // s_i = i, so every signature has an image), coordinate i is
-//   E_i(s) = weight * phi_i(s_i) / sqrt(n),        i = 1..n,
+//   E_i(s) = phi_i(s_i) / sqrt(n),        i = 1..n,
 // with phi_i one fixed per-coordinate map chosen by options.transform:
 //   kRaw      phi_i(x) = x                (ShapeDNA's plain Euclidean form)
 //   kByIndex  phi_i(x) = x / i            (normalized by index: every
@@ -50,23 +50,15 @@ inline constexpr int kMaxSpectrum = 1000;
 // SpectralOptions: the spectral term of the combined distance. Every
 // signature of one index is prepared with the same options.
 struct SpectralOptions {
-  // w_s: the term's weight relative to the EMD of Eq. 7 (whose ground
-  // distance is of order 1). 0 gives the paper's TPR distance exactly.
-  // Must be finite and >= 0. Default 1, with phi = by_index and n = 20:
-  // chosen by cross-validation over every dev set together (SHREC'07's 20
-  // classes, SHREC'11, the synthetic identity set; tpr-tune-spectral over
-  // phi x n x w_s, docs/results.md): best summed over the three sets, and
-  // the choice of every held-out fold and set lies within by_index, n 20
-  // to 30, w_s 0.5 to 1. No further normalisation of either term: both are
-  // scale-free already (the EMD of normalized features, by_index values
-  // about 1 by Weyl's law), and dividing each by a constant would only
-  // rescale w_s (its per-set median variant, measured for comparison, is
-  // data-dependent, hence no fixed metric, and scored within 0.001).
-  double weight = 1.0;
-  // phi. Default kByIndex, see weight.
+  // Default phi = by_index, n = 20: chosen by cross-validation over every
+  // dev set together (SHREC'07's 20 classes, SHREC'11, the synthetic
+  // identity set; tpr-tune-spectral over phi x n, docs/results.md). The
+  // term's factor in a distance is not an option of the embedding: it is
+  // the spectral factor of the search's TermWeights (intent.h).
+  // phi. Default kByIndex, see above.
   SpectralTransform transform = SpectralTransform::kByIndex;
   // n: eigenvalues compared (the first n). Range 1..kMaxSpectrum. Default
-  // 20, see weight (the extractor computes 20 by default; a longer spectrum is
+  // 20, see above (the extractor computes 20 by default; a longer spectrum is
   // truncated, a shorter one padded).
   int eigenvalues = 20;
 };
@@ -109,8 +101,7 @@ std::vector<double> HeatTraceEmbedding(const std::vector<double>& spectrum,
                                        const HeatTraceOptions& options);
 
 // SpectralEmbedding returns E(spectrum) of the file comment: options.
-// eigenvalues values, or an empty vector when options.weight is 0 (the
-// term is then absent). Preconditions: `options` valid and every value of
+// eigenvalues values. Preconditions: `options` valid and every value of
 // `spectrum` finite and > 0 (ValidateSignature checks both); values past
 // the first n are ignored. O(n); thread-safe.
 std::vector<double> SpectralEmbedding(const std::vector<double>& spectrum,

@@ -1,15 +1,19 @@
 // VP-tree build, best-first ranked search and serialization (Tam & Lau 2007
 // section 6.2). Design notes:
-// - Every distance computed while partitioning (item x to the vantage point
-//   of each ancestor) is kept. A node stores [min, max] of those distances
-//   over its subtree for every ancestor, and a leaf item its own row, so a
-//   search bounds a subtree or an item by the triangle inequality against
-//   ALL ancestors' vantage points, not only the parent's, at no metric cost.
-//   Memory is O(n log n) doubles (about 14 per item at n = 100k).
-// - The item rows are laid out in tree order, a bucket's rows contiguous
-//   and item-major (item_row below), so that scanning a bucket reads one
-//   linear block: with rows in item-id order a scan took a cache miss per
-//   item and dominated a 10-NN query over 100k items.
+// - Every term distance computed while partitioning (item x to the vantage
+//   point of each ancestor) is kept, per term. A node stores [min, max] of
+//   each term's distances over its subtree for every ancestor, and a leaf
+//   item its own values, so a search bounds a subtree or an item by the
+//   triangle inequality of each term against ALL ancestors' vantage points,
+//   not only the parent's, at no metric cost, under any weighting. Memory
+//   is O(n log n) floats per term (about 14 per item and term at n = 100k).
+// - The item values are float32 (a bound subtracts the rounding, below)
+//   and laid out in tree order: one block per bucket (or vantage point),
+//   term-major, then ancestor-major, then item (item_row below), so that
+//   scanning a bucket reads one linear block per term (with rows in
+//   item-id order a scan took a cache miss per item and dominated a 10-NN
+//   query over 100k items), a term whose weight is 0 is never read, and
+//   the inner loop runs over the bucket's items with unit stride.
 // - The search is the incremental nearest-neighbour algorithm of Hjaltason
 //   and Samet: one priority queue holds nodes (keyed by lower bound) and
 //   items (keyed by a lower bound that is refined lazily: stored distances,
@@ -21,9 +25,13 @@
 // - Computed bounds are deflated by a relative 1e-9 before use: the metric
 //   (an EMD from a simplex) satisfies the triangle inequality only to
 //   rounding, and an overestimated bound could reorder ties or lose an item.
+//   Bounds from the float32 item values are deflated by a relative 1e-7:
+//   a stored value r~ = fl32(r) is within 2^-24 r (6e-8) of r, so
+//   |q - r~| - 1e-7 max(q, r~) <= |q - r| - 1e-9 max(q, r).
 #include "indexer/lib/vp_tree.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 #include <queue>
@@ -41,6 +49,7 @@ namespace {
 
 constexpr uint32_t kNone = 0xffffffffu;
 constexpr double kRelativeSlack = 1e-9;
+constexpr double kStoredSlack = 1e-7;  // bounds from float32 item values
 
 // A triangle-inequality bound, made safe against the metric's rounding.
 double Deflate(double bound, double scale) {
@@ -57,33 +66,51 @@ struct VpTree::Node {
   uint32_t outer = kNone;
   uint32_t begin = 0;  // leaf bucket: leaf_items[begin, end)
   uint32_t end = 0;
-  uint32_t depth = 0;         // number of ancestors (derived)
-  uint64_t range_offset = 0;  // ranges[range_offset + 2 j], j < depth (derived)
+  uint32_t depth = 0;  // number of ancestors (derived)
+  // ranges[range_offset + 2 (j terms + t)], j < depth, t < terms (derived)
+  uint64_t range_offset = 0;
 };
 
 struct VpTree::Data {
   uint32_t n_items = 0;
   size_t height = 0;
+  size_t terms = 1;
+  TermVector build_weights = {1.0, 0.0, 0.0};
   // The arrays a search reads are huge-page advised (huge_pages.h): at 1M
   // items item_dists alone is about 110 MB, read at a random bucket per
   // visited leaf.
   HugeVector<Node> nodes;
   HugeVector<uint32_t> leaf_items;
-  // Per node, per ancestor (root first): min and max distance from that
-  // ancestor's vantage point to the items of the node's subtree.
+  // Per node, per ancestor (root first), per term: min and max term
+  // distance from that ancestor's vantage point to the items of the node's
+  // subtree.
   HugeVector<double> ranges;
-  // Per item: the node holding it, and its distances to the vantage points
-  // of that node's ancestors (root first) at item_dists[item_row[item]].
-  // Rows are in node order (a vantage point's row, or its bucket's rows in
-  // leaf_items order, back to back): see AssignRows. Serialized bytes keep
-  // them in item-id order, independent of this layout.
+  // Per item: the node holding it, and its term distances to the vantage
+  // points of that node's ancestors (root first), in float32. The values
+  // of one node (a vantage point's, or its bucket's c items in leaf_items
+  // order) form one block in node order; in it, term t, ancestor j of the
+  // item at bucket position k is at block + (t depth + j) c + k, and
+  // item_row[item] = block + k (ItemValue). Serialized bytes keep them in
+  // item-id order, independent of this layout.
   std::vector<uint32_t> item_holder;
   HugeVector<uint64_t> item_row;
-  HugeVector<double> item_dists;
+  HugeVector<float> item_dists;
 
   // Sets item_row from nodes (with depths), leaf_items and the vantage
-  // points, in the tree-order layout above; returns the total row length.
+  // points, in the tree-order layout above; returns the total length.
   uint64_t AssignRows();
+  // BlockItems returns c of the block holding `item`: 1 for a vantage
+  // point, the bucket's size for a leaf item.
+  uint64_t BlockItems(uint32_t item) const {
+    const Node& n = nodes[item_holder[item]];
+    return n.vp != kNone ? 1 : n.end - n.begin;
+  }
+  // ItemValue returns the index in item_dists of term t's distance from
+  // `item` to its j-th ancestor's vantage point.
+  uint64_t ItemValue(uint32_t item, uint32_t j, size_t t) const {
+    const uint64_t depth = nodes[item_holder[item]].depth;
+    return item_row[item] + (t * depth + j) * BlockItems(item);
+  }
 };
 
 VpTree::VpTree() : data_(std::make_unique<Data>()) {}
@@ -95,7 +122,7 @@ size_t VpTree::MemoryBytes() const {
          d.ranges.capacity() * sizeof(double) +
          d.item_holder.capacity() * sizeof(uint32_t) +
          d.item_row.capacity() * sizeof(uint64_t) +
-         d.item_dists.capacity() * sizeof(double);
+         d.item_dists.capacity() * sizeof(float);
 }
 VpTree::~VpTree() = default;
 VpTree::VpTree(VpTree&&) noexcept = default;
@@ -107,13 +134,13 @@ uint64_t VpTree::Data::AssignRows() {
   for (const Node& n : nodes) {
     if (n.vp != kNone) {
       item_row[n.vp] = row;
-      row += n.depth;
+      row += n.depth * terms;
       continue;
     }
     for (uint32_t p = n.begin; p < n.end; ++p) {
-      item_row[leaf_items[p]] = row;
-      row += n.depth;
+      item_row[leaf_items[p]] = row + (p - n.begin);
     }
+    row += static_cast<uint64_t>(n.depth) * terms * (n.end - n.begin);
   }
   return row;
 }
@@ -134,6 +161,21 @@ std::vector<uint32_t> VpTree::ItemsInTreeOrder() const {
 }
 
 size_t VpTree::size() const { return data_->n_items; }
+size_t VpTree::terms() const { return data_->terms; }
+const TermVector& VpTree::build_weights() const { return data_->build_weights; }
+
+absl::Status ValidateWeights(const TermVector& w, size_t terms) {
+  bool any = false;
+  for (size_t t = 0; t < terms && t < kMaxTerms; ++t) {
+    if (!std::isfinite(w[t]) || w[t] < 0.0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "weight of term ", t, " is ", w[t], "; it must be finite and >= 0"));
+    }
+    any = any || w[t] > 0.0;
+  }
+  if (!any) return absl::InvalidArgumentError("every term weight is 0");
+  return absl::OkStatus();
+}
 size_t VpTree::height() const { return data_->height; }
 size_t VpTree::node_count() const { return data_->nodes.size(); }
 
@@ -142,9 +184,15 @@ size_t VpTree::node_count() const { return data_->nodes.size(); }
 
 class VpTreeBuilder {
  public:
-  VpTreeBuilder(size_t n, const PairDistance& distance,
-                const VpTreeOptions& options, const std::atomic<bool>* cancel)
-      : n_(n), distance_(distance), options_(options), cancel_(cancel) {}
+  VpTreeBuilder(size_t n, size_t terms, const PairTerms& distance,
+                const TermVector& build_weights, const VpTreeOptions& options,
+                const std::atomic<bool>* cancel)
+      : n_(n),
+        terms_(terms),
+        distance_(distance),
+        build_weights_(build_weights),
+        options_(options),
+        cancel_(cancel) {}
 
   absl::StatusOr<VpTree> Run() {
     if (options_.leaf_size < 1) {
@@ -165,21 +213,38 @@ class VpTreeBuilder {
     if (n_ > 0 && !distance_) {
       return absl::InvalidArgumentError("VP-tree build without a distance");
     }
+    if (terms_ < 1 || terms_ > kMaxTerms) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "VP-tree of ", terms_, " terms: 1 to ", kMaxTerms, " allowed"));
+    }
+    if (absl::Status s = ValidateWeights(build_weights_, terms_); !s.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("VP-tree build weights: ", s.message()));
+    }
     VpTree tree;
     data_ = tree.data_.get();
     data_->n_items = static_cast<uint32_t>(n_);
+    data_->terms = terms_;
+    data_->build_weights = TermVector{};
+    for (size_t t = 0; t < terms_; ++t) {
+      data_->build_weights[t] = build_weights_[t];
+    }
     data_->item_holder.assign(n_, kNone);
     rows_.assign(n_, {});
     work_.resize(n_);
     for (size_t i = 0; i < n_; ++i) work_[i] = static_cast<uint32_t>(i);
     if (n_ > 0) BuildNode(kNone, 0, 0, static_cast<uint32_t>(n_));
     if (cancelled_) return absl::CancelledError("VP-tree build cancelled");
-    // Flatten the per-item rows in tree order.
+    // Flatten the per-item rows into the tree-order blocks.
     data_->item_dists.resize(data_->AssignRows());
-    for (size_t i = 0; i < n_; ++i) {
-      std::copy(rows_[i].begin(), rows_[i].end(),
-                data_->item_dists.begin() +
-                    static_cast<ptrdiff_t>(data_->item_row[i]));
+    for (uint32_t i = 0; i < n_; ++i) {
+      const uint32_t depth = data_->nodes[data_->item_holder[i]].depth;
+      for (uint32_t j = 0; j < depth; ++j) {
+        for (size_t t = 0; t < terms_; ++t) {
+          data_->item_dists[data_->ItemValue(i, j, t)] =
+              static_cast<float>(rows_[i][j * terms_ + t]);
+        }
+      }
       std::vector<double>().swap(rows_[i]);
     }
     return tree;
@@ -191,13 +256,25 @@ class VpTreeBuilder {
     return cancelled_;
   }
 
-  // Computes out[i] = d(vp, items[i]) for all i, split across threads for
-  // large nodes (each thread writes only its own slots).
+  // The build weighting's distance of one item's term values.
+  double Weighted(const double* terms) const {
+    double d = 0.0;
+    for (size_t t = 0; t < terms_; ++t) {
+      if (build_weights_[t] > 0.0) d += build_weights_[t] * terms[t];
+    }
+    return d;
+  }
+
+  // Computes out[i terms + t] = d_t(vp, items[i]) for all i and t, split
+  // across threads for large nodes (each thread writes only its own slots).
   void DistancesTo(uint32_t vp, const uint32_t* items, size_t count,
                    double* out) {
     const size_t threads = static_cast<size_t>(options_.build_threads);
+    auto some = [this, vp, items, out](size_t b, size_t e) {
+      for (size_t i = b; i < e; ++i) distance_(vp, items[i], out + i * terms_);
+    };
     if (threads <= 1 || count < 256) {
-      for (size_t i = 0; i < count; ++i) out[i] = distance_(vp, items[i]);
+      some(0, count);
       return;
     }
     std::vector<std::thread> pool;
@@ -205,13 +282,9 @@ class VpTreeBuilder {
     for (size_t t = 1; t < threads; ++t) {
       const size_t b = std::min(count, t * chunk);
       const size_t e = std::min(count, b + chunk);
-      pool.emplace_back([this, vp, items, out, b, e] {
-        for (size_t i = b; i < e; ++i) out[i] = distance_(vp, items[i]);
-      });
+      pool.emplace_back(some, b, e);
     }
-    for (size_t i = 0; i < std::min(count, chunk); ++i) {
-      out[i] = distance_(vp, items[i]);
-    }
+    some(0, std::min(count, chunk));
     for (std::thread& t : pool) t.join();
   }
 
@@ -229,11 +302,13 @@ class VpTreeBuilder {
     std::vector<uint32_t> sampled(sample);
     for (uint32_t& s : sampled) s = work_[pick(rng)];
     std::vector<double> d(sample);
+    std::vector<double> terms(sample * terms_);
     uint32_t best = lo;
     double best_spread = -1.0;
     for (size_t c = 0; c < candidates; ++c) {
       const uint32_t pos = pick(rng);
-      DistancesTo(work_[pos], sampled.data(), sample, d.data());
+      DistancesTo(work_[pos], sampled.data(), sample, terms.data());
+      for (size_t i = 0; i < sample; ++i) d[i] = Weighted(&terms[i * terms_]);
       double mean = 0.0;
       for (double v : d) mean += v;
       mean /= static_cast<double>(sample);
@@ -260,7 +335,7 @@ class VpTreeBuilder {
       node.range_offset = data_->ranges.size();
     }
     data_->height = std::max<size_t>(data_->height, depth);
-    for (uint32_t a = 0; a < depth; ++a) {
+    for (uint32_t a = 0; a < depth * terms_; ++a) {
       double mn = std::numeric_limits<double>::infinity();
       double mx = 0.0;
       for (uint32_t p = lo; p < hi; ++p) {
@@ -287,13 +362,14 @@ class VpTreeBuilder {
     const uint32_t vp = work_[lo];
     data_->item_holder[vp] = index;
     const size_t m = hi - lo - 1;
-    std::vector<double> d(m);
+    std::vector<double> d(m * terms_);
     DistancesTo(vp, &work_[lo + 1], m, d.data());
     std::vector<std::pair<double, uint32_t>> order(m);
     for (size_t i = 0; i < m; ++i) {
       const uint32_t item = work_[lo + 1 + i];
-      rows_[item].push_back(d[i]);
-      order[i] = {d[i], item};
+      const double* terms = &d[i * terms_];
+      rows_[item].insert(rows_[item].end(), terms, terms + terms_);
+      order[i] = {Weighted(terms), item};
     }
     // Median split; (distance, item) keeps it deterministic under ties. The
     // stored ranges, not the split rule, carry correctness.
@@ -312,19 +388,38 @@ class VpTreeBuilder {
   }
 
   const size_t n_;
-  const PairDistance& distance_;
+  const size_t terms_;
+  const PairTerms& distance_;
+  const TermVector build_weights_;
   const VpTreeOptions options_;
   const std::atomic<bool>* cancel_;
   bool cancelled_ = false;
   VpTree::Data* data_ = nullptr;
+  // Per item: its term distances to its ancestors' vantage points, root
+  // first, terms_ values per ancestor.
   std::vector<std::vector<double>> rows_;
   std::vector<uint32_t> work_;
 };
 
+absl::StatusOr<VpTree> VpTree::Build(size_t n, size_t terms,
+                                     const PairTerms& distance,
+                                     const TermVector& build_weights,
+                                     const VpTreeOptions& options,
+                                     const std::atomic<bool>* cancel) {
+  return VpTreeBuilder(n, terms, distance, build_weights, options, cancel)
+      .Run();
+}
+
 absl::StatusOr<VpTree> VpTree::Build(size_t n, const PairDistance& distance,
                                      const VpTreeOptions& options,
                                      const std::atomic<bool>* cancel) {
-  return VpTreeBuilder(n, distance, options, cancel).Run();
+  PairTerms one;
+  if (distance) {
+    one = [&distance](uint32_t i, uint32_t j, double* out) {
+      out[0] = distance(i, j);
+    };
+  }
+  return Build(n, 1, one, {1.0, 0.0, 0.0}, options, cancel);
 }
 
 // ---------------------------------------------------------------------------
@@ -334,8 +429,13 @@ class VpCursor : public NeighborCursor {
  public:
   VpCursor(const VpTree::Data* data, QuerySpec spec)
       : data_(data), spec_(std::move(spec)), queue_(Later{this}) {
+    assert(ValidateWeights(spec_.weights, data_->terms).ok());
+    for (size_t t = 0; t < data_->terms; ++t) {
+      if (spec_.weights[t] > 0.0) active_[active_count_++] = t;
+    }
     if (!data_->nodes.empty()) {
-      dq_.assign(data_->nodes.size(), std::numeric_limits<double>::quiet_NaN());
+      dq_.assign(data_->nodes.size() * data_->terms,
+                 std::numeric_limits<double>::quiet_NaN());
       queue_.push({0.0, 0, kNode, 0});
     }
     run_.clear();
@@ -390,7 +490,8 @@ class VpCursor : public NeighborCursor {
             break;
           }
           ++stats_.emd_computations;
-          const double d = spec_.distance(e.index);
+          double terms[kMaxTerms];
+          const double d = Evaluate(e.index, terms);
           if (d <= spec_.radius) queue_.push({d, e.index, kItemExact, 0});
           break;
         }
@@ -402,6 +503,21 @@ class VpCursor : public NeighborCursor {
   }
 
   const SearchStats& stats() const override { return stats_; }
+
+  // Evaluate returns d_w(query, item), leaving the term distances in
+  // terms[0..kMaxTerms) (NaN for a term whose weight is 0). Thread-safe
+  // when spec_.distance is.
+  double Evaluate(uint32_t item, double* terms) const {
+    for (size_t t = 0; t < kMaxTerms; ++t) {
+      terms[t] = std::numeric_limits<double>::quiet_NaN();
+    }
+    spec_.distance(item, terms);
+    double d = 0.0;
+    for (size_t a = 0; a < active_count_; ++a) {
+      d += spec_.weights[active_[a]] * terms[active_[a]];
+    }
+    return d;
+  }
 
  private:
   // Calls spec_.prefetch for the item under the smallest key left (an
@@ -491,35 +607,76 @@ class VpCursor : public NeighborCursor {
     run_.clear();
   }
 
-  // Collects the query's distances to the vantage points of `node`'s
-  // ancestors, root first, into path_ (NaN where unknown).
+  // Collects the query's term distances to the vantage points of `node`'s
+  // ancestors, root first, into path_: term t, ancestor j at
+  // path_[t depth + j] (NaN where unknown or the term's weight is 0).
   void CollectPath(const VpTree::Node& node) {
-    path_.resize(node.depth);
+    const size_t terms = data_->terms;
+    path_.resize(node.depth * terms);
     uint32_t p = node.parent;
     for (uint32_t j = node.depth; j-- > 0;) {
-      path_[j] = dq_[p];
+      for (size_t t = 0; t < terms; ++t) {
+        path_[t * node.depth + j] = dq_[p * terms + t];
+      }
       p = data_->nodes[p].parent;
     }
   }
 
-  // Lower bound on d(query, x) for x below `child` from its stored ranges.
+  // Lower bound on d_w(query, x) for x below `child` from its stored
+  // ranges: max(floor, sum_t w_t L_t), L_t the best bound of term t.
   double NodeBound(uint32_t child, double floor) {
     const VpTree::Node& node = data_->nodes[child];
     CollectPath(node);
-    double bound = floor;
+    const size_t terms = data_->terms;
     const double* r = &data_->ranges[node.range_offset];
-    for (uint32_t j = 0; j < node.depth; ++j) {
-      const double q = path_[j];
-      if (std::isnan(q)) continue;
-      const double lo = r[2 * j];
-      const double hi = r[2 * j + 1];
-      if (q < lo) {
-        bound = std::max(bound, Deflate(lo - q, lo));
-      } else if (q > hi) {
-        bound = std::max(bound, Deflate(q - hi, q));
+    double sum = 0.0;
+    for (size_t a = 0; a < active_count_; ++a) {
+      const size_t t = active_[a];
+      double term = 0.0;
+      for (uint32_t j = 0; j < node.depth; ++j) {
+        const double q = path_[t * node.depth + j];
+        if (std::isnan(q)) continue;
+        const double lo = r[2 * (j * terms + t)];
+        const double hi = r[2 * (j * terms + t) + 1];
+        if (q < lo) {
+          term = std::max(term, Deflate(lo - q, lo));
+        } else if (q > hi) {
+          term = std::max(term, Deflate(q - hi, q));
+        }
       }
+      sum += spec_.weights[t] * term;
     }
-    return bound;
+    return std::max(floor, sum);
+  }
+
+  // Sets bucket_bounds_[k] to sum_t w_t L_t for the c items of the leaf
+  // whose block starts at `block`, L_t the best bound of term t from the
+  // stored float32 values (deflated by kStoredSlack, see the file comment).
+  // path_ must hold the leaf's path. Written without branches, the inner
+  // loop over the bucket with unit stride, so that the compiler vectorizes
+  // it.
+  void BucketBounds(const float* block, uint32_t depth, uint32_t c) {
+    bucket_bounds_.assign(c, 0.0);
+    term_bounds_.resize(c);
+    double* sum = bucket_bounds_.data();
+    double* m = term_bounds_.data();
+    for (size_t a = 0; a < active_count_; ++a) {
+      const size_t t = active_[a];
+      std::fill(m, m + c, 0.0);
+      for (uint32_t j = 0; j < depth; ++j) {
+        const double q = path_[t * depth + j];
+        const float* r = block + (t * depth + j) * c;
+        // std::max(m, NaN) keeps m: an unknown q (a vantage point whose
+        // distance is NaN) bounds nothing.
+        for (uint32_t k = 0; k < c; ++k) {
+          const double v = static_cast<double>(r[k]);
+          const double b = std::fabs(q - v) - kStoredSlack * std::max(q, v);
+          m[k] = std::max(m[k], b);
+        }
+      }
+      const double w = spec_.weights[t];
+      for (uint32_t k = 0; k < c; ++k) sum[k] += w * m[k];
+    }
   }
 
   void Expand(const Entry& e) {
@@ -529,32 +686,27 @@ class VpCursor : public NeighborCursor {
       CollectPath(node);
       run_.clear();
       if (node.begin == node.end) return;
-      // Every ancestor was expanded to reach this leaf, so path_ has no
-      // NaN; the rows of the bucket are contiguous (see Data). The bound is
-      // max(e.key, max_j Deflate(|q_j - r_j|, max(q_j, r_j))), written
-      // without branches so the compiler can vectorize it.
-      const uint32_t depth = node.depth;
-      const double* q = path_.data();
+      // The bucket's values are one block (see Data).
       // data() + offset, not &v[offset]: a tree that is one leaf has no
       // stored distances, and indexing an empty vector is undefined
       // (UBSan, found by tests/fuzz fuzz_vp_tree_load).
-      const double* row = data_->item_dists.data() +
-                          data_->item_row[data_->leaf_items[node.begin]];
-      for (uint32_t p = node.begin; p < node.end; ++p, row += depth) {
-        double bound = e.key;
-        for (uint32_t j = 0; j < depth; ++j) {
-          const double b = std::fabs(q[j] - row[j]) -
-                           kRelativeSlack * std::max(q[j], row[j]);
-          bound = std::max(bound, b);
-        }
-        AddToRun(data_->leaf_items[p], bound);
+      const uint32_t c = node.end - node.begin;
+      BucketBounds(data_->item_dists.data() +
+                       data_->item_row[data_->leaf_items[node.begin]],
+                   node.depth, c);
+      for (uint32_t k = 0; k < c; ++k) {
+        AddToRun(data_->leaf_items[node.begin + k],
+                 std::max(e.key, bucket_bounds_[k]));
       }
       PushRun();
       return;
     }
     ++stats_.emd_computations;
-    const double d = spec_.distance(node.vp);
-    dq_[e.index] = d;
+    double terms[kMaxTerms];
+    const double d = Evaluate(node.vp, terms);
+    for (size_t t = 0; t < data_->terms; ++t) {
+      dq_[e.index * data_->terms + t] = terms[t];
+    }
     if ((!spec_.accept || spec_.accept(node.vp)) && d <= spec_.radius) {
       queue_.push({d, node.vp, kItemExact, 0});
     }
@@ -573,10 +725,16 @@ class VpCursor : public NeighborCursor {
 
   const VpTree::Data* data_;
   QuerySpec spec_;
+  // The terms whose weight is > 0, in term order.
+  size_t active_[kMaxTerms] = {};
+  size_t active_count_ = 0;
   bool stopped_ = false;  // spec_.stop returned true
   SearchStats stats_;
-  std::vector<double> dq_;    // per node: d(query, vantage point)
-  std::vector<double> path_;  // scratch
+  // Per node and term: d_t(query, vantage point) at node terms + t.
+  std::vector<double> dq_;
+  std::vector<double> path_;                      // scratch
+  std::vector<double> bucket_bounds_;             // scratch of BucketBounds
+  std::vector<double> term_bounds_;               // scratch of BucketBounds
   std::vector<std::pair<double, uint32_t>> run_;  // scratch
   std::vector<std::vector<std::pair<double, uint32_t>>> runs_;
   std::priority_queue<Entry, std::vector<Entry>, Later> queue_;
@@ -621,7 +779,8 @@ void VpCursor::RefineBatch(const Entry& e) {
     }
     slot.entry = x;
     if (!slot.dead && x.level == levels && x.key < cutoff) {
-      slot.distance = spec_.distance(x.index);
+      double terms[kMaxTerms];
+      slot.distance = Evaluate(x.index, terms);
       slot.exact = true;
     }
   });
@@ -673,14 +832,30 @@ std::vector<ItemNeighbor> VpTree::Range(QuerySpec spec,
 // ---------------------------------------------------------------------------
 // Serialization: little-endian fixed-width fields, FNV-1a 64 checksum last.
 //   "TPRVPT" u16 version | u32 n_items | u32 n_nodes
+//   u32 terms | terms x f64 build weight
 //   per node: u32 parent, vp, inner, outer, begin, end
-//   u32 n_leaf_items, u32 each | u64 n_ranges, f64 each
-//   u64 n_item_dists, f64 each | u64 checksum of everything before
+//   u32 n_leaf_items, u32 each | u64 n_ranges, f64 each (node order, then
+//   ancestor, then term: min, max)
+//   u64 n_item_dists, f32 bits each (item order, then ancestor, then term)
+//   | u64 checksum of everything before
 
 namespace {
 
-constexpr Frame kFrame{"TPRVPT", /*version=*/1, "VP-tree",
+constexpr Frame kFrame{"TPRVPT", /*version=*/2, "VP-tree",
                        "corrupt VP-tree bytes"};
+
+void PutF32(std::string* out, float v) {
+  uint32_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  PutU(out, bits, 4);
+}
+
+bool ReadF32(ByteReader* r, float* v) {
+  uint32_t bits;
+  if (!r->U32(&bits)) return false;
+  std::memcpy(v, &bits, sizeof bits);
+  return true;
+}
 
 absl::Status Corrupt(absl::string_view what) {
   return CorruptFrame(kFrame, what);
@@ -693,6 +868,8 @@ std::string VpTree::Serialize() const {
   std::string out = BeginFrame(kFrame);
   PutU(&out, d.n_items, 4);
   PutU(&out, d.nodes.size(), 4);
+  PutU(&out, d.terms, 4);
+  for (size_t t = 0; t < d.terms; ++t) PutF(&out, d.build_weights[t]);
   for (const Node& n : d.nodes) {
     for (uint32_t v : {n.parent, n.vp, n.inner, n.outer, n.begin, n.end}) {
       PutU(&out, v, 4);
@@ -702,12 +879,14 @@ std::string VpTree::Serialize() const {
   for (uint32_t v : d.leaf_items) PutU(&out, v, 4);
   PutU(&out, d.ranges.size(), 8);
   for (double v : d.ranges) PutF(&out, v);
-  // Rows in item-id order (format version 1), whatever the memory layout.
+  // Values in item-id order, whatever the memory layout.
   PutU(&out, d.item_dists.size(), 8);
   for (uint32_t item = 0; item < d.n_items; ++item) {
     const uint32_t depth = d.nodes[d.item_holder[item]].depth;
     for (uint32_t j = 0; j < depth; ++j) {
-      PutF(&out, d.item_dists[d.item_row[item] + j]);
+      for (size_t t = 0; t < d.terms; ++t) {
+        PutF32(&out, d.item_dists[d.ItemValue(item, j, t)]);
+      }
     }
   }
   EndFrame(&out);
@@ -735,6 +914,18 @@ class VpTreeReader {
     if (!r.U32(&d.n_items) || !r.U32(&n_nodes))
       return Corrupt("truncated header");
     if (d.n_items == kNone) return Corrupt("item count");
+    uint32_t terms;
+    if (!r.U32(&terms) || terms < 1 || terms > kMaxTerms) {
+      return Corrupt("term count");
+    }
+    d.terms = terms;
+    d.build_weights = TermVector{};
+    for (size_t t = 0; t < d.terms; ++t) {
+      if (!r.F(&d.build_weights[t])) return Corrupt("truncated build weights");
+    }
+    if (!ValidateWeights(d.build_weights, d.terms).ok()) {
+      return Corrupt("build weights");
+    }
     if (static_cast<uint64_t>(n_nodes) * 24 > r.remaining()) {
       return Corrupt("node count exceeds the bytes");
     }
@@ -782,7 +973,7 @@ class VpTreeReader {
         n.depth = p.depth + 1;
       }
       n.range_offset = range_total;
-      range_total += 2ull * n.depth;
+      range_total += 2ull * n.depth * d.terms;
       d.height = std::max<size_t>(d.height, n.depth);
       if (n.vp == kNone) {
         if (n.inner != kNone || n.outer != kNone || n.begin != next_leaf ||
@@ -812,7 +1003,8 @@ class VpTreeReader {
       if (d.item_holder[item] == kNone) {
         return Corrupt(absl::StrCat("item ", item, " missing"));
       }
-      dist_total += d.nodes[d.item_holder[item]].depth;
+      dist_total +=
+          static_cast<uint64_t>(d.nodes[d.item_holder[item]].depth) * d.terms;
     }
 
     uint64_t n_ranges;
@@ -832,18 +1024,22 @@ class VpTreeReader {
     }
     uint64_t n_dists;
     if (!r.U(8, &n_dists) || n_dists != dist_total ||
-        n_dists * 8 != r.remaining()) {
+        n_dists * 4 != r.remaining()) {
       return Corrupt("item distance count");
     }
-    // The bytes hold rows in item-id order; memory holds them in tree order.
+    // The bytes hold values in item-id order; memory in tree-order blocks.
     d.AssignRows();
     d.item_dists.resize(n_dists);
     for (uint32_t item = 0; item < d.n_items; ++item) {
       const uint32_t depth = d.nodes[d.item_holder[item]].depth;
       for (uint32_t j = 0; j < depth; ++j) {
-        double& v = d.item_dists[d.item_row[item] + j];
-        r.F(&v);
-        if (!(v >= 0.0) || !std::isfinite(v)) return Corrupt("item distance");
+        for (size_t t = 0; t < d.terms; ++t) {
+          float& v = d.item_dists[d.ItemValue(item, j, t)];
+          ReadF32(&r, &v);
+          if (!(v >= 0.0f) || !std::isfinite(v)) {
+            return Corrupt("item distance");
+          }
+        }
       }
     }
     return tree;

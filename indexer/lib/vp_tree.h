@@ -1,24 +1,32 @@
 // VpTree: an exact metric index (vantage-point tree, Tam & Lau 2007 section
-// 6.2; Yianilos 1993) over items 0..n-1 under any metric, with exact k-NN,
-// range and ranked (incremental, best-first) search. The metric is supplied
-// as callbacks, so the same tree serves the EMD (signature_index.h) and, in
-// tests, plain vectors under L1/L2.
+// 6.2; Yianilos 1993) over items 0..n-1, with exact k-NN, range and ranked
+// (incremental, best-first) search under ANY non-negative weighting
+//   d_w(x, y) = sum_t w_t d_t(x, y)
+// of up to kMaxTerms metrics d_t, from one tree. The terms are supplied as
+// callbacks, so the same tree serves the EMD and the spectral terms
+// (signature_index.h) and, in tests, plain vectors under L1/L2.
 //
-//   absl::StatusOr<VpTree> tree = VpTree::Build(n, pair_distance, {});
-//   QuerySpec q; q.distance = [&](uint32_t i) { return Dist(query, item[i]); };
+//   absl::StatusOr<VpTree> tree = VpTree::Build(n, 2, pair_terms, {1, 1});
+//   QuerySpec q; q.weights = {0.5, 2};
+//   q.distance = [&](uint32_t i, double* d) { Terms(query, item[i], d); };
 //   for (const ItemNeighbor& nb : tree->Knn(q, 10)) Use(nb.item, nb.distance);
 //
 // Shape: each internal node holds one vantage point (chosen among a few
 // random candidates for the largest spread of distances, as NMSLIB does) and
-// splits the rest at the median distance into an inner and an outer child;
-// leaves hold buckets of up to leaf_size items. Every node stores, for each
-// of its ancestors' vantage points, the [min, max] distance from that point
-// to the items below it, and every item its distance to each ancestor's
-// vantage point; both are by-products of the build and give tight
-// triangle-inequality bounds without extra distance computations.
+// splits the rest at the median of the build weighting's distance into an
+// inner and an outer child; leaves hold buckets of up to leaf_size items.
+// Every node stores, for each of its ancestors' vantage points and each
+// term, the [min, max] term distance from that point to the items below it,
+// and every item each term's distance to each ancestor's vantage point; both
+// are by-products of the build. A search under weights w bounds a subtree or
+// an item by sum_t w_t L_t, L_t the best triangle-inequality bound of term t
+// over the ancestors: each L_t <= d_t, so the sum is <= d_w for every w >= 0
+// (intent.h), and it is never looser than the bound of the weighted
+// distance itself (sum_t w_t |a_t - b_t| >= |sum_t w_t (a_t - b_t)|).
 #ifndef TPR_INDEXER_LIB_VP_TREE_H_
 #define TPR_INDEXER_LIB_VP_TREE_H_
 
+#include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -78,16 +86,39 @@ struct VpTreeOptions {
   int build_threads = 1;
 };
 
+// kMaxTerms: the most terms a tree's distance may have.
+inline constexpr size_t kMaxTerms = 3;
+
+// TermVector: one value per term (weights, or term distances); entries
+// past a tree's terms() are unused.
+using TermVector = std::array<double, kMaxTerms>;
+
+// ValidateWeights returns OK when w[0..terms) are finite and >= 0 with at
+// least one > 0, INVALID_ARGUMENT naming the first bad entry otherwise.
+// O(terms); thread-safe.
+absl::Status ValidateWeights(const TermVector& w, size_t terms);
+
 // PairDistance returns d(item i, item j) >= 0; it must be a metric.
 using PairDistance = std::function<double(uint32_t, uint32_t)>;
 
+// PairTerms writes d_t(item i, item j) >= 0 to out[t] for every term t of
+// the tree; each d_t must be a metric.
+using PairTerms = std::function<void(uint32_t, uint32_t, double* out)>;
+
 // QuerySpec is how a search sees its query.
 struct QuerySpec {
-  // Required: d(query, item). May return NaN for an item whose point is not
-  // available; such an item is never returned and its distances are not used
-  // for pruning.
-  std::function<double(uint32_t)> distance;
-  // Optional: a cascade of lower bounds on distance(item), cheapest first
+  // The search's distance d_w = sum_t weights[t] d_t over the tree's
+  // terms: each finite and >= 0, at least one > 0 (ValidateWeights; a
+  // precondition of Search). Default: {1, 0, 0}, the first term alone.
+  TermVector weights = {1.0, 0.0, 0.0};
+  // Required: distance(item, out) writes d_t(query, item) to out[t] for
+  // every term t with weights[t] > 0 (the others are not read, and need not
+  // be computed). The search's distance is then sum_t weights[t] out[t],
+  // summed in term order over the terms with weights[t] > 0. May write NaN
+  // for an item whose point is not available; such an item is never
+  // returned and its distances are not used for pruning.
+  std::function<void(uint32_t item, double* out)> distance;
+  // Optional: a cascade of lower bounds on d_w(query, item), cheapest first
   // (for the EMD: the centroid bound, then the relaxed transport bound).
   // Bound l is consulted for an item only when bounds 0..l-1 left it below
   // every answer still to come, so a costly bound runs only where the cheap
@@ -166,14 +197,28 @@ class VpTree {
   VpTree(VpTree&&) noexcept;
   VpTree& operator=(VpTree&&) noexcept;
 
-  // Build indexes items 0..n-1 under `distance` (a metric; thread-safe when
-  // options.build_threads > 1). Returns INVALID_ARGUMENT for a bad option or
-  // n >= 2^32 - 1, CANCELLED when *cancel becomes true meanwhile.
-  // Cost: about n * (log2(n / leaf_size) + 1) distances plus
-  // vantage_candidates * vantage_sample per large node; O(n log n) memory.
+  // Build indexes items 0..n-1 under `terms` term distances (`distance`
+  // fills all of them; thread-safe when options.build_threads > 1),
+  // splitting on the weighted distance sum_t build_weights[t] d_t. Any
+  // search weighting is exact on the tree; one close to build_weights
+  // prunes best. Returns INVALID_ARGUMENT for a bad option, terms not in
+  // 1..kMaxTerms, invalid build_weights or n >= 2^32 - 1, CANCELLED when
+  // *cancel becomes true meanwhile. Cost: about n * (log2(n / leaf_size) +
+  // 1) calls of `distance` plus vantage_candidates * vantage_sample per
+  // large node; O(n log n x terms) memory.
+  static absl::StatusOr<VpTree> Build(
+      size_t n, size_t terms, const PairTerms& distance,
+      const TermVector& build_weights, const VpTreeOptions& options,
+      const std::atomic<bool>* cancel = nullptr);
+  // Build of a tree of one term, `distance`, at weight 1.
   static absl::StatusOr<VpTree> Build(
       size_t n, const PairDistance& distance, const VpTreeOptions& options,
       const std::atomic<bool>* cancel = nullptr);
+
+  // terms returns the number of terms (1 for an empty tree built without).
+  size_t terms() const;
+  // build_weights returns the weighting the tree splits on.
+  const TermVector& build_weights() const;
 
   // size returns the number of items indexed.
   size_t size() const;
@@ -197,7 +242,8 @@ class VpTree {
   // the metric). Each item is returned as soon as no unexplored node or
   // unrefined item can beat it, so the metric is computed only for items
   // whose bounds are below the last distance returned. spec.distance is
-  // required. The cursor refers to this tree.
+  // required and spec.weights valid for terms() (asserted). The cursor
+  // refers to this tree.
   std::unique_ptr<NeighborCursor> Search(QuerySpec spec) const;
   // Knn returns the first min(k, available) results of Search.
   std::vector<ItemNeighbor> Knn(QuerySpec spec, size_t k,

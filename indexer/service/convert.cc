@@ -166,4 +166,43 @@ tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points) {
   return out;
 }
 
+absl::StatusOr<tpr::index::TermWeights> ToTermWeights(
+    const tpr::v1::SearchRequest& request) {
+  if (request.has_ranking()) {
+    const tpr::v1::Ranking& r = request.ranking();
+    const tpr::index::TermWeights w{r.emd_weight(), r.spectral_weight(),
+                                    r.heat_weight()};
+    if (absl::Status s = tpr::index::ValidateTermWeights(w); !s.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("ranking: ", s.message()));
+    }
+    return w;
+  }
+  switch (request.intent()) {
+    case tpr::v1::INTENT_UNSPECIFIED:
+    case tpr::v1::INTENT_BALANCED:
+      return tpr::index::IntentWeights(tpr::index::Intent::kBalanced);
+    case tpr::v1::INTENT_IDENTITY:
+      return tpr::index::IntentWeights(tpr::index::Intent::kIdentity);
+    case tpr::v1::INTENT_KIND:
+      return tpr::index::IntentWeights(tpr::index::Intent::kKind);
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "intent ", static_cast<int>(request.intent()),
+          " is not one of INTENT_BALANCED (1), INTENT_IDENTITY (2), "
+          "INTENT_KIND (3)"));
+  }
+}
+
+tpr::v1::Intent ToWireIntent(tpr::index::Intent intent) {
+  switch (intent) {
+    case tpr::index::Intent::kBalanced:
+      return tpr::v1::INTENT_BALANCED;
+    case tpr::index::Intent::kIdentity:
+      return tpr::v1::INTENT_IDENTITY;
+    case tpr::index::Intent::kKind:
+      return tpr::v1::INTENT_KIND;
+  }
+  return tpr::v1::INTENT_BALANCED;
+}
+
 }  // namespace tpr::indexer

@@ -12,7 +12,9 @@
 #define TPR_INDEXER_SERVICE_CONVERT_H_
 
 #include "absl/status/statusor.h"
+#include "indexer/lib/intent.h"
 #include "indexer/lib/signature.h"
+#include "tpr/v1/indexer.pb.h"
 #include "tpr/v1/signature.pb.h"
 
 namespace tpr::indexer {
@@ -64,6 +66,18 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(
 // ToIndexSignature(ToWireSignature(s, p)) == s for every valid s. O(size);
 // thread-safe.
 tpr::v1::Signature ToWireSignature(const tpr::index::Signature& s, int points);
+
+// ToTermWeights returns the weighting a search ranks by: request.ranking's
+// three weights when it is set, else IntentWeights of request.intent
+// (INTENT_UNSPECIFIED reads as INTENT_BALANCED). INVALID_ARGUMENT for an
+// intent value this build does not know (the message names `intent` and
+// the value) or ranking weights that are negative, not finite or all 0
+// (the message names `ranking` and the term). O(1); thread-safe.
+absl::StatusOr<tpr::index::TermWeights> ToTermWeights(
+    const tpr::v1::SearchRequest& request);
+
+// ToWireIntent returns the wire value of `intent`. O(1); thread-safe.
+tpr::v1::Intent ToWireIntent(tpr::index::Intent intent);
 
 }  // namespace tpr::indexer
 

@@ -122,6 +122,7 @@ absl::StatusOr<std::unique_ptr<IndexerCore>> IndexerCore::Open(
   if (options.data_dir.empty()) {
     return absl::InvalidArgumentError("data directory is empty");
   }
+  TPR_RETURN_IF_ERROR(tpr::index::ValidateIndexOptions(options.index));
   TPR_ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage,
                        Storage::Open(options.data_dir, options.storage));
   std::unique_ptr<IndexerCore> core(
@@ -497,12 +498,6 @@ tpr::v1::StatsResponse IndexerCore::Stats() const {
 // ---------------------------------------------------------------------------
 // Search.
 
-bool IndexerCore::UsesOwnDistance(const tpr::v1::SearchRequest& request) const {
-  return !request.has_ranking() || (request.ranking().emd_weight() == 1.0 &&
-                                    request.ranking().spectral_weight() ==
-                                        options_.index.ground.spectral.weight);
-}
-
 absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     const tpr::v1::SearchRequest& request,
     std::function<bool()> cancelled) const {
@@ -519,6 +514,8 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
         absl::StrCat("radius is ", request.radius(),
                      "; it must be finite and >= 0 (0: unlimited)"));
   }
+  TPR_ASSIGN_OR_RETURN(const tpr::index::TermWeights weights,
+                       ToTermWeights(request));
   tpr::index::Signature query;
   std::string exclude;
   switch (request.query_case()) {
@@ -575,19 +572,10 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
     // Cancellation is polled between EMDs inside the ranked search: one
     // cursor step may otherwise run many EMDs (a filtered or far-reaching
     // search), which kept the server busy after the client's deadline.
-    if (UsesOwnDistance(request)) {
-      TPR_ASSIGN_OR_RETURN(
-          cursor, index_->Search(query, request.radius(), filter, cancelled));
-    } else {
-      // Another weighting of the two terms: exact, but over every model
-      // (the tree prunes only for its own distance); the ranking runs on
-      // the first Next(), outside view_mu_.
-      TPR_ASSIGN_OR_RETURN(cursor, index_->SearchExhaustive(
-                                       query,
-                                       {request.ranking().emd_weight(),
-                                        request.ranking().spectral_weight()},
-                                       request.radius(), filter, cancelled));
-    }
+    // Every weighting (intent or ranking) is searched with the tree.
+    TPR_ASSIGN_OR_RETURN(
+        cursor,
+        index_->Search(query, weights, request.radius(), filter, cancelled));
   }
   return MakeSearchSession(std::move(cursor), request.k(), std::move(cancelled),
                            std::move(labels));

@@ -203,12 +203,9 @@ class IndexerCore {
   // NOT_FOUND for an unknown query id; FAILED_PRECONDITION while the store
   // holds models whose signature version is older than the indexer's (the
   // message says to re-extract them with `tpr add --update`), or for a
-  // query signature of another version. A request.ranking other than the
-  // index's own distance ranks exhaustively (SignatureIndex::
-  // SearchExhaustive: INVALID_ARGUMENT for bad weights, FAILED_PRECONDITION
-  // for a spectral weight on an index without spectra). Cost: O(1) to
-  // start; see Next (a ranking other than the index's: O(models) distances
-  // on the first Next).
+  // query signature of another version. The search ranks by request.ranking
+  // or request.intent (ToTermWeights: INVALID_ARGUMENT naming `ranking` or
+  // `intent`), always with the VP-tree. Cost: O(1) to start; see Next.
   absl::StatusOr<std::unique_ptr<SearchSession>> StartSearch(
       const tpr::v1::SearchRequest& request,
       std::function<bool()> cancelled) const;
@@ -272,9 +269,6 @@ class IndexerCore {
  private:
   IndexerCore(CoreOptions options, std::unique_ptr<Storage> storage);
   void Log(const std::string& message) const;
-  // Whether `request` ranks by the index's own distance (no ranking, or one
-  // equal to it), which the VP-tree answers.
-  bool UsesOwnDistance(const tpr::v1::SearchRequest& request) const;
   absl::Status LoadIndex();
   // The stored media of `id`, or NOT_FOUND naming `what` is missing.
   absl::StatusOr<tpr::v1::ModelMedia> MediaOf(const std::string& id,

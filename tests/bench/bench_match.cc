@@ -21,6 +21,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -139,12 +140,16 @@ using tpr::index::ConstrainedTransportBound;
 using tpr::index::Distance;
 using tpr::index::Emd;
 using tpr::index::GroundDistanceOptions;
+using tpr::index::HeatDistance;
+using tpr::index::Intent;
+using tpr::index::IntentWeights;
 using tpr::index::ItemNeighbor;
 using tpr::index::PreparedSignature;
 using tpr::index::QuerySpec;
 using tpr::index::RelaxedTransportBound;
 using tpr::index::SearchStats;
 using tpr::index::SpectralDistance;
+using tpr::index::TermWeights;
 using tpr::index::VpTree;
 using tpr::index::VpTreeOptions;
 using tpr::index::testing::SignatureGenerator;
@@ -166,11 +171,21 @@ struct DbKey {
   // spectra present, w_s = 0
   // (the same data searched with the paper's distance).
   int spectral_permille = 0;
+  // true: signatures carry 50-value spectra and the tree is built under
+  // IntentWeights(Intent::kBalanced), as SignatureIndex builds it
+  // (spectral_permille is then ignored).
+  bool balanced = false;
   bool operator<(const DbKey& o) const {
     return std::tie(n, classes, jitter_permille, leaf_size, extracted,
-                    spectral_permille) <
+                    spectral_permille, balanced) <
            std::tie(o.n, o.classes, o.jitter_permille, o.leaf_size, o.extracted,
-                    o.spectral_permille);
+                    o.spectral_permille, o.balanced);
+  }
+  // BuildWeights returns the weighting the tree is built (and by default
+  // searched) under.
+  TermWeights BuildWeights() const {
+    if (balanced) return IntentWeights(Intent::kBalanced);
+    return {1.0, spectral_permille > 0 ? spectral_permille / 1000.0 : 0.0, 0.0};
   }
 };
 
@@ -186,6 +201,7 @@ struct Db {
   // its lower bound.
   tpr::index::CentroidTable centroids;
   VpTree tree;
+  TermWeights build;               // the tree's build weighting
   double build_seconds = 0.0;      // wall clock
   double build_cpu_seconds = 0.0;  // one thread
 };
@@ -227,7 +243,7 @@ void Generate(const DbKey& key,
   gopt.seed = 20071;
   gopt.classes = std::max(key.classes, 1);
   gopt.jitter = key.jitter_permille / 1000.0;
-  if (key.spectral_permille != 0) gopt.spectrum = 50;
+  if (key.spectral_permille != 0 || key.balanced) gopt.spectrum = 50;
   SignatureGenerator gen =
       key.extracted ? SignatureGenerator(gopt, ExtractedPrototypes(key.classes))
                     : SignatureGenerator(gopt);
@@ -243,9 +259,6 @@ Db& GetDb(const DbKey& key) {
   if (slot) return *slot;
   slot = std::make_unique<Db>();
   GroundDistanceOptions ground;
-  // Explicit, so that w_s = 0 stays the paper's distance whatever the default.
-  ground.spectral.weight =
-      key.spectral_permille > 0 ? key.spectral_permille / 1000.0 : 0.0;
   slot->items.reserve(static_cast<size_t>(key.n));
   Generate(key, [&](tpr::index::Signature s) {
     std::vector<PreparedSignature>& to =
@@ -260,10 +273,17 @@ Db& GetDb(const DbKey& key) {
   const std::clock_t cpu_start = std::clock();
   VpTreeOptions tree_options;
   tree_options.leaf_size = key.leaf_size;
+  // Three terms, as SignatureIndex stores them (EMD, spectral, heat).
+  const TermWeights b = key.BuildWeights();
+  slot->build = b;
   slot->tree = *VpTree::Build(
-      items.size(),
-      [&items](uint32_t i, uint32_t j) { return Distance(items[i], items[j]); },
-      tree_options);
+      items.size(), 3,
+      [&items](uint32_t i, uint32_t j, double* out) {
+        out[0] = Emd(items[i], items[j]);
+        out[1] = SpectralDistance(items[i], items[j]);
+        out[2] = HeatDistance(items[i], items[j]);
+      },
+      {b.emd, b.spectral, b.heat}, tree_options);
   slot->build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
           .count();
@@ -330,9 +350,23 @@ template <typename Items>
 QuerySpec Spec(const Db& db, const Items& items, const PreparedSignature& q,
                Cascade cascade = Cascade::kConstrained32,
                Prefetch prefetch = Prefetch::kAdaptive,
-               bool table_spectral = true) {
+               bool table_spectral = true,
+               std::optional<TermWeights> weights = std::nullopt) {
+  const TermWeights w = weights ? *weights : db.build;
   QuerySpec spec;
-  spec.distance = [&items, &q](uint32_t i) { return Distance(q, items[i]); };
+  spec.weights = {w.emd, w.spectral, w.heat};
+  spec.distance = [&items, &q, w](uint32_t i, double* out) {
+    if (w.emd > 0.0) out[0] = Emd(q, items[i]);
+    if (w.spectral > 0.0) out[1] = SpectralDistance(q, items[i]);
+    if (w.heat > 0.0) out[2] = HeatDistance(q, items[i]);
+  };
+  // The weighted embedding terms, exact.
+  auto embeddings = [&items, &q, w](uint32_t i) {
+    double sum = 0.0;
+    if (w.spectral > 0.0) sum += w.spectral * SpectralDistance(q, items[i]);
+    if (w.heat > 0.0) sum += w.heat * HeatDistance(q, items[i]);
+    return sum;
+  };
   // This query's bound counts, for the adaptive policy (as the index's
   // cursor keeps them).
   struct Counts {
@@ -341,9 +375,11 @@ QuerySpec Spec(const Db& db, const Items& items, const PreparedSignature& q,
   };
   auto counts = std::make_shared<Counts>();
   if (prefetch != Prefetch::kNone) {
-    spec.prefetch = [&db, &items, prefetch, counts](uint32_t i, size_t level) {
+    spec.prefetch = [&db, &items, prefetch, counts, w](uint32_t i,
+                                                       size_t level) {
       if (level == 0) {
         db.centroids.Prefetch(i);
+        if (w.heat > 0.0) db.centroids.PrefetchHeat(i);
         if (prefetch == Prefetch::kLate ||
             ((prefetch == Prefetch::kAdaptive ||
               prefetch == Prefetch::kAdaptiveVantage) &&
@@ -359,48 +395,49 @@ QuerySpec Spec(const Db& db, const Items& items, const PreparedSignature& q,
   // The query's centroid, computed once per query as the index does.
   auto qc =
       std::make_shared<const std::vector<double>>(tpr::index::Centroid(q));
-  if (q.spectral_size() == 0) {
-    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
+  if (table_spectral) {
+    spec.lower_bounds.push_back([&db, &q, qc, counts, w](uint32_t i) {
       level1_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level1.fetch_add(1, std::memory_order_relaxed);
-      return db.centroids.LowerBound(qc->data(), q.bands(), i);
-    });
-  } else if (table_spectral) {
-    spec.lower_bounds.push_back([&db, &q, qc, counts](uint32_t i) {
-      level1_bounds.fetch_add(1, std::memory_order_relaxed);
-      counts->level1.fetch_add(1, std::memory_order_relaxed);
-      return db.centroids.LowerBound(qc->data(), q.bands(), i) +
-             db.centroids.SpectralLowerBound(q.spectral(), q.spectral_size(),
-                                             i);
+      double sum = w.emd > 0.0 ? w.emd * db.centroids.LowerBound(qc->data(),
+                                                                 q.bands(), i)
+                               : 0.0;
+      if (w.spectral > 0.0) {
+        sum += w.spectral * db.centroids.SpectralLowerBound(
+                                q.spectral(), q.spectral_size(), i);
+      }
+      if (w.heat > 0.0) {
+        sum += w.heat * db.centroids.HeatLowerBound(q.heat(), q.heat_size(), i);
+      }
+      return sum;
     });
   } else {
-    spec.lower_bounds.push_back([&db, &items, &q, qc, counts](uint32_t i) {
+    spec.lower_bounds.push_back([&db, &q, qc, counts, w,
+                                 embeddings](uint32_t i) {
       level1_bounds.fetch_add(1, std::memory_order_relaxed);
       counts->level1.fetch_add(1, std::memory_order_relaxed);
-      return db.centroids.LowerBound(qc->data(), q.bands(), i) +
-             SpectralDistance(q, items[i]);
+      return (w.emd > 0.0
+                  ? w.emd * db.centroids.LowerBound(qc->data(), q.bands(), i)
+                  : 0.0) +
+             embeddings(i);
     });
   }
+  if (w.emd == 0.0) return spec;  // no EMD: nothing for level 2 to bound
+  auto level2 = [&items, &q, counts, w, embeddings](double (*bound)(
+                    const PreparedSignature&, const PreparedSignature&)) {
+    return [&items, &q, counts, w, embeddings, bound](uint32_t i) {
+      level2_bounds.fetch_add(1, std::memory_order_relaxed);
+      counts->level2.fetch_add(1, std::memory_order_relaxed);
+      return w.emd * bound(q, items[i]) + embeddings(i);
+    };
+  };
   if (cascade == Cascade::kRelaxed) {
-    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
-      level2_bounds.fetch_add(1, std::memory_order_relaxed);
-      counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return RelaxedTransportBound(q, items[i]) + SpectralDistance(q, items[i]);
-    });
+    spec.lower_bounds.push_back(level2(&RelaxedTransportBound));
   } else if (cascade == Cascade::kConstrained) {
-    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
-      level2_bounds.fetch_add(1, std::memory_order_relaxed);
-      counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return ConstrainedTransportBound(q, items[i]) +
-             SpectralDistance(q, items[i]);
-    });
+    spec.lower_bounds.push_back(level2(&ConstrainedTransportBound));
   } else if (cascade == Cascade::kConstrained32) {
-    spec.lower_bounds.push_back([&items, &q, counts](uint32_t i) {
-      level2_bounds.fetch_add(1, std::memory_order_relaxed);
-      counts->level2.fetch_add(1, std::memory_order_relaxed);
-      return tpr::index::ConstrainedTransportBound32(q, items[i]) +
-             SpectralDistance(q, items[i]);
-    });
+    spec.lower_bounds.push_back(
+        level2(&tpr::index::ConstrainedTransportBound32));
   }
   return spec;
 }
@@ -453,7 +490,8 @@ void Report(benchmark::State& state, const Db& db, const SearchStats& total,
 void RunTree(benchmark::State& state, const DbKey& key, size_t k,
              Cascade cascade = Cascade::kConstrained32, int threads = 1,
              Prefetch prefetch = Prefetch::kAdaptive,
-             bool table_spectral = true, Storage storage = Storage::kArena) {
+             bool table_spectral = true, Storage storage = Storage::kArena,
+             std::optional<TermWeights> weights = std::nullopt) {
   Db& db = GetDb(key);
   const tpr::index::SignatureArena* signatures =
       storage == Storage::kArena ? &Arena(db) : nullptr;
@@ -467,8 +505,9 @@ void RunTree(benchmark::State& state, const DbKey& key, size_t k,
     const PreparedSignature& q = db.queries[queries % db.queries.size()];
     QuerySpec spec =
         signatures != nullptr
-            ? Spec(db, *signatures, q, cascade, prefetch, table_spectral)
-            : Spec(db, db.items, q, cascade, prefetch, table_spectral);
+            ? Spec(db, *signatures, q, cascade, prefetch, table_spectral,
+                   weights)
+            : Spec(db, db.items, q, cascade, prefetch, table_spectral, weights);
     if (threads > 1) {
       // As SignatureIndex does with IndexOptions::search_threads.
       spec.parallel_batch = 2 * static_cast<size_t>(threads);
@@ -626,6 +665,28 @@ void BM_KnnVpTreeExtractedStorage(benchmark::State& state) {
 }
 BENCHMARK(BM_KnnVpTreeExtractedStorage)
     ->ArgsProduct({{10000, 100000, 1000000}, {1, 10}, {0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
+// BM_KnnIntentExtracted/<n>/<k>/<intent>: the index's search (the arena,
+// the cascade, the adaptive prefetch) over one tree built under
+// IntentWeights(Intent::kBalanced), as SignatureIndex builds it, searched
+// under intent 0 balanced (the default, the build weighting), 1 identity,
+// 2 kind, 3 the paper's distance {1, 0, 0}: the per-term bounds let every
+// weighting use the one tree. Run the four side by side (one process, one
+// database) for their ratios.
+void BM_KnnIntentExtracted(benchmark::State& state) {
+  DbKey key = ExtractedKey(state);
+  key.balanced = true;
+  const TermWeights weightings[] = {IntentWeights(Intent::kBalanced),
+                                    IntentWeights(Intent::kIdentity),
+                                    IntentWeights(Intent::kKind),
+                                    {1.0, 0.0, 0.0}};
+  RunTree(state, key, static_cast<size_t>(state.range(1)),
+          Cascade::kConstrained32, /*threads=*/1, Prefetch::kAdaptive,
+          /*table_spectral=*/true, Storage::kArena, weightings[state.range(2)]);
+}
+BENCHMARK(BM_KnnIntentExtracted)
+    ->ArgsProduct({{10000, 100000, 1000000}, {10}, {0, 1, 2, 3}})
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedBefore/<n>/<k>/<spectral>: the search as it was

@@ -40,9 +40,9 @@ std::vector<PreparedSignature> PrepareAll(const SignatureGeneratorOptions& o,
   return out;
 }
 
-// Draw prepares generated signatures with the default options, or with the
-// spectral term off (weight 0: no embedding at all) when `spectral` is
-// false.
+// Draw prepares generated signatures with the default options, or with 10
+// spectral values and no heat-trace term when `spectral` is false (other
+// embedding sizes than the default's).
 std::vector<PreparedSignature> Draw(int bands, int count, uint64_t seed,
                                     bool spectral = true) {
   SignatureGeneratorOptions o;
@@ -51,7 +51,10 @@ std::vector<PreparedSignature> Draw(int bands, int count, uint64_t seed,
   o.classes = 3;
   o.features = 8;
   GroundDistanceOptions ground;
-  if (!spectral) ground.spectral.weight = 0.0;
+  if (!spectral) {
+    ground.spectral.eigenvalues = 10;
+    ground.heat.scales = 0;
+  }
   return PrepareAll(o, ground, count);
 }
 
@@ -173,6 +176,14 @@ TEST(CentroidTableTest, SpectralBoundNeverAboveSpectralTermAndWithinRounding) {
         largest = std::max(largest, std::abs(double{p.spectral()[k]}));
     }
     const double r = std::sqrt(20.0) * 0.5 * largest / 32767.0 * (1.0 + 1e-6);
+    ASSERT_EQ(table.heat_size(), items[0].heat_size());
+    double largest_heat = 0.0;
+    for (const PreparedSignature& p : items) {
+      for (int k = 0; k < p.heat_size(); ++k)
+        largest_heat = std::max(largest_heat, std::abs(double{p.heat()[k]}));
+    }
+    const double rh = std::sqrt(static_cast<double>(table.heat_size())) * 0.5 *
+                      largest_heat / 32767.0 * (1.0 + 1e-6);
     int compared = 0;
     double largest_gap = 0.0;
     for (const PreparedSignature& q : DrawWithSpectra(8, 99, transform)) {
@@ -188,16 +199,24 @@ TEST(CentroidTableTest, SpectralBoundNeverAboveSpectralTermAndWithinRounding) {
         EXPECT_LE(got, want) << "slot " << i;
         EXPECT_GE(got, want - 2.0 * r * (1.0 + 1e-9) - 1e-14 * want)
             << "slot " << i;
-        // The whole level-1 bound of the index under the default metric.
-        const double level1 = table.LowerBound(qc.data(), q.bands(), i) + got;
-        EXPECT_LE(level1, DistanceLowerBound(q, items[i])) << "slot " << i;
-        EXPECT_LE(level1, Distance(q, items[i])) << "slot " << i;
+        // The whole level-1 bound of the index under EMD + S + H.
+        const double heat = table.HeatLowerBound(q.heat(), q.heat_size(), i);
+        const double want_heat = HeatDistance(q, items[i]);
+        EXPECT_LE(heat, want_heat) << "slot " << i;
+        EXPECT_GE(heat, want_heat - 2.0 * rh * (1.0 + 1e-9) - 1e-14 * want_heat)
+            << "slot " << i;
+        const TermWeights all{1, 1, 1};
+        const double level1 =
+            table.LowerBound(qc.data(), q.bands(), i) + got + heat;
+        EXPECT_LE(level1, DistanceLowerBound(q, items[i], all)) << "slot " << i;
+        EXPECT_LE(level1, Distance(q, items[i], all)) << "slot " << i;
         EXPECT_GT(want, 0.0);
         largest_gap = std::max(largest_gap, (want - got) / want);
         ++compared;
       }
       // A query whose embedding has another length gets no bound.
       EXPECT_EQ(table.SpectralLowerBound(q.spectral(), 19, 0), 0.0);
+      EXPECT_EQ(table.HeatLowerBound(q.heat(), q.heat_size() - 1, 0), 0.0);
     }
     EXPECT_EQ(compared, 8 * 32);
     // Relative to the distance, which between two poses of a class can be
@@ -211,33 +230,46 @@ TEST(CentroidTableTest, SpectralBoundNeverAboveSpectralTermAndWithinRounding) {
                                          items[i].spectral_size(), i),
                 0.0)
           << i;
+      EXPECT_EQ(table.HeatLowerBound(items[i].heat(), items[i].heat_size(), i),
+                0.0)
+          << i;
     }
   }
 }
 
-TEST(CentroidTableTest, NoSpectralBoundWithoutOrWithMixedEmbeddings) {
-  // Weight 0 (the paper's distance): no embedding, no bytes for it.
+TEST(CentroidTableTest, NoEmbeddingBoundWithoutOrWithMixedEmbeddings) {
+  // 10 spectral values and no heat-trace term: 10 values kept, no heat
+  // array at all.
   const std::vector<PreparedSignature> plain =
       Draw(20, 6, 5, /*spectral=*/false);
   const CentroidTable without = CentroidTable::Build(
       plain.size(),
       [&](uint32_t i) -> const PreparedSignature* { return &plain[i]; });
-  EXPECT_EQ(without.spectral_size(), 0);
-  EXPECT_EQ(without.SpectralLowerBound(nullptr, 0, 0), 0.0);
+  EXPECT_EQ(without.spectral_size(), 10);
+  EXPECT_EQ(without.heat_size(), 0);
+  EXPECT_EQ(without.HeatLowerBound(nullptr, 0, 0), 0.0);
   std::vector<PreparedSignature> with =
       DrawWithSpectra(6, 5, SpectralTransform::kByIndex);
   const CentroidTable table = CentroidTable::Build(
       with.size(),
       [&](uint32_t i) -> const PreparedSignature* { return &with[i]; });
+  const size_t heat = static_cast<size_t>(with[0].heat_size());
+  ASSERT_GT(heat, 0u);
+  // The extra spectral values per row; the heat array's radius and values.
+  const size_t more = static_cast<size_t>(with[0].spectral_size() - 10);
   EXPECT_EQ(table.MemoryBytes(),
-            without.MemoryBytes() + with.size() * (20 * sizeof(int16_t)));
-  // Items of two spectral sizes in one table (never in one index): the
-  // table keeps no embedding and bounds nothing, still a lower bound.
+            without.MemoryBytes() +
+                with.size() * (more * sizeof(int16_t) + sizeof(float) +
+                               heat * sizeof(int16_t)));
+  // Items of two embedding sizes in one table (never in one index): the
+  // table keeps neither embedding and bounds nothing, still a lower bound.
   std::vector<const PreparedSignature*> mixed = {&plain[0], &with[0], &with[1]};
   const CentroidTable m =
       CentroidTable::Build(mixed.size(), [&](uint32_t i) { return mixed[i]; });
   EXPECT_EQ(m.spectral_size(), 0);
+  EXPECT_EQ(m.heat_size(), 0);
   EXPECT_EQ(m.SpectralLowerBound(with[2].spectral(), 20, 1), 0.0);
+  EXPECT_EQ(m.HeatLowerBound(with[2].heat(), with[2].heat_size(), 1), 0.0);
 }
 
 }  // namespace

@@ -216,9 +216,9 @@ TEST(ExtractedSignaturesTest, GeneratedShapes) {
 
 TEST(ExtractedSignaturesTest, GeneratedShapesWithSpectraUnderTheDefaultMetric) {
   // 10 synthetic classes x 3 poses at 1500 vertices, extracted with their
-  // spectra (the extractor's default 20 eigenvalues), under the default
-  // metric (EMD + spectral term): every bound of the index's cascade stays
-  // below the exact distance, pair by pair.
+  // spectra (the extractor's default eigenvalues), under every term (EMD +
+  // spectral + heat trace): every bound of the index's cascade stays below
+  // the exact distance, pair by pair.
   std::vector<PreparedSignature> set;
   for (const Signature& s : GeneratedShapes(3, extract::Options{})) {
     ASSERT_FALSE(s.spectrum.empty());
@@ -235,19 +235,28 @@ TEST(ExtractedSignaturesTest, GeneratedShapesWithSpectraUnderTheDefaultMetric) {
     for (size_t j = 0; j < set.size(); ++j) {
       const PreparedSignature& b = set[j];
       const uint32_t slot = static_cast<uint32_t>(j);
-      const double d = Distance(a, b);
+      // EMD + S + H: each bound of the cascade plus the exact embeddings.
+      const TermWeights all{1, 1, 1};
+      const double d = Distance(a, b, all);
       const double tolerance = d * 1e-12 + 1e-15;
       const double spectral = SpectralDistance(a, b);
+      const double heat = HeatDistance(a, b);
       const double table_spectral =
           table.SpectralLowerBound(a.spectral(), a.spectral_size(), slot);
+      const double table_heat =
+          table.HeatLowerBound(a.heat(), a.heat_size(), slot);
       EXPECT_LE(table_spectral, spectral) << q << " " << j;
-      const double level1 =
-          table.LowerBound(qc.data(), a.bands(), slot) + table_spectral;
-      EXPECT_LE(level1, DistanceLowerBound(a, b) + tolerance) << q << " " << j;
-      EXPECT_LE(level1, d + tolerance) << q << " " << j;
-      EXPECT_LE(ConstrainedTransportBound(a, b) + spectral, d + tolerance)
+      EXPECT_LE(table_heat, heat) << q << " " << j;
+      const double level1 = table.LowerBound(qc.data(), a.bands(), slot) +
+                            table_spectral + table_heat;
+      EXPECT_LE(level1, DistanceLowerBound(a, b, all) + tolerance)
           << q << " " << j;
-      EXPECT_LE(ConstrainedTransportBound32(a, b) + spectral, d + tolerance)
+      EXPECT_LE(level1, d + tolerance) << q << " " << j;
+      EXPECT_LE(ConstrainedTransportBound(a, b) + spectral + heat,
+                d + tolerance)
+          << q << " " << j;
+      EXPECT_LE(ConstrainedTransportBound32(a, b) + spectral + heat,
+                d + tolerance)
           << q << " " << j;
       spectral_positive += spectral > 0.0;
     }

@@ -1,10 +1,10 @@
-// The distance the index searches with is a metric (section 6.2; Rubner et
-// al. [22]; metric.h): identity, symmetry and the triangle inequality, for
-// the EMD over Eq. 7 alone (spectral weight 0, the paper's distance) and
-// for the EMD plus the spectral term, on realistic generated signatures,
-// on degenerate ones full of ties, and on signatures extracted from
-// generated shapes; the spectral embedding against hand-computed values;
-// the lower bounds the search relies on.
+// The distances the index searches with are metrics (section 6.2; Rubner
+// et al. [22]; metric.h): identity, symmetry and the triangle inequality,
+// for the EMD over Eq. 7 alone (the paper's distance) and for weightings
+// of the EMD, the spectral and the heat-trace terms, on realistic
+// generated signatures, on degenerate ones full of ties, and on signatures
+// extracted from generated shapes; the embeddings against hand-computed
+// values; the lower bounds the search relies on.
 #include "indexer/lib/metric.h"
 
 #include <algorithm>
@@ -28,17 +28,19 @@ namespace {
 
 constexpr double kTolerance = 1e-9;
 
-// Options with the spectral term on (weight w, transform t, the first 50
-// values: explicit, so the hand-computed oracles do not follow the
-// defaults).
+// Options with the spectral term's transform t and the first 50 values,
+// explicit, so that the hand-computed oracles do not follow the defaults.
 GroundDistanceOptions WithSpectral(
-    double w, SpectralTransform t = SpectralTransform::kLog) {
+    SpectralTransform t = SpectralTransform::kLog) {
   GroundDistanceOptions o;
-  o.spectral.weight = w;
   o.spectral.transform = t;
   o.spectral.eigenvalues = 50;
   return o;
 }
+
+// The paper's distance, and the EMD plus w times the spectral term.
+constexpr TermWeights kPaper{1.0, 0.0, 0.0};
+TermWeights EmdPlusSpectral(double w) { return {1.0, w, 0.0}; }
 
 PreparedSignature Prep(const Signature& s,
                        const GroundDistanceOptions& o = {}) {
@@ -84,13 +86,13 @@ std::vector<Signature> Degenerate(uint64_t seed, int count, int max_features,
 // Checks the three axioms on every triple of `sigs` (at most `max_triples`
 // random ones) and returns the number of triples checked.
 int CheckMetric(const std::vector<PreparedSignature>& sigs, int max_triples,
-                uint64_t seed) {
+                uint64_t seed, const TermWeights& w = kPaper) {
   EmdSolver solver;
   const int n = static_cast<int>(sigs.size());
   std::vector<double> d(static_cast<size_t>(n) * n);
   for (int i = 0; i < n; ++i) {
     for (int j = 0; j < n; ++j) {
-      d[static_cast<size_t>(i) * n + j] = Distance(solver, sigs[i], sigs[j]);
+      d[static_cast<size_t>(i) * n + j] = Distance(solver, sigs[i], sigs[j], w);
     }
   }
   auto at = [&](int i, int j) { return d[static_cast<size_t>(i) * n + j]; };
@@ -161,28 +163,33 @@ TEST(MetricTest, CombinedIsAMetricOnGeneratedSignaturesWithSpectra) {
         std::sort(spectrum.begin(), spectrum.end());
         s.spectrum = spectrum;
       }
-      sigs.push_back(Prep(s, WithSpectral(0.7, t)));
+      sigs.push_back(Prep(s, WithSpectral(t)));
     }
-    EXPECT_EQ(CheckMetric(sigs, 20000, 93), 20000) << SpectralTransformName(t);
+    EXPECT_EQ(CheckMetric(sigs, 20000, 93, EmdPlusSpectral(0.7)), 20000)
+        << SpectralTransformName(t);
+    // Every term, and the embeddings alone (no EMD computed).
+    EXPECT_EQ(CheckMetric(sigs, 5000, 94, {0.5, 1.0, 2.0}), 5000);
+    EXPECT_EQ(CheckMetric(sigs, 5000, 95, {0.0, 1.0, 3.0}), 5000);
   }
 }
 
 TEST(MetricTest, CombinedIsAMetricOnDegenerateSignaturesAndSpectra) {
   // EMD ties, spectral ties and exact zeros everywhere.
-  GroundDistanceOptions o = WithSpectral(0.5, SpectralTransform::kByIndex);
+  GroundDistanceOptions o = WithSpectral(SpectralTransform::kByIndex);
   o.spectral.eigenvalues = 3;
+  o.heat.eigenvalues = 3;
   std::vector<PreparedSignature> sigs;
   for (const Signature& s : Degenerate(15, 80, 6, 3))
     sigs.push_back(Prep(s, o));
-  EXPECT_EQ(CheckMetric(sigs, 5000, 16), 5000);
+  EXPECT_EQ(CheckMetric(sigs, 5000, 16, EmdPlusSpectral(0.5)), 5000);
+  EXPECT_EQ(CheckMetric(sigs, 5000, 17, {0.3, 0.0, 1.5}), 5000);
 }
 
 TEST(MetricTest, EmbeddingMatchesHandComputedValues) {
   const std::vector<double> sphere = {2, 2, 2, 6};  // l (l + 1), unit sphere
   SpectralOptions o;
-  o.weight = 3.0;
   o.eigenvalues = 6;  // two past the spectrum: padded with s_i = i
-  const double c = 3.0 / std::sqrt(6.0);
+  const double c = 1.0 / std::sqrt(6.0);
   o.transform = SpectralTransform::kRaw;
   std::vector<double> e = SpectralEmbedding(sphere, o);
   const std::vector<double> raw = {2, 2, 2, 6, 5, 6};
@@ -195,64 +202,94 @@ TEST(MetricTest, EmbeddingMatchesHandComputedValues) {
   o.transform = SpectralTransform::kLog;
   e = SpectralEmbedding(sphere, o);
   for (int i = 0; i < 6; ++i) EXPECT_DOUBLE_EQ(e[i], c * std::log(raw[i])) << i;
-  // Values past n are ignored; weight 0 means no term at all.
+  // Values past n are ignored.
   o.eigenvalues = 2;
   EXPECT_EQ(SpectralEmbedding(sphere, o).size(), 2u);
-  o.weight = 0.0;
-  EXPECT_TRUE(SpectralEmbedding(sphere, o).empty());
   // The distance is the Euclidean one: |(3, 4)| = 5.
   const double a[2] = {1, 1}, b[2] = {4, 5};
   EXPECT_DOUBLE_EQ(SpectralDistance(a, b, 2), 5.0);
 }
 
-TEST(MetricTest, DistanceIsEmdPlusSpectralAndWeightZeroIsThePaper) {
+// The heat trace of the unit sphere's spectrum s = (2, 2, 2, 6) padded to
+// n = 6 with s_5 = 5, s_6 = 6, at m = 2 times 0.1 and 1: F_j = log(t_j
+// Z(t_j)) / sqrt(2), written out by hand.
+TEST(MetricTest, HeatTraceMatchesHandComputedValues) {
+  const std::vector<double> sphere = {2, 2, 2, 6};
+  HeatTraceOptions o;
+  o.scales = 2;
+  o.t_min = 0.1;
+  o.t_max = 1.0;
+  o.eigenvalues = 6;
+  const std::vector<double> f = HeatTraceEmbedding(sphere, o);
+  ASSERT_EQ(f.size(), 2u);
+  for (int j = 0; j < 2; ++j) {
+    const double t = j == 0 ? 0.1 : 1.0;
+    const double z = 3 * std::exp(-2 * t) + std::exp(-6 * t) +
+                     std::exp(-5 * t) + std::exp(-6 * t);
+    EXPECT_NEAR(f[j], std::log(t * z) / std::sqrt(2.0), 1e-14) << j;
+  }
+  o.scales = 0;
+  EXPECT_TRUE(HeatTraceEmbedding(sphere, o).empty());
+}
+
+TEST(MetricTest, DistanceIsTheWeightedSumAndTheEmdAloneIsThePaper) {
   testing::SignatureGeneratorOptions go;
   go.seed = 5;
   go.spectrum = 50;
   testing::SignatureGenerator gen(go);
+  const GroundDistanceOptions o = WithSpectral();
   for (int n = 0; n < 20; ++n) {
     const Signature x = gen.Next(), y = gen.Next();
-    // Weight 0: exactly the EMD of Eq. 7, bit for bit.
-    const PreparedSignature a0 = Prep(x, WithSpectral(0.0)),
-                            b0 = Prep(y, WithSpectral(0.0));
-    EXPECT_EQ(a0.spectral_size(), 0);
-    EXPECT_EQ(Distance(a0, b0), Emd(a0, b0));
-    EXPECT_EQ(DistanceLowerBound(a0, b0), EmdLowerBound(a0, b0));
-    // Weight w: the EMD (unchanged by the spectral options) plus w times
-    // the hand-computed spectral term.
-    const PreparedSignature a = Prep(x, WithSpectral(0.8)),
-                            b = Prep(y, WithSpectral(0.8));
+    const PreparedSignature a = Prep(x, o), b = Prep(y, o);
+    EXPECT_EQ(a.spectral_size(), 50);
+    EXPECT_EQ(a.heat_size(), o.heat.scales);
+    // The paper's weighting: exactly the EMD of Eq. 7, bit for bit.
+    EXPECT_EQ(Distance(a, b, kPaper), Emd(a, b));
+    EXPECT_EQ(DistanceLowerBound(a, b, kPaper), EmdLowerBound(a, b));
+    // The spectral term against its hand-computed value.
     double s = 0.0;
     for (int i = 0; i < 50; ++i) {
       const double d = std::log(x.spectrum[i]) - std::log(y.spectrum[i]);
       s += d * d;
     }
-    const double spectral = 0.8 * std::sqrt(s / 50.0);
+    const double spectral = std::sqrt(s / 50.0);
+    const std::vector<double> hx = HeatTraceEmbedding(x.spectrum, o.heat);
+    const std::vector<double> hy = HeatTraceEmbedding(y.spectrum, o.heat);
+    const double heat = SpectralDistance(hx.data(), hy.data(), hx.size());
     // The stored embeddings are float32 (ground_distance.h): each value
-    // moves by at most 2^-24 of itself, so the term by at most
+    // moves by at most 2^-24 of itself, so a term by at most
     // 2^-24 (||E(x)|| + ||E(y)||).
-    const std::vector<double> ex =
-        SpectralEmbedding(x.spectrum, WithSpectral(0.8).spectral);
-    const std::vector<double> ey =
-        SpectralEmbedding(y.spectrum, WithSpectral(0.8).spectral);
-    const std::vector<double> zero(ex.size(), 0.0);
-    const double rounding =
-        std::ldexp(SpectralDistance(ex.data(), zero.data(), ex.size()) +
-                       SpectralDistance(ey.data(), zero.data(), ey.size()),
-                   -24) +
-        1e-12;
-    EXPECT_NEAR(SpectralDistance(a, b), spectral, rounding);
-    EXPECT_NEAR(Distance(a, b), Emd(a0, b0) + spectral, rounding);
-    // The bounds the search uses: S <= EmdLowerBound + S <= d.
-    EXPECT_LE(SpectralDistance(a, b), DistanceLowerBound(a, b));
-    EXPECT_LE(DistanceLowerBound(a, b), Distance(a, b) + kTolerance);
+    auto rounding = [](const std::vector<double>& ex,
+                       const std::vector<double>& ey) {
+      const std::vector<double> zero(ex.size(), 0.0);
+      return std::ldexp(SpectralDistance(ex.data(), zero.data(), ex.size()) +
+                            SpectralDistance(ey.data(), zero.data(), ey.size()),
+                        -24) +
+             1e-12;
+    };
+    const double rs = rounding(SpectralEmbedding(x.spectrum, o.spectral),
+                               SpectralEmbedding(y.spectrum, o.spectral));
+    const double rh = rounding(hx, hy);
+    EXPECT_NEAR(SpectralDistance(a, b), spectral, rs);
+    EXPECT_NEAR(HeatDistance(a, b), heat, rh);
+    const TermWeights w{0.8, 1.5, 2.5};
+    EXPECT_NEAR(Distance(a, b, w),
+                0.8 * Emd(a, b) + 1.5 * spectral + 2.5 * heat,
+                1.5 * rs + 2.5 * rh + 1e-12);
+    // A term of weight 0 is left out exactly (no EMD for {0, 1, 0}).
+    EXPECT_EQ(Distance(a, b, {0, 1, 0}), SpectralDistance(a, b));
+    EXPECT_EQ(Distance(a, b, {0, 0, 1}), HeatDistance(a, b));
+    // The bounds the search uses: embeddings <= bound <= d_w.
+    EXPECT_LE(1.5 * SpectralDistance(a, b) + 2.5 * HeatDistance(a, b),
+              DistanceLowerBound(a, b, w));
+    EXPECT_LE(DistanceLowerBound(a, b, w), Distance(a, b, w) + kTolerance);
   }
 }
 
 TEST(MetricTest, SpectralTermSeparatesOnlyWhatTheEmdConfuses) {
   // Identity of indiscernibles (metric.h): equal features, different
-  // spectra are at distance S > 0 with w_s > 0 and 0 with w_s = 0; spectra
-  // that agree on the first n values are at 0 either way.
+  // spectra are at distance S > 0 when S is weighed and 0 under the paper's
+  // distance; spectra that agree on the first n values are at 0 either way.
   testing::SignatureGeneratorOptions go;
   go.spectrum = 8;
   testing::SignatureGenerator gen(go);
@@ -260,14 +297,15 @@ TEST(MetricTest, SpectralTermSeparatesOnlyWhatTheEmdConfuses) {
   Signature y = x;
   y.spectrum[3] *= 1.5;
   std::sort(y.spectrum.begin(), y.spectrum.end());
-  GroundDistanceOptions o = WithSpectral(1.0);
-  EXPECT_EQ(Distance(Prep(x, WithSpectral(0.0)), Prep(y, WithSpectral(0.0))),
-            0.0);
-  EXPECT_GT(Distance(Prep(x, o), Prep(y, o)), 0.0);
+  GroundDistanceOptions o = WithSpectral();
+  EXPECT_EQ(Distance(Prep(x, o), Prep(y, o), kPaper), 0.0);
+  EXPECT_GT(Distance(Prep(x, o), Prep(y, o), EmdPlusSpectral(1.0)), 0.0);
+  EXPECT_GT(Distance(Prep(x, o), Prep(y, o), {1, 0, 1}), 0.0);
   Signature z = x;
   z.spectrum.push_back(1e6);  // past n = 8
   o.spectral.eigenvalues = 8;
-  EXPECT_EQ(Distance(Prep(x, o), Prep(z, o)), 0.0);
+  o.heat.eigenvalues = 8;
+  EXPECT_EQ(Distance(Prep(x, o), Prep(z, o), {1, 1, 1}), 0.0);
 }
 
 TEST(MetricTest, EmdIsAMetricOnDegenerateSignatures) {
@@ -304,8 +342,12 @@ TEST(MetricTest, EmdIsAMetricOnExtractedSignatures) {
   // And with the spectral term on the extracted spectra (whatever the
   // extractor gives; empty spectra see the Weyl padding).
   std::vector<PreparedSignature> combined;
-  for (const Signature& s : raw) combined.push_back(Prep(s, WithSpectral(0.5)));
-  EXPECT_EQ(CheckMetric(combined, 2000, 4), 2000);
+  for (const Signature& s : raw) combined.push_back(Prep(s, WithSpectral()));
+  EXPECT_EQ(CheckMetric(combined, 2000, 4, EmdPlusSpectral(0.5)), 2000);
+  for (Intent intent : {Intent::kBalanced, Intent::kIdentity, Intent::kKind}) {
+    EXPECT_EQ(CheckMetric(combined, 1000, 5, IntentWeights(intent)), 1000)
+        << IntentName(intent);
+  }
   // Same class, other pose should usually be nearer than another class;
   // not asserted here (retrieval quality is the extractor's test), but the
   // lower bound must hold on real data.

@@ -55,6 +55,7 @@ void ExpectSameSignature(const PreparedSignature& a,
   ASSERT_EQ(a.size(), b.size());
   ASSERT_EQ(a.bands(), b.bands());
   ASSERT_EQ(a.spectral_size(), b.spectral_size());
+  ASSERT_EQ(a.heat_size(), b.heat_size());
   EXPECT_EQ(a.serial(), b.serial());
   ASSERT_EQ(a.MemoryBytes(), b.MemoryBytes());
   EXPECT_EQ(std::memcmp(a.weights(), b.weights(), a.MemoryBytes()), 0);
@@ -84,7 +85,9 @@ TEST(SignatureArenaTest, ViewsEqualTheOriginalsBitForBit) {
     EXPECT_FALSE(v->owns_block());
     ExpectSameSignature(*v, items[i]);
     for (const PreparedSignature& q : queries) {
-      EXPECT_TRUE(SameBits(Distance(q, *v), Distance(q, items[i]))) << i;
+      const TermWeights all{1, 1, 1};  // every term
+      EXPECT_TRUE(SameBits(Distance(q, *v, all), Distance(q, items[i], all)))
+          << i;
       EXPECT_TRUE(SameBits(ConstrainedTransportBound32(q, *v),
                            ConstrainedTransportBound32(q, items[i])))
           << i;
@@ -137,8 +140,8 @@ TEST(SignatureArenaTest, CopiesOfViewsOwnTheirBlockAndOutliveTheArena) {
   }
   for (uint32_t i = 0; i < items.size(); ++i) {
     ExpectSameSignature(copies[i], items[i]);
-    EXPECT_TRUE(
-        SameBits(Distance(items[0], copies[i]), Distance(items[0], items[i])));
+    EXPECT_TRUE(SameBits(Distance(items[0], copies[i], TermWeights{1, 1, 1}),
+                         Distance(items[0], items[i], TermWeights{1, 1, 1})));
   }
 }
 
@@ -207,7 +210,9 @@ TEST(VpTreeOrderTest, EveryItemOnceNeighboursAdjacent) {
   options.leaf_size = 16;
   absl::StatusOr<VpTree> tree = VpTree::Build(
       items.size(),
-      [&](uint32_t i, uint32_t j) { return Distance(items[i], items[j]); },
+      [&](uint32_t i, uint32_t j) {
+        return Distance(items[i], items[j], IntentWeights(Intent::kBalanced));
+      },
       options);
   ASSERT_TRUE(tree.ok()) << tree.status();
   const std::vector<uint32_t> order = tree->ItemsInTreeOrder();
@@ -221,8 +226,9 @@ TEST(VpTreeOrderTest, EveryItemOnceNeighboursAdjacent) {
   double consecutive = 0.0;
   double shuffled = 0.0;
   for (size_t k = 0; k + 1 < order.size(); ++k) {
-    consecutive += Distance(items[order[k]], items[order[k + 1]]);
-    shuffled += Distance(items[k], items[(k * 7 + 13) % items.size()]);
+    const TermWeights w = IntentWeights(Intent::kBalanced);
+    consecutive += Distance(items[order[k]], items[order[k + 1]], w);
+    shuffled += Distance(items[k], items[(k * 7 + 13) % items.size()], w);
   }
   EXPECT_LT(consecutive, 0.8 * shuffled);
   // Deterministic: the same tree gives the same order.

@@ -1,6 +1,7 @@
-// SignatureIndex against a brute-force EMD oracle on realistic clustered
-// signatures: k-NN, ranked and radius search, ties, inserts and deletes with
-// and without rebuilds, background rebuilds under concurrent use, and
+// SignatureIndex against a brute-force oracle on realistic clustered
+// signatures: k-NN, ranked and radius search under the index's own weighting,
+// every intent and random weightings, ties, inserts and deletes with and
+// without rebuilds, background rebuilds under concurrent use, and
 // persistence (round trip, missing and changed items, corrupt bytes).
 #include "indexer/lib/signature_index.h"
 
@@ -27,11 +28,26 @@ namespace {
 using testing::SignatureGenerator;
 using testing::SignatureGeneratorOptions;
 
+// The index's own weighting (IndexOptions::build_weights by default).
+TermWeights Own() { return IntentWeights(Intent::kBalanced); }
+
+// The oracle's d_w, written out: each weighed term in the order emd,
+// spectral, heat (the order the index sums them in, so equal bit for bit).
+double OracleDistance(const PreparedSignature& q, const PreparedSignature& p,
+                      const TermWeights& w) {
+  double d = 0.0;
+  if (w.emd > 0.0) d += w.emd * Emd(q, p);
+  if (w.spectral > 0.0) d += w.spectral * SpectralDistance(q, p);
+  if (w.heat > 0.0) d += w.heat * HeatDistance(q, p);
+  return d;
+}
+
 // The oracle: every live signature, prepared independently, one distance
-// each (metric.h: the EMD, plus the spectral term when its weight is > 0).
+// each under the weighting asked for.
 class Oracle {
  public:
-  explicit Oracle(GroundDistanceOptions ground = {}) : ground_(ground) {}
+  explicit Oracle(GroundDistanceOptions ground = {}, TermWeights w = Own())
+      : ground_(ground), w_(w) {}
 
   void Upsert(const std::string& id, const Signature& s) {
     live_[id] = *Prepare(s, ground_);
@@ -41,12 +57,14 @@ class Oracle {
 
   std::vector<Neighbor> Search(
       const Signature& query, size_t k, double radius = 0.0,
-      const std::function<bool(const std::string&)>& filter = nullptr) const {
+      const std::function<bool(const std::string&)>& filter = nullptr,
+      const TermWeights* weights = nullptr) const {
     const PreparedSignature q = *Prepare(query, ground_);
+    const TermWeights& w = weights != nullptr ? *weights : w_;
     std::vector<Neighbor> all;
     for (const auto& [id, p] : live_) {
       if (filter && !filter(id)) continue;
-      const double d = Distance(q, p);
+      const double d = OracleDistance(q, p, w);
       if (radius > 0.0 && d > radius) continue;
       all.push_back({id, d});
     }
@@ -59,6 +77,7 @@ class Oracle {
 
  private:
   GroundDistanceOptions ground_;
+  TermWeights w_;
   std::map<std::string, PreparedSignature> live_;
 };
 
@@ -84,12 +103,14 @@ IndexOptions ManualOptions() {
   return options;
 }
 
-// Drain returns every neighbour a search yields, in order.
+// Drain returns every neighbour a search yields, in order (under the
+// index's own weighting unless `w` is given).
 std::vector<Neighbor> Drain(
     const SignatureIndex& index, const Signature& query, double radius,
-    std::function<bool(const std::string&)> filter = nullptr) {
-  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
-      index.Search(query, radius, std::move(filter));
+    std::function<bool(const std::string&)> filter = nullptr,
+    std::optional<TermWeights> w = std::nullopt) {
+  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor = index.Search(
+      query, w ? *w : index.build_weights(), radius, std::move(filter));
   EXPECT_TRUE(cursor.ok()) << cursor.status();
   std::vector<Neighbor> got;
   if (!cursor.ok()) return got;
@@ -129,7 +150,7 @@ TEST(SignatureIndexTest, EmptyIndex) {
   EXPECT_EQ(index.size(), 0u);
   EXPECT_TRUE(index.Knn(q, 5).empty());
   absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
-      index.Search(q, 0.0, nullptr);
+      index.Search(q, Own(), 0.0, nullptr);
   ASSERT_TRUE(cursor.ok()) << cursor.status();
   EXPECT_FALSE((*cursor)->Next().has_value());
   index.Rebuild();
@@ -182,7 +203,7 @@ TEST(SignatureIndexTest, CursorKeepsItsArenaAcrossRebuildsAndTheIndexsEnd) {
   std::vector<std::vector<Neighbor>> want;
   for (const Signature& q : queries) {
     absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> c =
-        index->Search(q, 0.0, nullptr);
+        index->Search(q, Own(), 0.0, nullptr);
     ASSERT_TRUE(c.ok()) << c.status();
     ASSERT_TRUE((*c)->Next().has_value());  // reads the arena once
     cursors.push_back(*std::move(c));
@@ -386,7 +407,7 @@ TEST(SignatureIndexTest, RankedRadiusAndFilteredSearchMatchBruteForce) {
   const std::vector<Signature> queries = Queries(&gen, 30);
   for (size_t q = 0; q < queries.size(); ++q) {
     // Whole ranking.
-    auto cursor = index.Search(queries[q], 0.0, nullptr);
+    auto cursor = index.Search(queries[q], Own(), 0.0, nullptr);
     ASSERT_TRUE(cursor.ok());
     std::vector<Neighbor> got;
     while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
@@ -395,14 +416,14 @@ TEST(SignatureIndexTest, RankedRadiusAndFilteredSearchMatchBruteForce) {
     // Radius at the 20th distance (inclusive), and a filter on the ids.
     const double radius = all[19].distance;
     auto filter = [](const std::string& id) { return id.back() % 2 == 0; };
-    cursor = index.Search(queries[q], radius, filter);
+    cursor = index.Search(queries[q], Own(), radius, filter);
     ASSERT_TRUE(cursor.ok());
     got.clear();
     while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
     ExpectSame(got, oracle.Search(queries[q], 10000, radius, filter),
                "radius " + std::to_string(q));
     // Stopping early costs less than draining.
-    cursor = index.Search(queries[q], 0.0, nullptr);
+    cursor = index.Search(queries[q], Own(), 0.0, nullptr);
     (*cursor)->Next();
     EXPECT_LT((*cursor)->stats().emd_computations,
               static_cast<int64_t>(index.size()));
@@ -422,10 +443,10 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
     gopt.spectrum = 50;
     SignatureGenerator gen(gopt);
     IndexOptions options = ManualOptions();
-    options.ground.spectral.weight = 0.6;
+    options.build_weights = {1.0, 0.6, 0.0};
     options.ground.spectral.transform = t;
     SignatureIndex index(options);
-    Oracle oracle(options.ground);
+    Oracle oracle(options.ground, options.build_weights);
     std::vector<Signature> stored;
     for (int i = 0; i < 240; ++i) {
       Signature s = i % 6 == 5 ? stored[static_cast<size_t>(i - 5)]  // a copy
@@ -460,149 +481,166 @@ TEST(SignatureIndexTest, CombinedMetricMatchesBruteForceIncludingTies) {
   }
 }
 
-// DrainExhaustive returns every neighbour SearchExhaustive yields.
-std::vector<Neighbor> DrainExhaustive(
-    const SignatureIndex& index, const Signature& query,
-    SignatureIndex::Weighting w, double radius = 0.0,
-    std::function<bool(const std::string&)> filter = nullptr) {
-  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> cursor =
-      index.SearchExhaustive(query, w, radius, std::move(filter));
-  EXPECT_TRUE(cursor.ok()) << cursor.status();
-  std::vector<Neighbor> got;
-  if (!cursor.ok()) return got;
-  while (std::optional<Neighbor> n = (*cursor)->Next()) got.push_back(*n);
-  return got;
+// Weightings: every intent, the paper's distance, each embedding alone,
+// and random ones with some term at 0.
+std::vector<TermWeights> Weightings(uint64_t seed) {
+  std::vector<TermWeights> out = {IntentWeights(Intent::kBalanced),
+                                  IntentWeights(Intent::kIdentity),
+                                  IntentWeights(Intent::kKind),
+                                  {1, 0, 0},
+                                  {0, 1, 0},
+                                  {0, 0, 1},
+                                  {1, 1, 1}};
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 3.0);
+  for (int r = 0; r < 4; ++r) {
+    TermWeights w{u(rng), u(rng), u(rng)};
+    if (r % 3 == 0) w.emd = 0.0;
+    if (r % 3 == 1) w.spectral = 0.0;
+    if (r % 3 == 2) w.heat = 0.0;
+    out.push_back(w);
+  }
+  return out;
 }
 
-TEST(SignatureIndexTest, ExhaustiveRankingsEqualAnIndependentBruteForce) {
-  // Another weighting of the two terms (proto Ranking): the paper's EMD
-  // alone, the spectrum alone and a mix, against an oracle that prepares
-  // every signature itself with the spectral term at weight 1 and sums the
-  // terms. The index keeps its embedding at weight 0.6 in float32, so the
-  // spectral parts agree to float rounding, not bit for bit; the EMD alone
-  // and the index's own weighting (the VP-tree's answers) agree exactly.
+std::string Name(const TermWeights& w) {
+  return std::to_string(w.emd) + "/" + std::to_string(w.spectral) + "/" +
+         std::to_string(w.heat);
+}
+
+// One tree, built once under the index's own weighting, answers every
+// intent and every weighting exactly: k-NN (k > n too), the whole ranked
+// order, radius and label-filtered searches equal the oracle's order and
+// distances bit for bit, over tree items, buffered items and tombstones,
+// with ties (exact copies, at distance 0), and again after SerializeTree /
+// Load.
+TEST(SignatureIndexTest, EveryIntentAndWeightingMatchesBruteForce) {
   SignatureGeneratorOptions gopt;
   gopt.seed = 33;
   gopt.classes = 8;
-  gopt.spectrum = 30;
+  gopt.spectrum = 50;
   SignatureGenerator gen(gopt);
-  IndexOptions options = ManualOptions();
-  options.ground.spectral.weight = 0.6;
-  SignatureIndex index(options);
-  GroundDistanceOptions unit = options.ground;
-  unit.spectral.weight = 1.0;
-  std::map<std::string, PreparedSignature> live;
+  SignatureIndex index(ManualOptions());
+  Oracle oracle;
+  std::vector<std::pair<std::string, Signature>> items;
   std::vector<Signature> stored;
-  for (int i = 0; i < 150; ++i) {
+  for (int i = 0; i < 200; ++i) {
     const Signature s = i % 10 == 9 ? stored[static_cast<size_t>(i - 4)]
                                     : gen.Next();  // some exact copies
     stored.push_back(s);
     ASSERT_TRUE(index.Upsert(Id(i), s).ok());
-    live.insert_or_assign(Id(i), *Prepare(s, unit));
+    oracle.Upsert(Id(i), s);
+    items.emplace_back(Id(i), s);
   }
   index.Rebuild();
-  for (int i = 150; i < 170; ++i) {  // buffer entries and a tombstone
+  for (int i = 200; i < 225; ++i) {  // buffered entries
     const Signature s = gen.Next();
     ASSERT_TRUE(index.Upsert(Id(i), s).ok());
-    live.insert_or_assign(Id(i), *Prepare(s, unit));
+    oracle.Upsert(Id(i), s);
+    items.emplace_back(Id(i), s);
   }
-  ASSERT_TRUE(index.Remove(Id(7)));
-  live.erase(Id(7));
-  auto brute = [&](const Signature& query, SignatureIndex::Weighting w,
-                   double radius, const std::string& skip) {
-    const PreparedSignature q = *Prepare(query, unit);
-    std::vector<Neighbor> all;
-    for (const auto& [id, p] : live) {
-      if (id == skip) continue;
-      const double d = w.emd * Emd(q, p) + w.spectral * SpectralDistance(q, p);
-      if (radius > 0.0 && d > radius) continue;
-      all.push_back({id, d});
-    }
-    std::sort(all.begin(), all.end(), [](const Neighbor& a, const Neighbor& b) {
-      return a.distance != b.distance ? a.distance < b.distance : a.id < b.id;
-    });
-    return all;
-  };
-  std::vector<Signature> queries = Queries(&gen, 6);
+  for (int i : {7, 40, 210}) {  // tombstones and a buffer delete
+    ASSERT_TRUE(index.Remove(Id(i)));
+    oracle.Remove(Id(i));
+    items.erase(std::find_if(items.begin(), items.end(),
+                             [i](const auto& e) { return e.first == Id(i); }));
+  }
+  ASSERT_GT(index.indexed(), 0u);
+  ASSERT_GT(index.buffered(), 0u);
+  absl::StatusOr<std::unique_ptr<SignatureIndex>> loaded =
+      SignatureIndex::Load(index.SerializeTree(), items, ManualOptions());
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  std::vector<Signature> queries = Queries(&gen, 5);
   queries.push_back(stored[9]);  // has a copy at distance 0
-  const SignatureIndex::Weighting weightings[] = {{1, 0}, {0, 1}, {0.5, 2}};
-  for (size_t q = 0; q < queries.size(); ++q) {
-    for (const SignatureIndex::Weighting& w : weightings) {
-      const std::string ctx = "query " + std::to_string(q) + " w " +
-                              std::to_string(w.emd) + "/" +
-                              std::to_string(w.spectral);
-      const std::vector<Neighbor> want = brute(queries[q], w, 0.0, Id(3));
-      const std::vector<Neighbor> got =
-          DrainExhaustive(index, queries[q], w, 0.0,
-                          [](const std::string& id) { return id != Id(3); });
-      ASSERT_EQ(got.size(), want.size()) << ctx;
-      for (size_t i = 0; i < got.size(); ++i) {
-        EXPECT_EQ(got[i].id, want[i].id) << ctx << " rank " << i;
-        if (w.spectral == 0.0) {
-          EXPECT_EQ(got[i].distance, want[i].distance) << ctx << " rank " << i;
-        } else {
-          EXPECT_NEAR(got[i].distance, want[i].distance,
-                      1e-6 * (1.0 + want[i].distance))
-              << ctx << " rank " << i;
+  auto labels = [](const std::string& id) { return id.back() % 3 != 0; };
+  for (const SignatureIndex* idx : {&index, loaded->get()}) {
+    for (const TermWeights& w : Weightings(34)) {
+      for (size_t q = 0; q < queries.size(); ++q) {
+        const std::string ctx = Name(w) + " query " + std::to_string(q);
+        const std::vector<Neighbor> all =
+            oracle.Search(queries[q], 10000, 0.0, nullptr, &w);
+        ASSERT_EQ(all.size(), oracle.size());
+        const std::vector<Neighbor> got =
+            Drain(*idx, queries[q], 0.0, nullptr, w);
+        ExpectSame(got, all, ctx + " ranked");
+        // k-NN through the cursor, with k > n.
+        for (size_t k : {size_t{1}, size_t{10}, oracle.size() + 3}) {
+          auto cursor = idx->Search(queries[q], w, 0.0, nullptr);
+          ASSERT_TRUE(cursor.ok()) << cursor.status();
+          std::vector<Neighbor> first;
+          while (first.size() < k) {
+            std::optional<Neighbor> n = (*cursor)->Next();
+            if (!n) break;
+            first.push_back(*n);
+          }
+          ExpectSame(first, oracle.Search(queries[q], k, 0.0, nullptr, &w),
+                     ctx + " k " + std::to_string(k));
+          if (k == 10 && w.emd > 0.0) {
+            EXPECT_LT((*cursor)->stats().emd_computations,
+                      static_cast<int64_t>(oracle.size()))
+                << ctx;
+          }
         }
+        const double radius = all[20].distance;
+        ExpectSame(Drain(*idx, queries[q], radius, labels, w),
+                   oracle.Search(queries[q], 10000, radius, labels, &w),
+                   ctx + " radius and filter");
       }
-      // Radius: exactly the oracle's ids within it. It lies halfway between
-      // two ranks that are not tied, so that float rounding of the spectral
-      // part cannot move an item across it.
-      size_t m = want.size() / 3;
-      while (m + 2 < want.size() && want[m + 1].distance - want[m].distance <
-                                        1e-5 * (1.0 + want[m].distance)) {
-        ++m;
-      }
-      const double radius = 0.5 * (want[m].distance + want[m + 1].distance);
-      std::vector<Neighbor> in = DrainExhaustive(index, queries[q], w, radius);
-      std::vector<Neighbor> want_in = brute(queries[q], w, radius, "");
-      ASSERT_EQ(in.size(), want_in.size()) << ctx << " radius";
-      for (size_t i = 0; i < in.size(); ++i)
-        EXPECT_EQ(in[i].id, want_in[i].id) << ctx << " radius rank " << i;
     }
-    // The index's own weighting, ranked exhaustively, is the tree's answer
-    // bit for bit (same terms, same order of summation).
-    ExpectSame(DrainExhaustive(index, queries[q], {1.0, 0.6}),
-               Drain(index, queries[q], 0.0), "own " + std::to_string(q));
   }
 }
 
-TEST(SignatureIndexTest, ExhaustiveRankingRefusesBadWeightsAndStops) {
+TEST(SignatureIndexTest, SearchRefusesBadWeightsAndStops) {
   SignatureGeneratorOptions gopt;
   gopt.seed = 5;
   gopt.spectrum = 20;
   SignatureGenerator gen(gopt);
-  SignatureIndex index(ManualOptions());  // spectral weight 1 by default
-  for (int i = 0; i < 20; ++i)
+  SignatureIndex index(ManualOptions());
+  for (int i = 0; i < 40; ++i)
     ASSERT_TRUE(index.Upsert(Id(i), gen.Next()).ok());
+  index.Rebuild();
   const Signature q = gen.Next();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
-  for (SignatureIndex::Weighting w : std::vector<SignatureIndex::Weighting>{
-           {-1, 0}, {0, -0.5}, {nan, 1}, {1, inf}, {0, 0}}) {
+  for (const TermWeights& w : std::vector<TermWeights>{{-1, 0, 0},
+                                                       {0, -0.5, 1},
+                                                       {nan, 1, 0},
+                                                       {1, inf, 0},
+                                                       {0, 0, 0},
+                                                       {1, 0, -2}}) {
     absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> c =
-        index.SearchExhaustive(q, w, 0.0, nullptr);
-    EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument)
-        << w.emd << " " << w.spectral;
+        index.Search(q, w, 0.0, nullptr);
+    EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument) << Name(w);
   }
-  IndexOptions no_spectra = ManualOptions();
-  no_spectra.ground.spectral.weight = 0.0;
-  SignatureIndex paper(no_spectra);
-  ASSERT_TRUE(paper.Upsert("a", gen.Next()).ok());
-  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> c =
-      paper.SearchExhaustive(q, {0, 1}, 0.0, nullptr);
-  EXPECT_EQ(c.status().code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_TRUE(paper.SearchExhaustive(q, {1, 0}, 0.0, nullptr).ok());
-  // stop: polled before each distance; once true, nothing more is computed
-  // and the cursor ends.
-  int polls = 0;
-  absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> stopped =
-      index.SearchExhaustive(q, {1, 0}, 0.0, nullptr,
-                             [&polls] { return ++polls > 5; });
-  ASSERT_TRUE(stopped.ok());
-  EXPECT_FALSE((*stopped)->Next().has_value());
-  EXPECT_EQ((*stopped)->stats().emd_computations, 5);
+  // stop: polled before each step that may compute an EMD; once true,
+  // nothing more is computed and the cursor ends.
+  for (const TermWeights& w : Weightings(6)) {
+    int polls = 0;
+    absl::StatusOr<std::unique_ptr<SignatureIndex::Cursor>> stopped =
+        index.Search(q, w, 0.0, nullptr, [&polls] { return ++polls > 3; });
+    ASSERT_TRUE(stopped.ok());
+    EXPECT_FALSE((*stopped)->Next().has_value());
+    EXPECT_LE((*stopped)->stats().emd_computations, 3) << Name(w);
+  }
+  // An empty index has no neighbour under any weighting.
+  SignatureIndex empty(ManualOptions());
+  for (const TermWeights& w : Weightings(7)) {
+    EXPECT_TRUE(Drain(empty, q, 0.0, nullptr, w).empty());
+  }
+  // Bad build weights are refused where options are checked.
+  IndexOptions bad = ManualOptions();
+  bad.build_weights = {0, 0, 0};
+  EXPECT_EQ(ValidateIndexOptions(bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      SignatureIndex::Load(index.SerializeTree(), {}, bad).status().code(),
+      absl::StatusCode::kInvalidArgument);
+  // A tree built under other build weights is refused on load (rebuild).
+  IndexOptions other = ManualOptions();
+  other.build_weights = {1, 0, 0};
+  EXPECT_EQ(
+      SignatureIndex::Load(index.SerializeTree(), {}, other).status().code(),
+      absl::StatusCode::kFailedPrecondition);
 }
 
 TEST(SignatureIndexTest, PrunesOnClusteredData) {
@@ -672,7 +710,7 @@ TEST(SignatureIndexTest, MalformedInputIsInvalidArgument) {
             absl::StatusCode::kInvalidArgument);
   EXPECT_FALSE(index.Contains("bad"));
   EXPECT_EQ(index.size(), 1u);
-  EXPECT_EQ(index.Search(bad, 0.0, nullptr).status().code(),
+  EXPECT_EQ(index.Search(bad, Own(), 0.0, nullptr).status().code(),
             absl::StatusCode::kInvalidArgument);
   EXPECT_TRUE(index.Knn(bad, 3).empty());
 }

@@ -102,8 +102,8 @@ VpTree BuildTree(const std::vector<Point>& points, Metric metric,
 QuerySpec Spec(const std::vector<Point>& points, const Point& query,
                Metric metric) {
   QuerySpec spec;
-  spec.distance = [&points, &query, metric](uint32_t i) {
-    return metric(query, points[i]);
+  spec.distance = [&points, &query, metric](uint32_t i, double* d) {
+    d[0] = metric(query, points[i]);
   };
   return spec;
 }
@@ -147,9 +147,9 @@ void CheckKnnAgainstBruteForce(const std::vector<Point>& points, Metric metric,
     int64_t calls = 0;
     QuerySpec spec = Spec(points, queries[q], metric);
     QuerySpec counted = spec;
-    counted.distance = [&](uint32_t i) {
+    counted.distance = [&](uint32_t i, double* d) {
       ++calls;
-      return spec.distance(i);
+      spec.distance(i, d);
     };
     const std::vector<ItemNeighbor> got = tree.Knn(counted, k, &stats);
     const std::vector<ItemNeighbor> want = oracle.Knn(spec, k);
@@ -346,12 +346,12 @@ TEST(VpTreeTest, PrefetchHintsEachVantagePointBeforeItsDistance) {
     int64_t unhinted = 0;  // vantage points computed without a hint
     int64_t computed = 0;
     const auto distance = spec.distance;
-    spec.distance = [&](uint32_t i) {
+    spec.distance = [&](uint32_t i, double* d) {
       if (bounded[i] == 0) {  // never bounded: a vantage point
         ++computed;
         if (hinted[i] == 0) ++unhinted;
       }
-      return distance(i);
+      distance(i, d);
     };
     spec.prefetch_vantage_points = true;
     spec.prefetch = [&hinted](uint32_t i, size_t level) {
@@ -443,8 +443,8 @@ TEST(VpTreeTest, UnavailablePointsAreSkippedNotFatal) {
   const BruteForceIndex oracle(points.size());
   for (const Point& query : Queries(points, 200, 112)) {
     QuerySpec spec = Spec(points, query, L2);
-    spec.distance = [&points, &query](uint32_t i) {
-      return i % 3 == 0 ? std::numeric_limits<double>::quiet_NaN()
+    spec.distance = [&points, &query](uint32_t i, double* d) {
+      d[0] = i % 3 == 0 ? std::numeric_limits<double>::quiet_NaN()
                         : L2(query, points[i]);
     };
     spec.accept = [](uint32_t i) { return i % 3 != 0; };
@@ -498,6 +498,193 @@ TEST(VpTreeTest, BadOptionsAndCancellation) {
   std::atomic<bool> cancel{true};
   EXPECT_EQ(VpTree::Build(points.size(), d, {}, &cancel).status().code(),
             absl::StatusCode::kCancelled);
+}
+
+// Three terms over the coordinates of one point: L2 of dims 0-1, L1 of dims
+// 2-3, L-infinity of dims 4-5 (each a metric on the whole point, a
+// pseudometric: points equal in those dims are at 0).
+void ThreeTerms(const Point& a, const Point& b, double* out) {
+  const Point a0(a.begin(), a.begin() + 2), b0(b.begin(), b.begin() + 2);
+  const Point a1(a.begin() + 2, a.begin() + 4),
+      b1(b.begin() + 2, b.begin() + 4);
+  const Point a2(a.begin() + 4, a.end()), b2(b.begin() + 4, b.end());
+  out[0] = L2(a0, b0);
+  out[1] = L1(a1, b1);
+  out[2] = LInf(a2, b2);
+}
+
+VpTree BuildThreeTermTree(const std::vector<Point>& points,
+                          const TermVector& build_weights,
+                          VpTreeOptions options = DeepTree()) {
+  absl::StatusOr<VpTree> tree = VpTree::Build(
+      points.size(), 3,
+      [&points](uint32_t i, uint32_t j, double* out) {
+        ThreeTerms(points[i], points[j], out);
+      },
+      build_weights, options);
+  EXPECT_TRUE(tree.ok()) << tree.status();
+  return std::move(tree).value();
+}
+
+// The query's terms; a term of weight 0 is left unwritten (NaN), as the
+// contract allows, so a search that read it would go wrong.
+QuerySpec ThreeTermSpec(const std::vector<Point>& points, const Point& query,
+                        const TermVector& w) {
+  QuerySpec spec;
+  spec.weights = w;
+  spec.distance = [&points, &query, w](uint32_t i, double* d) {
+    double all[3];
+    ThreeTerms(query, points[i], all);
+    for (int t = 0; t < 3; ++t) {
+      d[t] = w[t] > 0.0 ? all[t] : std::numeric_limits<double>::quiet_NaN();
+    }
+  };
+  return spec;
+}
+
+// The oracle's distance, written out here: sum_t w_t d_t in term order.
+double WeightedOracle(const Point& a, const Point& b, const TermVector& w) {
+  double all[3];
+  ThreeTerms(a, b, all);
+  double d = 0.0;
+  for (int t = 0; t < 3; ++t) {
+    if (w[t] > 0.0) d += w[t] * all[t];
+  }
+  return d;
+}
+
+// Weightings: the build's, each term alone, pairs with a 0, random ones.
+std::vector<TermVector> Weightings(uint64_t seed) {
+  std::vector<TermVector> out = {{1, 1, 0},   {1, 0, 0},    {0, 1, 0},
+                                 {0, 0, 1},   {0.25, 1, 0}, {1, 0.1, 0},
+                                 {0, 2, 0.5}, {3, 0, 1},    {1, 1, 1}};
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 4.0);
+  for (int r = 0; r < 6; ++r) {
+    TermVector w = {u(rng), u(rng), u(rng)};
+    w[rng() % 3] = 0.0;  // some term unused
+    out.push_back(w);
+  }
+  return out;
+}
+
+// One tree built under {1, 1, 0} answers every non-negative weighting
+// exactly: k-NN, the whole ranked order and range search equal brute force
+// (order and distances, ties included), and the oracle's distances are the
+// weighted sums written out independently.
+TEST(VpTreeTermsTest, EveryWeightingMatchesBruteForce) {
+  std::vector<Point> points = Clustered(1500, 6, 12, 0.05, 161);
+  // Duplicated points: exact ties under every weighting.
+  for (size_t i = 0; i < 100; ++i) points.push_back(points[i * 7]);
+  const VpTree tree = BuildThreeTermTree(points, {1, 1, 0});
+  EXPECT_EQ(tree.terms(), 3u);
+  EXPECT_EQ(tree.build_weights(), (TermVector{1, 1, 0}));
+  const BruteForceIndex oracle(points.size());
+  std::mt19937_64 rng(162);
+  std::uniform_real_distribution<double> radius(0.05, 0.5);
+  for (const TermVector& w : Weightings(163)) {
+    const std::string ctx = "w " + std::to_string(w[0]) + " " +
+                            std::to_string(w[1]) + " " + std::to_string(w[2]);
+    for (const Point& query : Queries(points, 30, 164)) {
+      const QuerySpec spec = ThreeTermSpec(points, query, w);
+      const std::vector<ItemNeighbor> want = oracle.Knn(spec, 10);
+      ASSERT_EQ(want.size(), 10u);
+      for (const ItemNeighbor& nb : want) {
+        EXPECT_EQ(nb.distance, WeightedOracle(query, points[nb.item], w));
+      }
+      SearchStats stats;
+      ExpectSame(tree.Knn(spec, 10, &stats), want, ctx + " knn");
+      EXPECT_LT(stats.emd_computations, static_cast<int64_t>(points.size()));
+      QuerySpec ranged = spec;
+      ranged.radius = radius(rng);
+      ExpectSame(tree.Range(ranged), oracle.Range(ranged), ctx + " range");
+    }
+    const Point& query = points[3];
+    std::unique_ptr<NeighborCursor> cursor =
+        tree.Search(ThreeTermSpec(points, query, w));
+    std::vector<ItemNeighbor> got;
+    while (std::optional<ItemNeighbor> next = cursor->Next()) {
+      got.push_back(*next);
+    }
+    ExpectSame(got, oracle.Range(ThreeTermSpec(points, query, w)),
+               ctx + " ranked");
+  }
+}
+
+// The tree splits on its build weighting but stores every term: a tree built
+// on the first term alone still answers the others exactly, with filters,
+// an unindexed buffer, tie order and after a serialization round trip.
+TEST(VpTreeTermsTest, OtherBuildWeightsFiltersBufferAndReload) {
+  const std::vector<Point> all = TieHeavy(1300, 6, 171);
+  const size_t n = 1000;
+  const std::vector<Point> tree_points(all.begin(), all.begin() + n);
+  const VpTree built = BuildThreeTermTree(tree_points, {1, 0, 0});
+  absl::StatusOr<VpTree> loaded = VpTree::Deserialize(built.Serialize());
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->Serialize(), built.Serialize());
+  EXPECT_EQ(loaded->build_weights(), (TermVector{1, 0, 0}));
+  const BruteForceIndex oracle(n);
+  for (const VpTree* tree : std::vector<const VpTree*>{&built, &*loaded}) {
+    for (const TermVector& w : Weightings(172)) {
+      for (const Point& query : Queries(all, 20, 173)) {
+        QuerySpec spec = ThreeTermSpec(all, query, w);
+        spec.accept = [](uint32_t i) { return i % 5 != 1; };
+        spec.tie_less = [](uint32_t a, uint32_t b) { return a > b; };
+        for (size_t i = n; i < all.size(); ++i) spec.extra_items.push_back(i);
+        ExpectSame(tree->Knn(spec, 25), oracle.Knn(spec, 25), "filtered");
+        ExpectSame(tree->Knn(spec, 2000), oracle.Knn(spec, 2000), "k > n");
+      }
+    }
+  }
+}
+
+// Per-term bounds are never looser than the weighted distance's own: under
+// the build weighting the tree computes no more distances than a one-term
+// tree built on that weighted distance (same seed, same splits).
+TEST(VpTreeTermsTest, PerTermBoundsPruneAtLeastAsWellAsTheSum) {
+  const std::vector<Point> points = Clustered(4000, 6, 40, 0.02, 181);
+  const TermVector w = {1, 1, 0};
+  const VpTree terms = BuildThreeTermTree(points, w);
+  const VpTree sum = BuildTree(points, [](const Point& a, const Point& b) {
+    return WeightedOracle(a, b, {1, 1, 0});
+  });
+  int64_t by_terms = 0, by_sum = 0;
+  for (const Point& query : Queries(points, 100, 182)) {
+    SearchStats a, b;
+    const std::vector<ItemNeighbor> got =
+        terms.Knn(ThreeTermSpec(points, query, w), 10, &a);
+    QuerySpec one;
+    one.distance = [&](uint32_t i, double* d) {
+      d[0] = WeightedOracle(query, points[i], {1, 1, 0});
+    };
+    ExpectSame(got, sum.Knn(one, 10, &b), "same answers");
+    by_terms += a.emd_computations;
+    by_sum += b.emd_computations;
+  }
+  // The float32 storage's larger slack (1e-7 against 1e-9) may reorder a
+  // near-tie of bounds; beyond that the count cannot grow.
+  EXPECT_LE(by_terms, by_sum + by_sum / 100);
+  EXPECT_LT(by_terms, 100 * 4000 / 5);
+}
+
+TEST(VpTreeTermsTest, BadTermsAndBuildWeights) {
+  const std::vector<Point> points = Uniform(50, 6, 191);
+  PairTerms d = [&points](uint32_t i, uint32_t j, double* out) {
+    ThreeTerms(points[i], points[j], out);
+  };
+  for (const TermVector& w : {TermVector{0, 0, 0}, TermVector{-1, 1, 0},
+                              TermVector{1, std::nan(""), 0}}) {
+    EXPECT_EQ(VpTree::Build(points.size(), 3, d, w, {}).status().code(),
+              absl::StatusCode::kInvalidArgument);
+  }
+  // A weight past the tree's terms is not part of it.
+  EXPECT_TRUE(VpTree::Build(points.size(), 2, d, {1, 0, -1}, {}).ok());
+  EXPECT_EQ(VpTree::Build(points.size(), 0, d, {1, 0, 0}, {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(VpTree::Build(points.size(), 4, d, {1, 0, 0}, {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(ValidateWeights({0, 0, 5}, 2).ok());
+  EXPECT_TRUE(ValidateWeights({0, 0.5, 5}, 2).ok());
 }
 
 // FNV-1a 64, written here independently of vp_tree.cc, to forge bytes whose

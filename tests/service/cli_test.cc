@@ -171,6 +171,42 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
               2);
   }
 
+  // --intent: each intent against the brute force under its weighting.
+  {
+    const auto& [id, signature] = models.front();
+    for (const auto& [name, intent] :
+         {std::pair<const char*, index::Intent>{"identity",
+                                                index::Intent::kIdentity},
+          {"KIND", index::Intent::kKind},
+          {"balanced", index::Intent::kBalanced}}) {
+      CommandResult q = RunTpr(
+          cluster_,
+          absl::StrCat("--json query -k 6 --intent ", name, " --id ", id));
+      ASSERT_EQ(q.exit_code, 0) << q.err;
+      std::vector<Ranked> streamed;
+      for (const std::string& line : Lines(q.out)) {
+        int rank;
+        std::string got_id, label;
+        double d;
+        ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &d)) << line;
+        streamed.push_back({d, got_id});
+      }
+      const index::TermWeights w = index::IntentWeights(intent);
+      absl::StatusOr<std::vector<Ranked>> expected =
+          testing::BruteForceRanking(signature, models,
+                                     [w](const index::PreparedSignature& a,
+                                         const index::PreparedSignature& b) {
+                                       return index::Distance(a, b, w);
+                                     });
+      ASSERT_TRUE(expected.ok()) << expected.status();
+      ASSERT_EQ(streamed.size(), 6u);
+      EXPECT_EQ(testing::SameRanking(streamed, *expected), "") << name;
+    }
+    CommandResult bad = RunTpr(cluster_, "query --intent nonsense --id " + id);
+    EXPECT_EQ(bad.exit_code, 2);
+    EXPECT_NE(bad.err.find("nonsense"), std::string::npos) << bad.err;
+  }
+
   // Query by mesh file, with a label filter and k.
   const testing::GeneratedFile& f = files->back();
   CommandResult by_mesh =

@@ -59,7 +59,8 @@ TEST(ConvertersTest, InProcessEqualsThroughTheWire) {
     absl::StatusOr<index::PreparedSignature> pb =
         index::Prepare(*wire, index::GroundDistanceOptions{});
     ASSERT_TRUE(pa.ok() && pb.ok()) << name;
-    EXPECT_EQ(index::Distance(*pa, *pb), 0.0) << name;
+    EXPECT_EQ(index::Distance(*pa, *pb, index::TermWeights{1, 1, 1}), 0.0)
+        << name;
     ++compared;
   }
   EXPECT_EQ(compared, 3);

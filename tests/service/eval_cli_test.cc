@@ -118,12 +118,11 @@ absl::StatusOr<Matrices> InProcessMatrices(
   const size_t n = prepared.size();
   const Matrix zero(n, std::vector<double>(n, 0.0));
   Matrices d{zero, zero, zero, zero};
-  // The index's default spectral weight is 1, so its spectral term is the
-  // term at weight 1 (what Ranking{spectral_weight: 1} ranks by).
-  EXPECT_EQ(index::GroundDistanceOptions{}.spectral.weight, 1.0);
   for (size_t i = 0; i < n; ++i) {
     for (size_t j = i + 1; j < n; ++j) {
-      d.tpr[i][j] = d.tpr[j][i] = index::Distance(prepared[i], prepared[j]);
+      d.tpr[i][j] = d.tpr[j][i] =
+          index::Distance(prepared[i], prepared[j],
+                          index::IntentWeights(index::Intent::kBalanced));
       d.paper[i][j] = d.paper[j][i] = index::Emd(prepared[i], prepared[j]);
       d.spectrum[i][j] = d.spectrum[j][i] =
           index::SpectralDistance(prepared[i], prepared[j]);

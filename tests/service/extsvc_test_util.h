@@ -352,10 +352,11 @@ struct Ranked {
 };
 
 // BruteForceRanking returns every model of `models` (id -> signature) ranked
-// by exact distance (indexer/lib/metric.h: EMD plus spectral term, default
-// options, which the indexer uses) to `query`, ascending, ties by id. The
-// oracle the services' VP-tree answers are compared with. `distance`
-// replaces that distance (e.g. index::Emd alone, for SearchRequest.ranking).
+// by exact distance (indexer/lib/metric.h under the default intent's
+// weighting, default options, which the indexer uses) to `query`,
+// ascending, ties by id. The oracle the services' VP-tree answers are
+// compared with. `distance` replaces that distance (e.g. index::Emd alone,
+// for SearchRequest.ranking, or another intent's weighting).
 inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
     const v1::Signature& query,
     const std::vector<std::pair<std::string, v1::Signature>>& models,
@@ -363,7 +364,8 @@ inline absl::StatusOr<std::vector<Ranked>> BruteForceRanking(
                                const index::PreparedSignature&)>& distance =
         [](const index::PreparedSignature& a,
            const index::PreparedSignature& b) {
-          return index::Distance(a, b);
+          return index::Distance(
+              a, b, index::IntentWeights(index::Intent::kBalanced));
         }) {
   const index::GroundDistanceOptions options;
   absl::StatusOr<index::Signature> query_signature =

@@ -37,6 +37,7 @@ using ::tpr::indexer::testing::SearchResult;
 using ::tpr::indexer::testing::TestModel;
 using ::tpr::indexer::testing::ToRequest;
 using ::tpr::indexer::testing::ToWire;
+using ::tpr::indexer::testing::WeightsOf;
 using ::tpr::testing::TempDir;
 
 constexpr int kShards = 3;
@@ -104,7 +105,8 @@ class GatewayTest : public ::testing::Test {
 
     // The corpus: generated models, plus exact copies of some under other
     // ids (ties at equal distance, spread over the shards by their ids).
-    models_ = MakeModels(240, 6, 17);
+    // With spectra, so that intents and rankings rank differently.
+    models_ = MakeModels(240, 6, 17, "m", /*spectrum=*/30);
     for (int i = 0; i < 30; i += 3) {
       for (const char* suffix : {"_a", "_b", "_c"}) {
         TestModel copy = models_[static_cast<size_t>(i)];
@@ -156,8 +158,9 @@ class GatewayTest : public ::testing::Test {
       }
       if (request.exclude_self()) exclude = request.id();
     }
-    std::vector<indexer::testing::Hit> oracle = BruteForce(
-        query, live(), request.k(), request.radius(), request.label(), exclude);
+    std::vector<indexer::testing::Hit> oracle =
+        BruteForce(query, live(), request.k(), request.radius(),
+                   request.label(), exclude, WeightsOf(request));
     EXPECT_EQ(got.neighbors.size(), oracle.size())
         << request.ShortDebugString();
     for (size_t i = 0; i < std::min(got.neighbors.size(), oracle.size()); ++i) {
@@ -249,15 +252,27 @@ TEST_F(GatewayTest, SearchEqualsOneIndexerIncludingTiesRadiusLabelsAndLargeK) {
   EXPECT_GT(total, 1000u);
 }
 
-TEST_F(GatewayTest, RankingsOtherThanTheIndexsPassThroughAndMergeExactly) {
-  // SearchRequest.ranking reaches every shard; each ranks its models
-  // exhaustively under it, and the merge equals one indexer's answer (and
-  // the EMD oracle: these models carry no spectrum, so every spectral term
-  // is 0 and both rankings below are the EMD).
+TEST_F(GatewayTest, IntentsAndRankingsPassThroughAndMergeExactly) {
+  // SearchRequest.intent and .ranking reach every shard; each searches its
+  // tree under that weighting, and the merge equals one indexer's answer
+  // and the brute-force oracle of the same weighting (ExpectSameAnswer).
+  // The corpus carries spectra, so the weightings rank differently.
   const int n = static_cast<int>(models_.size());
   size_t total = 0;
   for (const char* id : {"m00003", "dup9_b"}) {
     for (int k : {5, n + 10}) {
+      for (tpr::v1::Intent intent :
+           {tpr::v1::INTENT_UNSPECIFIED, tpr::v1::INTENT_BALANCED,
+            tpr::v1::INTENT_IDENTITY, tpr::v1::INTENT_KIND}) {
+        tpr::v1::SearchRequest request;
+        request.set_id(id);
+        request.set_k(k);
+        request.set_exclude_self(k == 5);
+        request.set_intent(intent);
+        total += ExpectSameAnswer(request);
+        request.set_label("class2");
+        total += ExpectSameAnswer(request);
+      }
       tpr::v1::SearchRequest request;
       request.set_id(id);
       request.set_k(k);
@@ -265,10 +280,22 @@ TEST_F(GatewayTest, RankingsOtherThanTheIndexsPassThroughAndMergeExactly) {
       request.mutable_ranking()->set_emd_weight(1.0);
       total += ExpectSameAnswer(request);
       request.mutable_ranking()->set_spectral_weight(3.0);
+      request.mutable_ranking()->set_heat_weight(0.5);
+      total += ExpectSameAnswer(request);
+      request.mutable_ranking()->set_emd_weight(0.0);
       total += ExpectSameAnswer(request);
     }
   }
-  EXPECT_GT(total, static_cast<size_t>(2 * n));
+  EXPECT_GT(total, static_cast<size_t>(4 * n));
+  // A bad intent is refused by the shards, named.
+  tpr::v1::SearchRequest bad;
+  bad.set_id("m00003");
+  bad.set_k(3);
+  bad.set_intent(static_cast<tpr::v1::Intent>(9));
+  SearchResult r = RunSearch(gateway_.get(), bad);
+  EXPECT_EQ(r.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(r.status.error_message().find("intent"), std::string::npos)
+      << r.status.error_message();
 }
 
 TEST_F(GatewayTest, TiesAcrossShardsComeInIdOrder) {

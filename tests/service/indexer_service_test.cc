@@ -255,59 +255,87 @@ TEST_F(IndexerServiceTest, SearchMatchesBruteForce) {
   }
 }
 
-TEST_F(IndexerServiceTest, RankingOverridesTheDistanceExactly) {
-  // SearchRequest.ranking: the paper's EMD alone, ranked over every model,
-  // equals the brute-force EMD (these models carry no spectrum, so their
-  // spectral terms are all 0 and the spectrum alone ties everything: the
-  // ranking is then the id order). Bad weights are INVALID_ARGUMENT.
-  const std::vector<TestModel> models = MakeModels(60, 4, 5);
+TEST_F(IndexerServiceTest, IntentsAndRankingsAreExactThroughTheTree) {
+  // SearchRequest.intent and .ranking through the real server: every intent
+  // and every ranking equals the brute-force oracle of its weighting (order
+  // and distances), with radius and label; the models carry spectra, so
+  // the weightings rank differently. Bad weights and an unknown intent are
+  // INVALID_ARGUMENT naming the field.
+  const std::vector<TestModel> models = MakeModels(300, 4, 5, "m", 30);
   AddAll(models);
   auto* stub = server_->stub();
   const TestModel& m = models[11];
-  tpr::v1::SearchRequest req = ById(m.id, 500);
-  req.set_exclude_self(true);
-  req.mutable_ranking()->set_emd_weight(1.0);
-  SearchResult r = RunSearch(stub, req);
-  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
-  TPR_EXPECT_SAME_RANKING(r.neighbors,
-                          BruteForce(m.signature, models, 500, 0, "", m.id));
-  // Exhaustive: one EMD per other model, no tree.
-  EXPECT_EQ(r.stats.emd_computations(), 59);
-  EXPECT_EQ(r.stats.nodes_visited(), 0);
-
-  req.set_k(4);
-  req.set_label("class1");
-  const std::vector<Hit> all = BruteForce(m.signature, models, 500);
-  const double radius = all[all.size() / 2].distance;
-  req.set_radius(radius);
-  r = RunSearch(stub, req);
-  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
-  TPR_EXPECT_SAME_RANKING(
-      r.neighbors, BruteForce(m.signature, models, 4, radius, "class1", m.id));
-
-  tpr::v1::SearchRequest spectrum = ById(m.id, 5);
-  spectrum.mutable_ranking()->set_spectral_weight(1.0);
-  r = RunSearch(stub, spectrum);
-  ASSERT_TRUE(r.status.ok()) << r.status.error_message();
-  ASSERT_EQ(r.neighbors.size(), 5u);
-  for (int i = 0; i < 5; ++i) {
-    EXPECT_EQ(r.neighbors[static_cast<size_t>(i)].id(),
-              models[static_cast<size_t>(i)].id);
-    EXPECT_EQ(r.neighbors[static_cast<size_t>(i)].distance(), 0.0);
+  std::set<std::vector<std::string>> orders;
+  for (tpr::v1::Intent intent :
+       {tpr::v1::INTENT_UNSPECIFIED, tpr::v1::INTENT_BALANCED,
+        tpr::v1::INTENT_IDENTITY, tpr::v1::INTENT_KIND}) {
+    tpr::v1::SearchRequest req = ById(m.id, 500);
+    req.set_exclude_self(true);
+    req.set_intent(intent);
+    const tpr::index::TermWeights w = WeightsOf(req);
+    SearchResult r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+    const std::vector<Hit> want =
+        BruteForce(m.signature, models, 500, 0, "", m.id, w);
+    TPR_EXPECT_SAME_RANKING(r.neighbors, want);
+    std::vector<std::string> order;
+    for (const Hit& h : want) order.push_back(h.id);
+    orders.insert(order);
+    // k-NN: the tree prunes (fewer EMDs than models).
+    req.set_k(5);
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(m.signature, models, 5, 0, "", m.id, w));
+    EXPECT_GT(r.stats.nodes_visited(), 0);
+    EXPECT_LT(r.stats.emd_computations(), 299);
+    // Radius (that weighting's distance) and label.
+    const double radius = want[want.size() / 2].distance;
+    req.set_k(500);
+    req.set_radius(radius);
+    req.set_label("class1");
+    r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+    TPR_EXPECT_SAME_RANKING(r.neighbors, BruteForce(m.signature, models, 500,
+                                                    radius, "class1", m.id, w));
   }
-  EXPECT_EQ(r.stats.emd_computations(), 0);
+  EXPECT_GE(orders.size(), 2u) << "intents rank differently";
 
-  for (auto [emd, spectral] : std::vector<std::pair<double, double>>{
-           {-1, 0}, {0, 0}, {1, std::nan("")}}) {
+  for (const tpr::index::TermWeights& w : std::vector<tpr::index::TermWeights>{
+           {1, 0, 0}, {0, 1, 0}, {0.5, 0, 2}, {0, 1, 1}}) {
+    tpr::v1::SearchRequest req = ById(m.id, 7);
+    req.mutable_ranking()->set_emd_weight(w.emd);
+    req.mutable_ranking()->set_spectral_weight(w.spectral);
+    req.mutable_ranking()->set_heat_weight(w.heat);
+    req.set_intent(tpr::v1::INTENT_KIND);  // ignored: the ranking wins
+    SearchResult r = RunSearch(stub, req);
+    ASSERT_TRUE(r.status.ok()) << r.status.error_message();
+    TPR_EXPECT_SAME_RANKING(r.neighbors,
+                            BruteForce(m.signature, models, 7, 0, "", "", w));
+    if (w.emd == 0.0) {
+      EXPECT_EQ(r.stats.emd_computations(), 0);
+    }
+  }
+
+  for (auto [emd, spectral, heat] :
+       std::vector<std::tuple<double, double, double>>{
+           {-1, 0, 0}, {0, 0, 0}, {1, std::nan(""), 0}, {1, 0, -3}}) {
     tpr::v1::SearchRequest bad = ById(m.id, 5);
     bad.mutable_ranking()->set_emd_weight(emd);
     bad.mutable_ranking()->set_spectral_weight(spectral);
-    r = RunSearch(stub, bad);
+    bad.mutable_ranking()->set_heat_weight(heat);
+    SearchResult r = RunSearch(stub, bad);
     EXPECT_EQ(r.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
-        << emd << " " << spectral;
-    EXPECT_NE(r.status.error_message().find("weight"), std::string::npos)
+        << emd << " " << spectral << " " << heat;
+    EXPECT_NE(r.status.error_message().find("ranking"), std::string::npos)
         << r.status.error_message();
   }
+  tpr::v1::SearchRequest unknown = ById(m.id, 5);
+  unknown.set_intent(static_cast<tpr::v1::Intent>(42));
+  SearchResult r = RunSearch(stub, unknown);
+  EXPECT_EQ(r.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(r.status.error_message().find("intent 42"), std::string::npos)
+      << r.status.error_message();
 }
 
 TEST_F(IndexerServiceTest, SearchIsExactAfterDeletesAndOverwrites) {

@@ -31,6 +31,8 @@
 #include "common/server_lifecycle.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/intent.h"
+#include "indexer/lib/metric.h"
 #include "indexer/service/convert.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
@@ -56,8 +58,10 @@ struct TestModel {
 // Generates `n` models of `classes` classes (label "class<c>"), small
 // signatures (12 features x 8 bands) so that tests stay quick.
 inline std::vector<TestModel> MakeModels(int n, int classes, uint64_t seed,
-                                         const std::string& prefix = "m") {
+                                         const std::string& prefix = "m",
+                                         int spectrum = 0) {
   tpr::index::testing::SignatureGeneratorOptions options;
+  options.spectrum = spectrum;
   options.seed = seed;
   options.features = 12;
   options.bands = 8;
@@ -91,22 +95,45 @@ struct Hit {
   double distance = 0;
 };
 
-// BruteForce returns the exact ranking: EMD to every model accepted by
-// `label` (empty: all) and `exclude`, within `radius` (<= 0: all), sorted by
-// (distance, id), first k.
-inline std::vector<Hit> BruteForce(const tpr::index::Signature& query,
-                                   const std::vector<TestModel>& models, int k,
-                                   double radius = 0,
-                                   const std::string& label = "",
-                                   const std::string& exclude = "") {
+// WeightsOf returns the weighting `request` asks for, read from the
+// library's IntentWeights (an oracle of the service's conversion): the
+// ranking's weights when set, else its intent's (unset: balanced).
+inline tpr::index::TermWeights WeightsOf(const tpr::v1::SearchRequest& r) {
+  if (r.has_ranking()) {
+    return {r.ranking().emd_weight(), r.ranking().spectral_weight(),
+            r.ranking().heat_weight()};
+  }
+  switch (r.intent()) {
+    case tpr::v1::INTENT_IDENTITY:
+      return tpr::index::IntentWeights(tpr::index::Intent::kIdentity);
+    case tpr::v1::INTENT_KIND:
+      return tpr::index::IntentWeights(tpr::index::Intent::kKind);
+    default:
+      return tpr::index::IntentWeights(tpr::index::Intent::kBalanced);
+  }
+}
+
+// BruteForce returns the exact ranking: d_w (default the EMD alone) to every
+// model accepted by `label` (empty: all) and `exclude`, within `radius`
+// (<= 0: all), sorted by (distance, id), first k.
+inline std::vector<Hit> BruteForce(
+    const tpr::index::Signature& query, const std::vector<TestModel>& models,
+    int k, double radius = 0, const std::string& label = "",
+    const std::string& exclude = "",
+    const tpr::index::TermWeights& w = {1, 0, 0}) {
   const tpr::index::GroundDistanceOptions ground;
   const tpr::index::PreparedSignature q = *tpr::index::Prepare(query, ground);
   std::vector<Hit> hits;
   for (const TestModel& m : models) {
     if (!label.empty() && m.label != label) continue;
     if (m.id == exclude) continue;
-    const double d =
-        tpr::index::Emd(q, *tpr::index::Prepare(m.signature, ground));
+    // Each weighed term in the order emd, spectral, heat, as the index sums.
+    const tpr::index::PreparedSignature p =
+        *tpr::index::Prepare(m.signature, ground);
+    double d = 0.0;
+    if (w.emd > 0.0) d += w.emd * tpr::index::Emd(q, p);
+    if (w.spectral > 0.0) d += w.spectral * tpr::index::SpectralDistance(q, p);
+    if (w.heat > 0.0) d += w.heat * tpr::index::HeatDistance(q, p);
     if (radius > 0 && d > radius) continue;
     hits.push_back({m.id, d});
   }
