@@ -15,7 +15,7 @@ foreach(var SOURCE BINARY WORK GENERATOR)
     message(FATAL_ERROR "check_install.cmake: -D${var}=... is required")
   endif()
 endforeach()
-set(expected tpr tpr-eval-local tpr-extractor tpr-gateway tpr-indexer tpr-synth)
+set(expected tpr tpr-eval-local tpr-extractor tpr-gateway tpr-indexer tpr-synth tpr-web)
 
 # 1. A product-only configure.
 set(notests ${WORK}/notests)

@@ -90,8 +90,10 @@ eval "$exports"
 
 status="$("$CLUSTER" status)"
 echo "$status"
-# haproxy, 2 extractors, 2 shards, 2 followers, 1 gateway
-[ "$(grep -c ' running$' <<<"$status")" = 8 ] || fail "not every process is running"
+# haproxy, 2 extractors, 2 shards, 2 followers, 1 gateway, tpr-web
+[ "$(grep -c ' running$' <<<"$status")" = 9 ] || fail "not every process is running"
+web_url="$(sed -n 's/^cluster: console and HTTP API at \(http:[^ ]*\)$/\1/p' <<<"$up")"
+[ -n "$web_url" ] || fail "up printed no console URL"
 mapfile -t pids < <(awk '{ print $2 }' "$TPR_CLUSTER_DIR/pids")
 
 "$BUILD/extractor/tpr-synth" --out "$WORK/set" --classes 2 --poses 3 --vertices 800 \
@@ -104,6 +106,16 @@ models="$(python3 -c 'import json, sys; print(int(json.load(sys.stdin)["models"]
 first="$(sed -n '1s/ .*//p' "$WORK/set/MANIFEST.txt")"
 hits="$("$TPR" --json query --id "$first" -k 3)" || fail "tpr query failed"
 [ "$(grep -c '"rank"' <<<"$hits")" = 3 ] || fail "query returned other than 3 neighbours: $hits"
+# The same through tpr-web in front of haproxy and the gateway.
+web_models="$(python3 -c 'import json, sys, urllib.request
+print(int(json.load(urllib.request.urlopen(sys.argv[1] + "api/v1/stats"))["models"]))' "$web_url")" ||
+  fail "tpr-web stats failed"
+[ "$web_models" = 6 ] || fail "tpr-web counts $web_models models, not 6"
+web_hits="$(python3 -c 'import json, sys, urllib.parse, urllib.request
+q = urllib.parse.urlencode({"id": sys.argv[2], "k": 3})
+print(len(json.load(urllib.request.urlopen(sys.argv[1] + "api/v1/search?" + q))["neighbors"]))' \
+  "$web_url" "$first")" || fail "tpr-web search failed"
+[ "$web_hits" = 3 ] || fail "tpr-web search returned $web_hits neighbours, not 3"
 
 "$CLUSTER" down --purge || fail "down failed"
 # Gone, or a zombie its new parent has not reaped yet.

@@ -54,10 +54,10 @@ namespace tpr::testing {
 
 // BinaryPath returns where the build put executable `name`: the build
 // directory itself when CMAKE_RUNTIME_OUTPUT_DIRECTORY gathers them there,
-// else the folder of its target (extractor/, indexer/, client/).
+// else the folder of its target (extractor/, indexer/, client/, web/).
 inline std::string BinaryPath(const std::string& name) {
   const std::string root = TPR_BINARY_DIR;
-  for (const char* sub : {"", "/extractor", "/indexer", "/client"}) {
+  for (const char* sub : {"", "/extractor", "/indexer", "/client", "/web"}) {
     const std::string candidate = root + sub + "/" + name;
     if (access(candidate.c_str(), X_OK) == 0) return candidate;
   }
