@@ -160,6 +160,7 @@ const bool kRegistered = RegisterCommand(
        sub.add_flag("--update", flags->options.update,
                     "replace ids already present (default: skip them)");
        AddHandlesOption(sub, &flags->options.extract);
+       AddTopologyOption(sub, &flags->options.extract);
        return [flags](const Globals& g) { return RunAdd(g, *flags); };
      }});
 

@@ -77,6 +77,7 @@ const bool kRegistered = RegisterCommand(
            [flags](const int& bands) { flags->options.set_bands(bands); },
            "geodesic bands per feature (0: default 20)");
        AddHandlesOption(sub, &flags->options);
+       AddTopologyOption(sub, &flags->options);
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
      }});
 

@@ -104,6 +104,7 @@ const bool kRegistered = RegisterCommand(
                       "(these two compare the query with every model)")
            ->check(CLI::IsMember({"default", "paper", "spectrum"}));
        AddHandlesOption(sub, &flags->extract);
+       AddTopologyOption(sub, &flags->extract);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});
 
