@@ -63,12 +63,14 @@ struct Options {
   TopologyMethod topology = TopologyMethod::kPersistence;
   // TopologyMethod::kPersistence: the shortest protrusion that holds a
   // topological point, as the persistence of its maximum in a source's
-  // geodesic distance field (the protrusion's length from where it branches
-  // off) / sqrt(total area), so that it does not depend on scale or
-  // resolution. In [0, 1]; ignored by kPaper. Default 0.05: on the SCAPE
-  // person (docs/tpr-stability.md) the head, the shortest limb, stands at
-  // 0.13 to 0.25 in every pose, while toes, heels, fingers, bent elbows and
-  // knees stay below 0.05 in nearly all.
+  // geodesic distance field (about the protrusion's length less the half
+  // girth of its base) / sqrt(total area), so that it does not depend on
+  // scale or resolution. In [0, 1]; ignored by kPaper. Default 0.05: on the
+  // SCAPE person (docs/tpr-stability.md) the head, the shortest limb, stands
+  // at 0.13 to 0.25 in every pose, while toes, heels, fingers, bent elbows
+  // and knees stay below 0.05 in nearly all. Smaller values keep more of a
+  // model's small protrusions (an armadillo's claws), which helps tell kinds
+  // apart and costs pose stability (figures in docs/tpr-stability.md).
   double point_min_prominence = 0.05;
   // Topological Ring Extraction under TopologyMethod::kPaper: a front's
   // wavefront is a ring when its region length (Eq. 3) exceeds this
@@ -82,9 +84,9 @@ struct Options {
   // same test with the threshold as this fraction of sqrt(total area)
   // instead. MAX g_o is measured from the surface centre, which the
   // hierarchical search of 4.5 places on a flat minimum of G (a torso's
-  // front or back), so it moves with the pose by a tenth on the generated
-  // bipeds, and every ring length near the threshold flips with it; the
-  // area does not move. In [0, 1]. Default 0.04: on the SCAPE person MAX
+  // front or back), so it moved by a tenth between a generated biped and a
+  // rotated, scaled copy of it, and every ring length near the threshold
+  // flips with it; the area does not move. In [0, 1]. Default 0.04: on the SCAPE person MAX
   // g_o is 0.8 to 0.9 sqrt(area), so this is the paper threshold's 0.05 of
   // MAX g_o in the area's unit (docs/tpr-stability.md).
   double ring_min_length = 0.04;
