@@ -86,9 +86,9 @@ struct Options {
   // hierarchical search of 4.5 places on a flat minimum of G (a torso's
   // front or back), so it moved by a tenth between a generated biped and a
   // rotated, scaled copy of it, and every ring length near the threshold
-  // flips with it; the area does not move. In [0, 1]. Default 0.04: on the SCAPE person MAX
-  // g_o is 0.8 to 0.9 sqrt(area), so this is the paper threshold's 0.05 of
-  // MAX g_o in the area's unit (docs/tpr-stability.md).
+  // flips with it; the area does not move. In [0, 1]. Default 0.04: on the
+  // SCAPE person MAX g_o is 0.8 to 0.9 sqrt(area), so this is the paper
+  // threshold's 0.05 of MAX g_o in the area's unit (docs/tpr-stability.md).
   double ring_min_length = 0.04;
   // Topological Ring Extraction: also stop once every saddle of the
   // centre-sourced analysis is visited (4.6.3's shortcut); see
