@@ -189,7 +189,10 @@ std::string CacheKey(const Model& model, const Config& config, size_t index) {
   const extract::Options& e = config.extract;
   key << " bands=" << e.bands << (e.bands_per_feature_extent ? "" : "/diameter")
       << " cycle=" << e.cycle_min_vertices << "/" << e.cycle_search_hops
-      << " ring=" << e.ring_length_threshold
+      << " ring=" << e.ring_length_threshold << "/" << e.ring_min_length
+      << " topology="
+      << (e.topology == extract::TopologyMethod::kPaper ? "paper"
+                                                        : "persistence")
       << " prominence=" << e.point_min_prominence
       << " stop=" << e.ring_stop_at_centre_saddles
       << (e.cut_handles ? " handles=cut" : "")
@@ -347,9 +350,17 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--cut-handles", c.extract.cut_handles,
                   "cut a closed mesh of genus > 0 to genus 0 before describing "
                   "it (1, default) or describe it as it is (0, the paper)");
+  app->add_option("--topology", c.extract.topology,
+                  "critical point filter before the vote of 4.4: persistence "
+                  "(default) or paper (4.3's cycle filter)")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, extract::TopologyMethod>{
+              {"persistence", extract::TopologyMethod::kPersistence},
+              {"paper", extract::TopologyMethod::kPaper}},
+          CLI::ignore_case));
   app->add_option("--point-prominence", c.extract.point_min_prominence,
-                  "smallest protrusion holding a topological point, / "
-                  "sqrt(area) (0 = paper)");
+                  "persistence filter: smallest protrusion holding a "
+                  "topological point, / sqrt(area)");
   app->add_option(
       "--spectral-weight", c.spectral_weight,
       "w_s: weight of the spectral term (0: the paper's TPR distance)");

@@ -175,6 +175,7 @@ const bool kRegistered = RegisterCommand(
                     "thumbnails without the TPR overlay (default: points as "
                     "red dots, rings as dark lines)");
        AddHandlesOption(sub, &flags->options.extract);
+       AddTopologyOption(sub, &flags->options.extract);
        return [flags](const Globals& g) { return RunAdd(g, *flags); };
      }});
 

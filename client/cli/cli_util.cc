@@ -173,4 +173,21 @@ void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options) {
       ->transform(CLI::CheckedTransformer(names, CLI::ignore_case));
 }
 
+void AddTopologyOption(CLI::App& command, tpr::v1::ExtractOptions* options) {
+  const std::map<std::string, tpr::v1::TopologyMethod> names = {
+      {"persistence", tpr::v1::TOPOLOGY_METHOD_PERSISTENCE},
+      {"paper", tpr::v1::TOPOLOGY_METHOD_PAPER}};
+  command
+      .add_option_function<tpr::v1::TopologyMethod>(
+          "--topology",
+          [options](const tpr::v1::TopologyMethod& topology) {
+            options->set_topology(topology);
+          },
+          "critical points before the vote of 4.4: persistence (the "
+          "default: protrusions shorter than point_min_prominence give no "
+          "point) or paper (4.3's cycle filter); compare signatures made "
+          "the same way")
+      ->transform(CLI::CheckedTransformer(names, CLI::ignore_case));
+}
+
 }  // namespace tpr::cli

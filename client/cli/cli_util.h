@@ -85,6 +85,14 @@ const char* IntentTitle(tpr::v1::Intent intent);
 // `options` must outlive the parse.
 void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options);
 
+// AddTopologyOption adds `--topology persistence|paper` (case ignored) to a
+// command that extracts meshes; when given, it sets options->topology: how
+// the extractor cleans the critical points before Topological Point
+// Selection. "paper" is the paper's method (4.3); unset leaves
+// TOPOLOGY_METHOD_UNSPECIFIED, the extractor's default (persistence). CLI11
+// refuses any other word, naming it. `options` must outlive the parse.
+void AddTopologyOption(CLI::App& command, tpr::v1::ExtractOptions* options);
+
 // ToJson returns `message` as one line of JSON (proto field names, every
 // primitive field printed; 64-bit integers as strings, non-finite doubles
 // as the strings "Infinity", "-Infinity" and "NaN": protobuf's JSON

@@ -482,6 +482,7 @@ const bool kRegistered = RegisterCommand(
                     "re-extract ids already in the indexer (default: use them "
                     "as they are)");
        AddHandlesOption(sub, &flags->options.add.extract);
+       AddTopologyOption(sub, &flags->options.add.extract);
        return [flags](const Globals& g) {
          return RunEval(g, flags->dataset, flags->options);
        };

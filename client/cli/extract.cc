@@ -125,6 +125,7 @@ const bool kRegistered = RegisterCommand(
                       "triangles) to FILE");
        sub.add_flag("--no-overlay", flags->no_overlay,
                     "thumbnail without the TPR overlay");
+       AddTopologyOption(sub, &flags->options);
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
      }});
 

@@ -108,6 +108,7 @@ const bool kRegistered = RegisterCommand(
            ->check(CLI::IsMember({"default", "paper", "spectrum"}));
        AddIntentOption(sub, &flags->intent);
        AddHandlesOption(sub, &flags->extract);
+       AddTopologyOption(sub, &flags->extract);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
      }});
 

@@ -80,6 +80,13 @@ absl::Status ValidateOptions(const Options& o) {
     return absl::InvalidArgumentError(
         "options: ring_length_threshold not in [0, 1]");
   }
+  if (!(o.ring_min_length >= 0.0 && o.ring_min_length <= 1.0)) {
+    return absl::InvalidArgumentError("options: ring_min_length not in [0, 1]");
+  }
+  if (o.topology != TopologyMethod::kPersistence &&
+      o.topology != TopologyMethod::kPaper) {
+    return absl::InvalidArgumentError("options: unknown topology method");
+  }
   if (!(o.point_min_prominence >= 0.0 && o.point_min_prominence <= 1.0)) {
     return absl::InvalidArgumentError(
         "options: point_min_prominence not in [0, 1]");
@@ -225,6 +232,13 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& input,
                 }
               });
   for (const absl::Status& s : cpa_status) TPR_RETURN_IF_ERROR(s);
+  if (options.topology == TopologyMethod::kPersistence) {
+    const double min_persistence =
+        options.point_min_prominence * std::sqrt(area);
+    for (CriticalPoints& set : sets) {
+      set = SimplifyByPersistence(graph, set, min_persistence);
+    }
+  }
   const CriticalPoints& centre_set = sets.back();
   double max_g_o = 0.0;
   for (double d : centre_set.distances) {
@@ -240,11 +254,8 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& input,
   timer.Finish("critical_points");
 
   // Stage: Topological Point Selection (4.4).
-  TopologicalPointOptions point_options;
-  point_options.min_persistence =
-      options.point_min_prominence * std::sqrt(area);
-  std::vector<TopologicalPoint> points = SelectTopologicalPoints(
-      graph, solver, sets, /*stats=*/nullptr, point_options);
+  std::vector<TopologicalPoint> points =
+      SelectTopologicalPoints(graph, solver, sets);
   int num_points = static_cast<int>(points.size());
   timer.Finish("topological_points");
 
@@ -288,7 +299,10 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& input,
 
   // Stage: Topological Ring Extraction (4.6).
   RingOptions ring_options;
-  ring_options.length_threshold = options.ring_length_threshold * max_g_o;
+  ring_options.length_threshold =
+      options.topology == TopologyMethod::kPaper
+          ? options.ring_length_threshold * max_g_o
+          : options.ring_min_length * std::sqrt(area);
   ring_options.stop_at_centre_saddles = options.ring_stop_at_centre_saddles;
   std::vector<int32_t> point_vertices(num_points);
   for (int i = 0; i < num_points; ++i) point_vertices[i] = points[i].vertex;

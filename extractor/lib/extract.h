@@ -17,6 +17,26 @@
 
 namespace tpr::extract {
 
+// TopologyMethod is how the critical points of each source's field are
+// cleaned of the extraneous ones before the vote of 4.4.
+enum class TopologyMethod {
+  // Persistence simplification (not in the paper): of each source's
+  // geodesic field, keep the maxima whose 0-dimensional persistence is at
+  // least Options::point_min_prominence x sqrt(area), and as saddles only
+  // the vertices where those maxima's superlevel components die
+  // (topological_points.h, SimplifyByPersistence). The vote of 4.4 then runs
+  // on these, so a point's search radius reaches the branching of its whole
+  // protrusion: the fingers of a hand or the toes and heel of a foot are
+  // one point, not one per finger that happened to win the vote in this
+  // pose, and a bump shorter than the threshold is no point at all.
+  kPersistence,
+  // The paper (4.3-4.4): Critical Point Analysis's cycle-size filter
+  // (Options::cycle_min_vertices) and every saddle it registers. Its counts
+  // follow the mesh's small protrusions and resolution: on the SCAPE person
+  // 6 to 16 points over 71 poses.
+  kPaper,
+};
+
 // Options carries every parameter of the pipeline. Defaults are the paper's
 // values where it gives one; otherwise the comment says how it was chosen.
 struct Options {
@@ -37,18 +57,39 @@ struct Options {
   // CriticalPointOptions::search_hops). Must exceed cycle_min_vertices.
   // Default 6.
   int cycle_search_hops = 6;
-  // Topological Point Selection: the shortest protrusion whose maxima vote,
-  // as the maxima's persistence in their source's distance field /
-  // sqrt(total area); see TopologicalPointOptions::min_persistence. Not in
-  // the paper (0 is the paper's 4.3-4.4). In [0, 1]. Default 0.
-  double point_min_prominence = 0.0;
-  // Topological Ring Extraction: a front's wavefront is a ring when its
-  // region length (Eq. 3) exceeds this fraction of MAX g_o (the paper gives
-  // no number, 4.6.2). Chosen by measurement on the synthetic classes (see
+  // How Critical Point Analysis's maxima and saddles are filtered before
+  // Topological Point Selection (4.3-4.4); see TopologyMethod. Default
+  // kPersistence.
+  TopologyMethod topology = TopologyMethod::kPersistence;
+  // TopologyMethod::kPersistence: the shortest protrusion that holds a
+  // topological point, as the persistence of its maximum in a source's
+  // geodesic distance field (about the protrusion's length less the half
+  // girth of its base) / sqrt(total area), so that it does not depend on
+  // scale or resolution. In [0, 1]; ignored by kPaper. Default 0.05: on the
+  // SCAPE person (docs/tpr-stability.md) the head, the shortest limb, stands
+  // at 0.13 to 0.25 in every pose, while toes, heels, fingers, bent elbows
+  // and knees stay below 0.05 in nearly all. Smaller values keep more of a
+  // model's small protrusions (an armadillo's claws), which helps tell kinds
+  // apart and costs pose stability (figures in docs/tpr-stability.md).
+  double point_min_prominence = 0.05;
+  // Topological Ring Extraction under TopologyMethod::kPaper: a front's
+  // wavefront is a ring when its region length (Eq. 3) exceeds this
+  // fraction of MAX g_o (the paper gives no number, 4.6.2). Chosen by
+  // measurement on the synthetic classes (see
   // tests/extractor/extract_test.cc): 0.05 keeps the joints of bipeds and
-  // quadrupeds and drops the slivers of near-simultaneous merges.
-  // Default 0.05.
+  // quadrupeds and drops the slivers of near-simultaneous merges. Ignored
+  // by kPersistence (ring_min_length). Default 0.05.
   double ring_length_threshold = 0.05;
+  // Topological Ring Extraction under TopologyMethod::kPersistence: the
+  // same test with the threshold as this fraction of sqrt(total area)
+  // instead. MAX g_o is measured from the surface centre, which the
+  // hierarchical search of 4.5 places on a flat minimum of G (a torso's
+  // front or back), so it moved by a tenth between a generated biped and a
+  // rotated, scaled copy of it, and every ring length near the threshold
+  // flips with it; the area does not move. In [0, 1]. Default 0.04: on the
+  // SCAPE person MAX g_o is 0.8 to 0.9 sqrt(area), so this is the paper
+  // threshold's 0.05 of MAX g_o in the area's unit (docs/tpr-stability.md).
+  double ring_min_length = 0.04;
   // Topological Ring Extraction: also stop once every saddle of the
   // centre-sourced analysis is visited (4.6.3's shortcut); see
   // RingOptions::stop_at_centre_saddles for why it is off. Default false.

@@ -9,27 +9,27 @@
 
 namespace tpr::extract {
 
-std::vector<double> MaximumPersistence(const MeshGraph& graph,
-                                       const std::vector<double>& field) {
+std::vector<PersistentMaximum> PersistentMaxima(
+    const MeshGraph& graph, const std::vector<double>& field,
+    double min_persistence) {
   const int32_t n = graph.num_vertices();
   std::vector<int32_t> order;
   order.reserve(n);
   for (int32_t v = 0; v < n; ++v) {
     if (field[v] != kUnreachable) order.push_back(v);
   }
-  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
-    return std::tie(field[b], a) <
-           std::tie(field[a], b);  // decreasing, ties by id
-  });
+  // Decreasing field, ties by id: the order that defines "strictly lower".
+  const auto higher = [&](int32_t a, int32_t b) {
+    return std::tie(field[b], a) < std::tie(field[a], b);
+  };
+  std::sort(order.begin(), order.end(), higher);
   DisjointSets sets(n);
-  std::vector<int32_t> top(n, -1);          // per root: the component's maximum
-  std::vector<int32_t> joined(n, -1);       // per vertex: the maximum it joined
-  std::vector<double> persistence(n, 0.0);  // per maximum
+  std::vector<int32_t> top(n, -1);     // per root: the component's maximum
+  std::vector<int32_t> lowest(n, -1);  // per root: its last vertex added
   std::vector<char> added(n, 0);
-  double lowest = 0.0;
+  std::vector<PersistentMaximum> out;
   for (int32_t v : order) {
     added[v] = 1;
-    lowest = field[v];
     int64_t root = -1;
     for (int32_t w : graph.neighbors(v)) {
       if (!added[w] || w == v) continue;
@@ -37,13 +37,12 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph,
       if (root < 0) {
         root = r;
       } else if (r != root) {
-        // Two components meet at v: the lower maximum dies here.
+        // Two components meet at v: the one with the lower maximum dies
+        // here (the elder rule).
         int64_t hi = root, lo = r;
-        if (std::tie(field[top[lo]], top[hi]) >
-            std::tie(field[top[hi]], top[lo])) {
-          std::swap(hi, lo);
-        }
-        persistence[top[lo]] = field[top[lo]] - field[v];
+        if (higher(top[lo], top[hi])) std::swap(hi, lo);
+        const double p = field[top[lo]] - field[v];
+        if (p >= min_persistence) out.push_back({top[lo], v, p});
         const int32_t keep = top[hi];
         sets.Union(hi, lo);
         root = sets.Find(hi);
@@ -52,28 +51,52 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph,
     }
     if (root < 0) {
       top[v] = v;  // a new maximum
-      joined[v] = v;
+      root = v;
     } else {
       sets.Union(root, v);
       const int32_t keep = top[root];
       root = sets.Find(root);
       top[root] = keep;
-      joined[v] = keep;
     }
+    lowest[root] = v;
   }
-  // Maxima that never died: the highest of each component.
+  // The highest maximum of each component never dies; its component's
+  // lowest vertex is the last one added to it.
   for (int32_t v : order) {
-    if (top[sets.Find(v)] == v) persistence[v] = field[v] - lowest;
+    if (sets.Find(v) != v) continue;
+    const double p = field[top[v]] - field[lowest[v]];
+    if (p >= min_persistence) out.push_back({top[v], -1, p});
   }
-  std::vector<double> out(n, 0.0);
-  for (int32_t v : order) out[v] = persistence[joined[v]];
+  std::sort(out.begin(), out.end(),
+            [](const PersistentMaximum& a, const PersistentMaximum& b) {
+              return std::tie(b.persistence, a.vertex) <
+                     std::tie(a.persistence, b.vertex);
+            });
+  return out;
+}
+
+CriticalPoints SimplifyByPersistence(const MeshGraph& graph,
+                                     const CriticalPoints& set,
+                                     double min_persistence) {
+  CriticalPoints out;
+  out.source = set.source;
+  out.distances = set.distances;
+  for (const PersistentMaximum& m :
+       PersistentMaxima(graph, set.distances, min_persistence)) {
+    out.maxima.push_back(m.vertex);
+    if (m.saddle >= 0) out.saddles.push_back(m.saddle);
+  }
+  // The source is the field's minimum, never a maximum; a one-vertex
+  // component's lone vertex would be (persistence 0), so drop it.
+  out.maxima.erase(
+      std::remove(out.maxima.begin(), out.maxima.end(), set.source),
+      out.maxima.end());
   return out;
 }
 
 std::vector<TopologicalPoint> SelectTopologicalPoints(
     const MeshGraph& graph, DijkstraSolver& solver,
-    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats,
-    const TopologicalPointOptions& options) {
+    const std::vector<CriticalPoints>& sets, TopologicalPointStats* stats) {
   TopologicalPointStats local;
   const int32_t n = graph.num_vertices();
   const int num_sources = static_cast<int>(sets.size());
@@ -102,13 +125,7 @@ std::vector<TopologicalPoint> SelectTopologicalPoints(
   };
   std::vector<Candidate> candidates;
   for (int i = 0; i < num_sources && i < 32; ++i) {
-    std::vector<double> persistence;
-    if (options.min_persistence > 0.0) {
-      persistence = MaximumPersistence(graph, sets[i].distances);
-    }
     for (int32_t m : sets[i].maxima) {
-      if (!persistence.empty() && persistence[m] < options.min_persistence)
-        continue;
       if (max_sources[m] == 0) candidates.push_back({to_saddle[m], m});
       max_sources[m] |= 1u << i;
     }

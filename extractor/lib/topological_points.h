@@ -38,32 +38,43 @@ struct TopologicalPointStats {
   int64_t vertices_visited = 0;
 };
 
-// TopologicalPointOptions departs from the paper where it is unstable.
-struct TopologicalPointOptions {
-  // A maximum of source s whose persistence in s's distance field is below
-  // this (in the mesh's length unit) does not vote: the field's value at
-  // the maximum minus its value at the saddle where the maximum's
-  // superlevel component joins a higher one (0-dimensional persistence,
-  // Edelsbrunner, Letscher and Zomorodian 2002), i.e. the length of the
-  // protrusion it tips. A finger, an ear or a bump of a scan then holds no
-  // topological point of its own, whatever the resolution. The paper (4.3,
-  // 4.4) filters only by cycle size (n = 1 vertex), which depends on the
-  // resolution, not on the size of the protrusion, so such small
-  // protrusions win or lose the vote of 4.4 from pose to pose. 0 keeps the
-  // paper's behaviour. ExtractSignature passes
-  // Options::point_min_prominence x sqrt(total area). Default 0.
-  double min_persistence = 0.0;
+// PersistentMaximum is a local maximum of a scalar field with its
+// 0-dimensional persistence pair (Edelsbrunner, Letscher and Zomorodian
+// 2002): adding vertices in decreasing field order, the superlevel component
+// born at `vertex` dies at `saddle`, where it joins a component born higher.
+struct PersistentMaximum {
+  int32_t vertex = -1;
+  // The merge vertex; -1 for the highest maximum of a connected component,
+  // which never dies.
+  int32_t saddle = -1;
+  // field[vertex] - field[saddle]; for the highest maximum of a component,
+  // field[vertex] minus the component's lowest value. In the field's unit:
+  // for a geodesic distance field, the length of the protrusion the maximum
+  // tips, measured from where it branches off.
+  double persistence = 0.0;
 };
 
-// MaximumPersistence returns, per vertex, the persistence of the maximum
-// whose superlevel component the vertex joined when the vertices are added
-// in decreasing `field` order (graph adjacency): for a local maximum its
-// own persistence, for another vertex that of the maximum above it. The
-// highest maximum of a component gets its field value minus the
-// component's lowest value. Vertices with kUnreachable get 0.
+// PersistentMaxima returns the local maxima of `field` (graph adjacency:
+// every neighbour strictly lower, ties broken by vertex id) whose
+// persistence is at least min_persistence, in decreasing persistence (ties
+// by vertex id). Vertices with kUnreachable are left out. Deterministic.
 // Cost O(n log n + e). Thread-safe.
-std::vector<double> MaximumPersistence(const MeshGraph& graph,
-                                       const std::vector<double>& field);
+std::vector<PersistentMaximum> PersistentMaxima(
+    const MeshGraph& graph, const std::vector<double>& field,
+    double min_persistence);
+
+// SimplifyByPersistence returns `set` with its maxima and saddles replaced
+// by the persistent pairs of its own distance field: the maxima of
+// persistence >= min_persistence (PersistentMaxima) and the saddles where
+// they die (the highest maximum has none). Source and distances are kept.
+// This is the persistence simplification that replaces the cycle-size
+// filter of 4.3 in TopologyMethod::kPersistence (extract.h): a maximum
+// survives when the protrusion it tips is at least min_persistence long,
+// whatever the mesh resolution, and a saddle survives when it is where such
+// a protrusion branches off. Cost O(n log n + e). Thread-safe.
+CriticalPoints SimplifyByPersistence(const MeshGraph& graph,
+                                     const CriticalPoints& set,
+                                     double min_persistence);
 
 // SelectTopologicalPoints returns the topological points, in the order they
 // were validated. Maxima are examined in decreasing distance to the nearest
@@ -76,19 +87,15 @@ std::vector<double> MaximumPersistence(const MeshGraph& graph,
 // all its maxima are marked visited; otherwise only m is. The paper picks
 // the representative "arbitrarily" (4.4); we take the member maximum
 // farthest from any saddle, the tip of the protrusion, so that its integral
-// geodesic (5.1) varies least with the pose. Maxima whose persistence in
-// their source's field is below options.min_persistence neither vote nor
-// are examined (see TopologicalPointOptions).
+// geodesic (5.1) varies least with the pose.
 // Preconditions: every maximum and saddle is a vertex of `graph`; `solver`
 // runs on `graph`. Cost: 1 sweep + one sweep bounded by the radius per
-// examined maximum (R x O(n log n + e) overall, 7.3.2), plus one
-// MaximumPersistence per set when min_persistence > 0. Not thread-safe per
-// solver.
+// examined maximum (R x O(n log n + e) overall, 7.3.2). Not thread-safe
+// per solver.
 std::vector<TopologicalPoint> SelectTopologicalPoints(
     const MeshGraph& graph, DijkstraSolver& solver,
     const std::vector<CriticalPoints>& sets,
-    TopologicalPointStats* stats = nullptr,
-    const TopologicalPointOptions& options = {});
+    TopologicalPointStats* stats = nullptr);
 
 }  // namespace tpr::extract
 

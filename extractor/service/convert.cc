@@ -65,7 +65,31 @@ absl::StatusOr<extract::Options> OptionsFromProto(
         absl::StrCat("options.point_min_prominence must be in [0, 1], got ",
                      proto.point_min_prominence()));
   }
-  options.point_min_prominence = proto.point_min_prominence();
+  if (proto.point_min_prominence() != 0.0) {
+    options.point_min_prominence = proto.point_min_prominence();
+  }
+  if (!(proto.ring_min_length() >= 0.0 && proto.ring_min_length() < 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.ring_min_length must be in [0, 1), got ",
+                     proto.ring_min_length()));
+  }
+  if (proto.ring_min_length() != 0.0) {
+    options.ring_min_length = proto.ring_min_length();
+  }
+  switch (proto.topology()) {
+    case v1::TOPOLOGY_METHOD_UNSPECIFIED:
+      break;  // the library's default
+    case v1::TOPOLOGY_METHOD_PERSISTENCE:
+      options.topology = extract::TopologyMethod::kPersistence;
+      break;
+    case v1::TOPOLOGY_METHOD_PAPER:
+      options.topology = extract::TopologyMethod::kPaper;
+      break;
+    default:  // a newer client's value
+      return absl::InvalidArgumentError(absl::StrCat(
+          "options.topology has unknown value ", proto.topology(),
+          " (1 = TOPOLOGY_METHOD_PERSISTENCE, 2 = TOPOLOGY_METHOD_PAPER)"));
+  }
   switch (proto.handles()) {
     case v1::HANDLE_TREATMENT_UNSPECIFIED:
       break;  // the library's default
@@ -94,6 +118,10 @@ v1::ExtractOptions OptionsToProto(const extract::Options& options) {
   proto.set_point_min_prominence(options.point_min_prominence);
   proto.set_handles(options.cut_handles ? v1::HANDLE_TREATMENT_CUT
                                         : v1::HANDLE_TREATMENT_KEEP);
+  proto.set_topology(options.topology == extract::TopologyMethod::kPaper
+                         ? v1::TOPOLOGY_METHOD_PAPER
+                         : v1::TOPOLOGY_METHOD_PERSISTENCE);
+  proto.set_ring_min_length(options.ring_min_length);
   return proto;
 }
 

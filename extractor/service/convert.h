@@ -32,8 +32,9 @@ inline constexpr int kSignatureVersion = 3;
 // meaning the default documented in extractor/lib/extract.h.
 // Errors: INVALID_ARGUMENT when bands is outside 1..256,
 // spectrum_eigenvalues outside 0..1000, point_min_prominence outside [0, 1],
-// handles not a HandleTreatment this build knows,
-// ring_length_threshold outside [0, 1) or another field is negative (the
+// handles or topology not a value this build knows,
+// ring_length_threshold or ring_min_length outside [0, 1) or another field
+// is negative (the
 // message names the field). `max_threads` caps the requested
 // Dijkstra threads (a client must not be able to take the whole machine).
 // O(1). Thread-safe.

@@ -277,11 +277,9 @@ TEST(ExtractTest, PointCountStableAcrossPoses) {
   EXPECT_LE(off, 1);
 }
 
-// Options::point_min_prominence: a ball with four long arms and one short
-// stub. The paper's selection (0) may give the stub a point; a threshold
-// between the stub's length and the arms' drops the stub and keeps every
-// arm.
-TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
+// A ball with four long arms and one short stub of length `stub` (from the
+// ball's surface), all of radius 0.1.
+Mesh BallWithStub(double stub) {
   synth::Skeleton sk;
   synth::Bone ball;
   ball.start_radius = ball.end_radius = 0.35;
@@ -292,25 +290,59 @@ TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
         Eigen::Vector3d(0, 1, 0)}) {
     synth::Bone arm;
     arm.parent = 0;
-    arm.end = (d.y() > 0 ? 0.55 : 1.3) * d;
+    arm.end = (d.y() > 0 ? 0.35 + stub : 1.3) * d;
     arm.start_radius = arm.end_radius = 0.1;
     sk.bones.push_back(arm);
   }
   absl::StatusOr<Mesh> mesh = synth::MeshFromSkeleton(sk, 5000);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
-  Options paper;
-  paper.spectrum_eigenvalues = 0;
-  Options stable = paper;
-  stable.point_min_prominence = 0.2;
-  const ExtractResult a = Extract(*mesh, paper);
-  const ExtractResult b = Extract(*mesh, stable);
-  EXPECT_EQ(Count(a.signature, FeatureKind::kPoint), 5);
-  EXPECT_EQ(Count(b.signature, FeatureKind::kPoint), 4);
-  Options bad;
-  bad.point_min_prominence = -0.1;
-  EXPECT_EQ(
-      ExtractSignature(*mesh, ComputeMeshStats(*mesh), bad).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(mesh.ok()) << mesh.status();
+  return mesh.ok() ? *mesh : Mesh{};
+}
+
+// TopologyMethod::kPersistence on a ball with four arms of 0.95 and a stub,
+// all of radius 0.1 (sqrt(area) about 2). Seen from the arms' tips, the
+// stub's tip rises above the saddle where its wavefront closes by about its
+// length less the half girth of its base (pi x 0.1): a bump of 0.05 is no
+// maximum at all, a stub of 0.2 stands about 0.08 (0.04 sqrt(area), under
+// the default 0.05), a limb of 0.8 about 0.65. The default then gives the
+// bump and the stub no point, the limb one; a threshold of 0 keeps the
+// stub's, and a stub that is no maximum stays without one. The same at any
+// scale.
+TEST(ExtractTest, PointMinProminenceDropsShortProtrusions) {
+  for (double scale : {1.0, 7.0}) {
+    const auto points = [&](double stub, Options options) {
+      Mesh mesh = BallWithStub(stub);
+      for (Eigen::Vector3d& p : mesh.positions) p *= scale;
+      options.spectrum_eigenvalues = 0;
+      return Count(Extract(mesh, options).signature, FeatureKind::kPoint);
+    };
+    EXPECT_EQ(points(0.05, Options{}), 4) << scale;
+    EXPECT_EQ(points(0.2, Options{}), 4) << scale;
+    EXPECT_EQ(points(0.8, Options{}), 5) << scale;
+    Options zero;
+    zero.point_min_prominence = 0.0;
+    EXPECT_EQ(points(0.2, zero), 5) << scale;
+    EXPECT_EQ(points(0.05, zero), 4) << scale;
+    // The paper's filter (4.3) keeps the stub's point and ignores the
+    // threshold.
+    Options paper;
+    paper.topology = TopologyMethod::kPaper;
+    Options paper_high = paper;
+    paper_high.point_min_prominence = 0.5;
+    EXPECT_EQ(points(0.2, paper), 5) << scale;
+    EXPECT_EQ(points(0.2, paper_high), 5) << scale;
+  }
+  const Mesh mesh = BallWithStub(0.2);
+  for (double bad : {-0.1, 1.5}) {
+    Options o;
+    o.point_min_prominence = bad;
+    EXPECT_EQ(ExtractSignature(mesh, ComputeMeshStats(mesh), o).status().code(),
+              absl::StatusCode::kInvalidArgument);
+    o = Options{};
+    o.ring_min_length = bad;
+    EXPECT_EQ(ExtractSignature(mesh, ComputeMeshStats(mesh), o).status().code(),
+              absl::StatusCode::kInvalidArgument);
+  }
 }
 
 TEST(ExtractTest, ThreadsGiveIdenticalResults) {

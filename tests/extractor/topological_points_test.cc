@@ -3,6 +3,7 @@
 #include "extractor/lib/topological_points.h"
 
 #include <algorithm>
+#include <map>
 #include <queue>
 #include <utility>
 #include <vector>
@@ -130,7 +131,7 @@ TEST(TopologicalPointsTest, StarGivesOnePointPerArm) {
   }
 }
 
-// Oracle for MaximumPersistence, by another algorithm: for a local maximum
+// Oracle for PersistentMaxima, by another algorithm: for a local maximum
 // m, the saddle is the highest "lowest point" over all paths from m to a
 // vertex above m (a widest-path search), and the persistence is
 // field(m) minus it.
@@ -158,7 +159,7 @@ double PersistenceByWidestPath(const MeshGraph& graph,
   return field[m] - lowest;  // the highest maximum
 }
 
-TEST(MaximumPersistenceTest, MatchesWidestPathOracle) {
+TEST(PersistentMaximaTest, MatchesWidestPathOracle) {
   synth::ShapeOptions options;
   options.target_vertices = 1500;
   for (const char* name : {"hand", "octopus", "biped_adult"}) {
@@ -167,18 +168,94 @@ TEST(MaximumPersistenceTest, MatchesWidestPathOracle) {
     const MeshGraph graph = MeshGraph::Build(*mesh);
     DijkstraSolver solver(graph);
     const std::vector<double> field = solver.Run(0);
-    const std::vector<double> persistence = MaximumPersistence(graph, field);
-    int maxima = 0;
+    const std::vector<PersistentMaximum> all =
+        PersistentMaxima(graph, field, 0.0);
+    std::map<int32_t, PersistentMaximum> by_vertex;
+    for (const PersistentMaximum& m : all) by_vertex[m.vertex] = m;
+    EXPECT_EQ(by_vertex.size(), all.size()) << name;
+    int maxima = 0, highest = 0;
     for (int32_t v = 0; v < graph.num_vertices(); ++v) {
       bool is_max = true;
       for (int32_t w : graph.neighbors(v)) is_max &= field[w] < field[v];
       if (!is_max) continue;
       ++maxima;
-      EXPECT_NEAR(persistence[v], PersistenceByWidestPath(graph, field, v),
+      ASSERT_EQ(by_vertex.count(v), 1u) << name << " vertex " << v;
+      const PersistentMaximum& m = by_vertex[v];
+      EXPECT_NEAR(m.persistence, PersistenceByWidestPath(graph, field, v),
                   1e-12)
           << name << " vertex " << v;
+      if (m.saddle < 0) {
+        ++highest;
+      } else {
+        EXPECT_DOUBLE_EQ(field[m.saddle], field[v] - m.persistence);
+      }
     }
     EXPECT_GE(maxima, 3) << name;
+    EXPECT_EQ(highest, 1) << name;  // one component, one maximum never dies
+    // Sorted by decreasing persistence; a threshold keeps a prefix.
+    for (size_t i = 1; i < all.size(); ++i) {
+      EXPECT_GE(all[i - 1].persistence, all[i].persistence);
+    }
+    const double cut = all.size() > 2 ? all[2].persistence : 0.0;
+    const std::vector<PersistentMaximum> kept =
+        PersistentMaxima(graph, field, cut);
+    for (const PersistentMaximum& m : kept) EXPECT_GE(m.persistence, cut);
+    size_t expected = 0;
+    for (const PersistentMaximum& m : all) expected += m.persistence >= cut;
+    EXPECT_EQ(kept.size(), expected) << name;
+  }
+}
+
+// SimplifyByPersistence on a star of k arms reaching 0.85 beyond a ball of
+// radius 0.35, of radius 0.1 (synth.h): from the tip of one arm, each other
+// arm's tip rises about its length less its base's half girth (0.85 - 0.3)
+// above the saddle where its wavefront closes, the farthest one above the
+// source; the ball's far side and the tessellation's ripples stand far
+// lower. A threshold of 0.33 keeps k - 1 maxima and their k - 2 saddles,
+// and exactly the other arms' tips.
+TEST(PersistentMaximaTest, StarKeepsOneMaximumPerOtherArm) {
+  synth::ShapeOptions o;
+  o.target_vertices = 5000;
+  for (int arms : {3, 5, 6}) {
+    absl::StatusOr<synth::Skeleton> sk = synth::StarSkeleton(arms, 0, o);
+    ASSERT_TRUE(sk.ok());
+    absl::StatusOr<Mesh> m = synth::GenerateStar(arms, o);
+    ASSERT_TRUE(m.ok());
+    const MeshGraph graph = MeshGraph::Build(*m);
+    DijkstraSolver solver(graph);
+    absl::StatusOr<SourcePoints> sp = SelectSourcePoints(graph, solver, {});
+    ASSERT_TRUE(sp.ok());
+    absl::StatusOr<CriticalPoints> cp =
+        AnalyzeCriticalPoints(graph, graph.links(), sp->far_a, {});
+    ASSERT_TRUE(cp.ok());
+    const CriticalPoints simple = SimplifyByPersistence(graph, *cp, 0.33);
+    EXPECT_EQ(simple.maxima.size(), static_cast<size_t>(arms - 1)) << arms;
+    EXPECT_EQ(simple.saddles.size(), static_cast<size_t>(arms - 2)) << arms;
+    EXPECT_EQ(simple.distances, cp->distances);
+    EXPECT_EQ(simple.source, cp->source);
+    // Each maximum is at an arm's end (leaf bones of the skeleton), a
+    // different one each.
+    std::vector<Eigen::Vector3d> tips;
+    std::vector<int> children(sk->bones.size(), 0);
+    for (const synth::Bone& b : sk->bones) {
+      if (b.parent >= 0) ++children[b.parent];
+    }
+    for (size_t i = 0; i < sk->bones.size(); ++i) {
+      if (children[i] == 0) tips.push_back(sk->bones[i].end);
+    }
+    ASSERT_EQ(tips.size(), static_cast<size_t>(arms));
+    std::vector<int> hit(arms, 0);
+    for (int32_t v : simple.maxima) {
+      int best = 0;
+      for (int t = 1; t < arms; ++t) {
+        if ((m->positions[v] - tips[t]).norm() <
+            (m->positions[v] - tips[best]).norm())
+          best = t;
+      }
+      EXPECT_LT((m->positions[v] - tips[best]).norm(), 0.3) << arms;
+      ++hit[best];
+    }
+    for (int h : hit) EXPECT_LE(h, 1) << arms;
   }
 }
 

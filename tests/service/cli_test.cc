@@ -374,6 +374,33 @@ TEST_F(CliTest, AddStoresMediaAndGetSavesThem) {
             2);
 }
 
+// `--topology` reaches the extractor (ExtractOptions.topology) from `tpr
+// extract` and `tpr add`, and the signature records the method: persistence
+// by default, `paper` when asked, another word refused by the parser.
+TEST_F(CliTest, TopologyOptionSelectsPersistenceOrPaper) {
+  const std::string torus = cluster_.dir() + "/torus_topology.off";
+  WriteTorusOff(torus);
+  CommandResult plain = RunTpr(cluster_, "--json extract " + torus);
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_NE(plain.out.find("\"topology\":\"TOPOLOGY_METHOD_PERSISTENCE\""),
+            std::string::npos)
+      << plain.out;
+  CommandResult paper =
+      RunTpr(cluster_, "--json extract --topology PAPER " + torus);
+  ASSERT_EQ(paper.exit_code, 0) << paper.err;
+  EXPECT_NE(paper.out.find("\"topology\":\"TOPOLOGY_METHOD_PAPER\""),
+            std::string::npos)
+      << paper.out;
+  CommandResult bad = RunTpr(cluster_, "extract --topology morse " + torus);
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.err.find("morse"), std::string::npos) << bad.err;
+  ASSERT_EQ(RunTpr(cluster_, "add --topology paper " + torus).exit_code, 0);
+  CommandResult stored = RunTpr(cluster_, "--json get " + torus);
+  ASSERT_EQ(stored.exit_code, 0) << stored.err;
+  EXPECT_NE(stored.out.find("TOPOLOGY_METHOD_PAPER"), std::string::npos)
+      << stored.out;
+}
+
 // Labels from --manifest; then SIGTERM while a search stream is open: the
 // server stops accepting calls
 // but the open stream still delivers every neighbour, then the process

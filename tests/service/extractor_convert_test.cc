@@ -25,6 +25,9 @@ TEST(ExtractorConvertTest, ZeroFieldsGiveTheLibraryDefaults) {
   EXPECT_EQ(o->point_min_prominence, defaults.point_min_prominence);
   EXPECT_EQ(o->cut_handles, defaults.cut_handles);
   EXPECT_TRUE(o->cut_handles);
+  EXPECT_EQ(o->topology, extract::TopologyMethod::kPersistence);
+  EXPECT_EQ(o->ring_min_length, defaults.ring_min_length);
+  EXPECT_GT(o->point_min_prominence, 0.0);
 }
 
 TEST(ExtractorConvertTest, EveryFieldIsMapped) {
@@ -37,8 +40,12 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
   p.set_spectrum_eigenvalues(17);
   p.set_point_min_prominence(0.02);
   p.set_handles(v1::HANDLE_TREATMENT_KEEP);
+  p.set_topology(v1::TOPOLOGY_METHOD_PAPER);
+  p.set_ring_min_length(0.03);
   absl::StatusOr<extract::Options> o = OptionsFromProto(p, 4);
   ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->topology, extract::TopologyMethod::kPaper);
+  EXPECT_EQ(o->ring_min_length, 0.03);
   EXPECT_EQ(o->bands, 12);
   EXPECT_EQ(o->cycle_min_vertices, 3);
   EXPECT_EQ(o->ring_length_threshold, 0.07);
@@ -57,6 +64,23 @@ TEST(ExtractorConvertTest, EveryFieldIsMapped) {
   EXPECT_EQ(back.spectrum_eigenvalues(), 17);
   EXPECT_EQ(back.point_min_prominence(), 0.02);
   EXPECT_EQ(back.handles(), v1::HANDLE_TREATMENT_KEEP);
+  EXPECT_EQ(back.topology(), v1::TOPOLOGY_METHOD_PAPER);
+  EXPECT_EQ(back.ring_min_length(), 0.03);
+}
+
+TEST(ExtractorConvertTest, TopologyMethodsMapBothWays) {
+  v1::ExtractOptions p;
+  p.set_topology(v1::TOPOLOGY_METHOD_PERSISTENCE);
+  absl::StatusOr<extract::Options> persistence = OptionsFromProto(p, 4);
+  ASSERT_TRUE(persistence.ok()) << persistence.status();
+  EXPECT_EQ(persistence->topology, extract::TopologyMethod::kPersistence);
+  EXPECT_EQ(OptionsToProto(*persistence).topology(),
+            v1::TOPOLOGY_METHOD_PERSISTENCE);
+  p.set_topology(v1::TOPOLOGY_METHOD_PAPER);
+  absl::StatusOr<extract::Options> paper = OptionsFromProto(p, 4);
+  ASSERT_TRUE(paper.ok()) << paper.status();
+  EXPECT_EQ(paper->topology, extract::TopologyMethod::kPaper);
+  EXPECT_EQ(OptionsToProto(*paper).topology(), v1::TOPOLOGY_METHOD_PAPER);
 }
 
 TEST(ExtractorConvertTest, HandleTreatmentsMapBothWays) {
@@ -80,6 +104,10 @@ TEST(ExtractorConvertTest, DefaultsAreFilledInTheWireForm) {
   EXPECT_EQ(back.bands(), extract::Options().bands);
   // The stored signature says which treatment made it, never "unspecified".
   EXPECT_EQ(back.handles(), v1::HANDLE_TREATMENT_CUT);
+  EXPECT_EQ(back.topology(), v1::TOPOLOGY_METHOD_PERSISTENCE);
+  EXPECT_EQ(back.point_min_prominence(),
+            extract::Options().point_min_prominence);
+  EXPECT_EQ(back.ring_min_length(), extract::Options().ring_min_length);
 }
 
 TEST(ExtractorConvertTest, ThreadsAreCappedByTheServer) {
@@ -110,6 +138,16 @@ TEST(ExtractorConvertTest, OutOfRangeValuesNameTheField) {
   ExpectInvalid(p, "point_min_prominence");
   p.set_point_min_prominence(1.5);
   ExpectInvalid(p, "point_min_prominence");
+  p = v1::ExtractOptions();
+  p.set_ring_min_length(-0.1);
+  ExpectInvalid(p, "ring_min_length");
+  p.set_ring_min_length(std::numeric_limits<double>::quiet_NaN());
+  ExpectInvalid(p, "ring_min_length");
+  p.set_ring_min_length(1.0);
+  ExpectInvalid(p, "ring_min_length");
+  p = v1::ExtractOptions();
+  p.set_topology(static_cast<v1::TopologyMethod>(7));
+  ExpectInvalid(p, "topology");
   p = v1::ExtractOptions();
   p.set_bands(257);
   ExpectInvalid(p, "bands");
