@@ -155,72 +155,67 @@ absl::StatusOr<SearchResult> Backends::Search(const v1::SearchRequest& request,
   return result;
 }
 
-absl::StatusOr<v1::Model> Backends::Get(const std::string& id,
-                                        const CallMeta& meta) const {
+template <typename Request, typename Response>
+absl::StatusOr<Response> Backends::CallIndexer(
+    grpc::Status (v1::Indexer::Stub::*rpc)(grpc::ClientContext*, const Request&,
+                                           Response*),
+    const Request& request, const char* method, const CallMeta& meta) const {
   grpc::ClientContext context;
   Prepare(&context, meta);
+  Response response;
+  const grpc::Status s = (indexer_.get()->*rpc)(&context, request, &response);
+  if (!s.ok()) return Failed(s, method);
+  return response;
+}
+
+absl::StatusOr<v1::Model> Backends::Get(const std::string& id,
+                                        const CallMeta& meta) const {
   v1::GetRequest request;
   request.set_id(id);
-  v1::Model model;
-  const grpc::Status s = indexer_->Get(&context, request, &model);
-  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Get");
-  return model;
+  return CallIndexer(&v1::Indexer::Stub::Get, request, "/tpr.v1.Indexer/Get",
+                     meta);
 }
 
 absl::StatusOr<v1::ListResponse> Backends::List(const v1::ListRequest& request,
                                                 const CallMeta& meta) const {
-  grpc::ClientContext context;
-  Prepare(&context, meta);
-  v1::ListResponse response;
-  const grpc::Status s = indexer_->List(&context, request, &response);
-  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/List");
-  return response;
+  return CallIndexer(&v1::Indexer::Stub::List, request, "/tpr.v1.Indexer/List",
+                     meta);
 }
 
 absl::StatusOr<v1::StatsResponse> Backends::Stats(const CallMeta& meta) const {
-  grpc::ClientContext context;
-  Prepare(&context, meta);
-  v1::StatsResponse response;
-  const grpc::Status s =
-      indexer_->Stats(&context, v1::StatsRequest(), &response);
-  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Stats");
-  return response;
+  return CallIndexer(&v1::Indexer::Stub::Stats, v1::StatsRequest(),
+                     "/tpr.v1.Indexer/Stats", meta);
 }
 
 absl::StatusOr<bool> Backends::Upsert(const v1::Model& model, bool overwrite,
                                       const CallMeta& meta) const {
-  grpc::ClientContext context;
-  Prepare(&context, meta);
   v1::UpsertRequest request;
   *request.mutable_model() = model;
   request.set_overwrite(overwrite);
-  v1::UpsertResponse response;
-  const grpc::Status s = indexer_->Upsert(&context, request, &response);
-  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/Upsert");
-  return response.created();
+  absl::StatusOr<v1::UpsertResponse> response = CallIndexer(
+      &v1::Indexer::Stub::Upsert, request, "/tpr.v1.Indexer/Upsert", meta);
+  if (!response.ok()) return response.status();
+  return response->created();
 }
 
 absl::Status Backends::Delete(const std::string& id,
                               const CallMeta& meta) const {
-  grpc::ClientContext context;
-  Prepare(&context, meta);
   v1::DeleteRequest request;
   request.set_id(id);
-  v1::DeleteResponse response;
-  const grpc::Status s = indexer_->Delete(&context, request, &response);
-  return s.ok() ? absl::OkStatus() : Failed(s, "/tpr.v1.Indexer/Delete");
+  return CallIndexer(&v1::Indexer::Stub::Delete, request,
+                     "/tpr.v1.Indexer/Delete", meta)
+      .status();
 }
 
 absl::StatusOr<std::string> Backends::Thumbnail(const std::string& id,
                                                 const CallMeta& meta) const {
-  grpc::ClientContext context;
-  Prepare(&context, meta);
   v1::GetThumbnailRequest request;
   request.set_id(id);
-  v1::Thumbnail response;
-  const grpc::Status s = indexer_->GetThumbnail(&context, request, &response);
-  if (!s.ok()) return Failed(s, "/tpr.v1.Indexer/GetThumbnail");
-  return std::move(*response.mutable_png());
+  absl::StatusOr<v1::Thumbnail> response =
+      CallIndexer(&v1::Indexer::Stub::GetThumbnail, request,
+                  "/tpr.v1.Indexer/GetThumbnail", meta);
+  if (!response.ok()) return response.status();
+  return std::move(*response->mutable_png());
 }
 
 absl::StatusOr<std::string> Backends::Preview(const std::string& id,

@@ -115,6 +115,14 @@ class Backends {
   Backends(BackendOptions options, std::shared_ptr<grpc::Channel> extractor,
            std::shared_ptr<grpc::Channel> indexer);
   void Prepare(grpc::ClientContext* context, const CallMeta& meta) const;
+  // CallIndexer makes the unary Indexer call `rpc` with `meta` and returns
+  // its response, or the call's status with `method` named when the
+  // service sent no message.
+  template <typename Request, typename Response>
+  absl::StatusOr<Response> CallIndexer(
+      grpc::Status (v1::Indexer::Stub::*rpc)(grpc::ClientContext*,
+                                             const Request&, Response*),
+      const Request& request, const char* method, const CallMeta& meta) const;
 
   BackendOptions options_;
   std::string authorization_;  // "Bearer <own key>", or "" to forward.

@@ -54,6 +54,20 @@ bool ParseNeighbor(const std::string& line, int* rank, std::string* id,
   return true;
 }
 
+// ParseRanking appends every line of `tpr --json query` output to `ranked`
+// as (distance, id); returns the first line that is not a neighbour, or ""
+// when every line is one.
+std::string ParseRanking(const std::string& out, std::vector<Ranked>* ranked) {
+  for (const std::string& line : Lines(out)) {
+    int rank;
+    std::string id, label;
+    double distance;
+    if (!ParseNeighbor(line, &rank, &id, &label, &distance)) return line;
+    ranked->push_back({distance, id});
+  }
+  return "";
+}
+
 std::string ReadBytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream bytes;
@@ -154,13 +168,7 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
           absl::StrCat("--json query -k 6 --rank-by ", name, " --id ", id));
       ASSERT_EQ(q.exit_code, 0) << q.err;
       std::vector<Ranked> streamed;
-      for (const std::string& line : Lines(q.out)) {
-        int rank;
-        std::string got_id, label;
-        double d;
-        ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &d)) << line;
-        streamed.push_back({d, got_id});
-      }
+      ASSERT_EQ(ParseRanking(q.out, &streamed), "");
       absl::StatusOr<std::vector<Ranked>> expected =
           testing::BruteForceRanking(signature, models, distance);
       ASSERT_TRUE(expected.ok()) << expected.status();
@@ -184,13 +192,7 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
           absl::StrCat("--json query -k 6 --intent ", name, " --id ", id));
       ASSERT_EQ(q.exit_code, 0) << q.err;
       std::vector<Ranked> streamed;
-      for (const std::string& line : Lines(q.out)) {
-        int rank;
-        std::string got_id, label;
-        double d;
-        ASSERT_TRUE(ParseNeighbor(line, &rank, &got_id, &label, &d)) << line;
-        streamed.push_back({d, got_id});
-      }
+      ASSERT_EQ(ParseRanking(q.out, &streamed), "");
       const index::TermWeights w = index::IntentWeights(intent);
       absl::StatusOr<std::vector<Ranked>> expected =
           testing::BruteForceRanking(signature, models,
