@@ -17,6 +17,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
+#include "extractor/lib/debris.h"
 #include "extractor/lib/disjoint_sets.h"
 #include "extractor/lib/mesh_io_text.h"  // the limit messages
 
@@ -528,7 +529,10 @@ absl::StatusOr<LoadedMesh> CleanPolygonSoup(PolygonSoup soup,
     warnings.push_back(absl::StrCat("reoriented ", repair.reoriented,
                                     " triangles for a consistent orientation"));
   }
-  const int64_t unreferenced = CompactVertices(&soup.positions, &triangles);
+  const DebrisDropped debris = DropDebris(soup.positions, &triangles);
+  if (debris.components > 0) warnings.push_back(DebrisWarning(debris));
+  const int64_t unreferenced =
+      CompactVertices(&soup.positions, &triangles) - debris.vertices;
   if (unreferenced > 0) {
     warnings.push_back(absl::StrCat("removed ", unreferenced,
                                     " vertices no triangle references"));

@@ -13,7 +13,9 @@
 //      surface is cut open where its orientation conflicts, and a vertex
 //      whose triangles form 2+ fans is split into one vertex per fan, so
 //      the result is manifold sheets; orientation as OrientConsistently;
-//   6. CompactVertices: unreferenced vertices removed, ids compacted.
+//   6. DropDebris (debris.h): components under 1% of the largest one's area
+//      and vertex count removed;
+//   7. CompactVertices: unreferenced vertices removed, ids compacted.
 // CheckManifold and OrientConsistently are the strict forms of step 5 (an
 // error instead of a repair), for callers that must not change topology.
 //
