@@ -3,9 +3,10 @@
 # with 2 extractors, 2 shards and one follower each; the two export lines it
 # prints (and `env` prints the same); meshes added with `tpr add` through
 # haproxy and the gateway; `tpr stats` counting them over the shards; a
-# query by id; `status` listing every recorded process as running; `down`
-# stopping every recorded PID (each exits within its drain) and --purge
-# removing the state directory. First, `--help` prints the usage and an
+# query by id; `status` listing every recorded process as running; an
+# extractor killed and restarted by hand on its address shown as running
+# and stopped by `down` with every recorded PID (each exits within its
+# drain); --purge removing the state directory. First, `--help` prints the usage and an
 # unknown command fails; then a failed start: with a stand-in
 # tpr-gateway that runs but never reports its port, `up` fails naming it and
 # leaves none of the processes it started running. Exit 77 (skipped)
@@ -117,9 +118,24 @@ print(len(json.load(urllib.request.urlopen(sys.argv[1] + "api/v1/search?" + q))[
   "$web_url" "$first")" || fail "tpr-web search failed"
 [ "$web_hits" = 3 ] || fail "tpr-web search returned $web_hits neighbours, not 3"
 
+# An extractor killed and started again by hand on its recorded address:
+# status finds it by its address (not its recorded PID) and down stops it.
+read -r _ old_pid extractor_addr < <(grep '^extractor0 ' "$TPR_CLUSTER_DIR/pids")
+kill -KILL "$old_pid"
+for _ in $(seq 1 100); do running "$old_pid" || break; sleep 0.1; done
+"$BUILD/extractor/tpr-extractor" --listen "$extractor_addr" --threads 1 \
+  >"$WORK/by-hand.log" 2>&1 </dev/null &
+by_hand=$!
+for _ in $(seq 1 100); do grep -q '(port ' "$WORK/by-hand.log" && break; sleep 0.1; done
+grep -q '(port ' "$WORK/by-hand.log" || { cat "$WORK/by-hand.log"; fail "the restarted extractor did not serve"; }
+status="$("$CLUSTER" status)"
+echo "$status"
+grep -q "^extractor0 .*running (pid $by_hand listens there" <<<"$status" ||
+  fail "status does not see the extractor restarted by hand"
+
 "$CLUSTER" down --purge || fail "down failed"
 # Gone, or a zombie its new parent has not reaped yet.
-for pid in "${pids[@]}"; do
+for pid in "${pids[@]}" "$by_hand"; do
   if running "$pid"; then fail "process $pid still runs after down"; fi
 done
 [ ! -e "$TPR_CLUSTER_DIR" ] || fail "--purge left $TPR_CLUSTER_DIR"
