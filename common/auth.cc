@@ -321,6 +321,7 @@ absl::Status ApiKeyAuthenticator::Check(absl::string_view method,
     LogWarning(log_name_, absl::StrCat("rpc=", method, " refused: ",
                                        absl::StatusCodeToString(status.code()),
                                        " (", status.message(), ")"));
+    if (on_refused_) on_refused_(std::string(method), status.code());
     return status;
   };
   if (authorization.empty()) {

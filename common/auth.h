@@ -37,6 +37,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -108,6 +109,15 @@ class ApiKeyAuthenticator {
   uint64_t unauthenticated() const { return unauthenticated_.load(); }
   uint64_t permission_denied() const { return permission_denied_.load(); }
 
+  // SetRefusalObserver makes every refusal of Check call `observer` with
+  // the method and the code (metrics count them; the log line is Check's
+  // own). Call before the server starts. Default none.
+  void SetRefusalObserver(
+      std::function<void(const std::string& method, absl::StatusCode code)>
+          observer) {
+    on_refused_ = std::move(observer);
+  }
+
   // Processor returns the gRPC auth-metadata processor running Check
   // (non-blocking: it runs inline in the auth filter). It consumes the
   // authorization header.
@@ -125,6 +135,7 @@ class ApiKeyAuthenticator {
   int64_t size_ = -1;                     // Guarded by mu_.
   mutable std::atomic<uint64_t> unauthenticated_{0};
   mutable std::atomic<uint64_t> permission_denied_{0};
+  std::function<void(const std::string&, absl::StatusCode)> on_refused_;
   std::mutex watch_mu_;
   std::condition_variable watch_cv_;
   bool stopping_ = false;

@@ -392,6 +392,12 @@ std::string Metrics::Scrape() const {
   return prometheus::TextSerializer().Serialize(all);
 }
 
+void Metrics::RecordRefused(const std::string& method, grpc::StatusCode code) {
+  std::string label;
+  Families::MethodSeries& series = families_->Of(method, &label);
+  families_->Code(label, series, code).requests->Increment();
+}
+
 std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
 Metrics::InterceptorFactory() {
   return std::make_unique<MetricsInterceptorFactory>(families_.get());

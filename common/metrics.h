@@ -97,6 +97,12 @@ class Metrics {
   std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>
   InterceptorFactory();
 
+  // RecordRefused counts a call the API-key check refused before any
+  // handler or interceptor saw it (common/auth.h) in tpr_rpc_requests_total
+  // with its method and code (UNAUTHENTICATED, PERMISSION_DENIED).
+  // Thread-safe.
+  void RecordRefused(const std::string& method, grpc::StatusCode code);
+
   // For the interceptor (metrics.cc).
   struct Families;
   Families& families() { return *families_; }

@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "absl/strings/str_cat.h"
+#include "common/listen_address.h"
 #include "common/logging.h"
 #include "common/metrics.h"
 
@@ -56,11 +57,57 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags) {
       ->check(CLI::Range(1, 86400));
   app.add_option("--metrics-listen", flags->metrics_listen,
                  "HOST:PORT serving Prometheus metrics at /metrics (port 0: a "
-                 "free one, logged)");
+                 "free one, logged); loopback unless --insecure");
+  app.add_flag("--insecure", flags->insecure,
+               "allow --listen or --metrics-listen beyond loopback without "
+               "TLS and API keys (e.g. behind a mesh sidecar that provides "
+               "TLS); logged at every start");
+}
+
+absl::Status CheckOpenDefaults(const ServerFlags& flags,
+                               const std::string& listen_address) {
+  if (flags.insecure) return absl::OkStatus();
+  const bool tls = !flags.tls.cert_file.empty();
+  const bool keys = !flags.api_keys.empty();
+  if (!IsLoopbackAddress(listen_address) && !(tls && keys)) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "--listen ", listen_address, " reaches beyond this machine without ",
+        tls ? "API keys" : (keys ? "TLS" : "TLS and API keys"),
+        ": give --tls-cert/--tls-key and --api-keys, listen on 127.0.0.1, or "
+        "pass --insecure where something else (a mesh sidecar, a private "
+        "network) secures the traffic"));
+  }
+  if (!flags.metrics_listen.empty() &&
+      !IsLoopbackAddress(flags.metrics_listen)) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "--metrics-listen ", flags.metrics_listen,
+        " reaches beyond this machine, and /metrics is plain HTTP without "
+        "keys: serve it on 127.0.0.1 (scrape through a local agent or "
+        "proxy) or pass --insecure"));
+  }
+  return absl::OkStatus();
 }
 
 absl::Status ApplyServerFlags(const ServerFlags& flags,
                               ServerOptions* options) {
+  if (absl::Status open = CheckOpenDefaults(flags, options->listen_address);
+      !open.ok()) {
+    return open;
+  }
+  if (flags.insecure && (!IsLoopbackAddress(options->listen_address) ||
+                         (!flags.metrics_listen.empty() &&
+                          !IsLoopbackAddress(flags.metrics_listen)))) {
+    LogWarning(
+        options->log_name,
+        absl::StrCat(
+            "--insecure: serving ", options->listen_address,
+            flags.metrics_listen.empty()
+                ? ""
+                : absl::StrCat(" and /metrics on ", flags.metrics_listen),
+            " beyond loopback",
+            flags.tls.cert_file.empty() ? ", without TLS" : "",
+            flags.api_keys.empty() ? ", without API keys" : ""));
+  }
   absl::StatusOr<LogFormat> format = ParseLogFormat(flags.log_format);
   if (!format.ok())
     return absl::InvalidArgumentError(

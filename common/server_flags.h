@@ -44,6 +44,11 @@ struct ServerFlags {
   // --metrics-listen HOST:PORT: serve Prometheus /metrics there; empty:
   // no metrics. Default empty.
   std::string metrics_listen;
+  // --insecure: allow listening (or serving /metrics) beyond loopback
+  // without TLS and API keys, for a deployment where something else (a
+  // mesh sidecar, a private network) provides them; logged at every start.
+  // Default false: ApplyServerFlags refuses such an address.
+  bool insecure = false;
   // --threads of the indexer and the gateway (AddServerThreadsFlag): an
   // upper bound on gRPC's handler threads; 0: gRPC's default. Default 0.
   int server_threads = 0;
@@ -70,8 +75,17 @@ void AddServerFlags(CLI::App& app, ServerFlags* flags);
 // fields of `*options` (opening the keys file; max_threads = server_threads
 // + 2 when server_threads > 0, since gRPC needs a few threads of its own
 // besides the handlers). Returns INVALID_ARGUMENT or
-// NOT_FOUND naming the flag and the file or line at fault.
+// NOT_FOUND naming the flag and the file or line at fault. Open defaults
+// are refused (CheckOpenDefaults) before anything is opened.
 absl::Status ApplyServerFlags(const ServerFlags& flags, ServerOptions* options);
+
+// CheckOpenDefaults returns FAILED_PRECONDITION, saying how to fix it,
+// when `listen_address` (the service's --listen) reaches beyond loopback
+// (common/listen_address.h) without both TLS (--tls-cert) and API keys
+// (--api-keys), or when --metrics-listen (plain HTTP, no keys) does;
+// unless flags.insecure. Thread-safe.
+absl::Status CheckOpenDefaults(const ServerFlags& flags,
+                               const std::string& listen_address);
 
 // FinishServerFlags runs after parsing: with --print-config it prints the
 // effective configuration to stdout and returns 0 (the exit code);

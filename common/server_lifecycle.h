@@ -18,6 +18,7 @@
 #define TPR_COMMON_SERVER_LIFECYCLE_H_
 
 #include <errno.h>
+#include <grpc/grpc.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/generic/async_generic_service.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -45,6 +46,7 @@
 #include "common/auth.h"
 #include "common/call_interceptor.h"
 #include "common/health.h"
+#include "common/listen_address.h"
 #include "common/logging.h"
 #include "common/metrics.h"
 
@@ -114,6 +116,25 @@ inline std::shared_ptr<grpc::ServerCredentials> ListeningCredentials(
   return credentials;
 }
 
+// ListenExclusively adds `address` to `builder` with SO_REUSEPORT off (gRPC
+// turns it on by default, which lets a second process share the port and
+// take half of its calls): binding an address in use then fails, and
+// BuildAndStart returns nullptr with *selected_port 0.
+inline void ListenExclusively(
+    grpc::ServerBuilder& builder, const std::string& address,
+    const std::shared_ptr<grpc::ServerCredentials>& credentials,
+    int* selected_port) {
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  builder.AddListeningPort(address, credentials, selected_port);
+}
+
+// The UNAVAILABLE status of a server that could not bind `address`, naming
+// it and the cause (DescribeListenFailure).
+inline absl::Status ListenError(const std::string& address) {
+  return absl::UnavailableError(absl::StrCat("cannot listen on ", address, ": ",
+                                             DescribeListenFailure(address)));
+}
+
 }  // namespace internal
 
 // StartedServer: a running server and the port it actually bound.
@@ -133,8 +154,9 @@ struct StartedServer {
 // callback services; the caller keeps them alive until the server is shut
 // down and destroyed) plus the default health service (overall status
 // SERVING) and v1alpha server reflection.
-// Returns UNAVAILABLE when the address cannot be bound (in use, bad host),
-// INVALID_ARGUMENT for an empty address.
+// The port is bound without SO_REUSEPORT: no other process can share it.
+// Returns UNAVAILABLE naming the address and the cause when it cannot be
+// bound (in use, bad host), INVALID_ARGUMENT for an empty address.
 // Cost: thread start-up, a few milliseconds. Not thread-safe with respect to
 // other StartServer calls (it flips gRPC's process-wide plugin switches).
 inline absl::StatusOr<StartedServer> StartServer(
@@ -150,9 +172,18 @@ inline absl::StatusOr<StartedServer> StartServer(
   StartedServer started;
   started.api_keys = options.api_keys;
   started.metrics = options.metrics;
+  if (options.api_keys != nullptr && options.metrics != nullptr) {
+    // Refused calls never reach the interceptors: count them here.
+    options.api_keys->SetRefusalObserver(
+        [metrics = options.metrics](const std::string& method,
+                                    absl::StatusCode code) {
+          metrics->RecordRefused(method, static_cast<grpc::StatusCode>(code));
+        });
+  }
   std::shared_ptr<grpc::ServerCredentials> credentials =
       internal::ListeningCredentials(options);
-  builder.AddListeningPort(options.listen_address, credentials, &started.port);
+  internal::ListenExclusively(builder, options.listen_address, credentials,
+                              &started.port);
   {
     CallInterceptorOptions calls;
     calls.service = options.log_name;
@@ -180,9 +211,8 @@ inline absl::StatusOr<StartedServer> StartServer(
   for (grpc::Service* service : services) builder.RegisterService(service);
   started.server = builder.BuildAndStart();
   if (started.server == nullptr || started.port == 0) {
-    return absl::UnavailableError(
-        absl::StrCat("cannot listen on ", options.listen_address,
-                     " (address in use or not resolvable)"));
+    started.server.reset();
+    return internal::ListenError(options.listen_address);
   }
   if (grpc::HealthCheckServiceInterface* health =
           started.server->GetHealthCheckService()) {
@@ -243,11 +273,12 @@ struct LoadingServer {
 // probes see a live process that is not ready yet: the overall health
 // status (liveness) is SERVING, options.readiness_service (readiness) is
 // NOT_SERVING, and every other call fails with UNAVAILABLE "<log_name> is
-// not ready: <reason>", which clients retry. Once the data is open, start
-// the real server on port() of this one (ListenAddressWithPort) and then
-// destroy this one: gRPC servers bind with SO_REUSEPORT, so the port stays
-// open throughout. Its log line carries no "(port N)" (tests and scripts
-// wait for that in the real server's "serving on" line). Errors as
+// not ready: <reason>", which clients retry. Once the data is open, destroy
+// this one and start the real server on its port (ListenAddressWithPort):
+// the port is bound exclusively (no SO_REUSEPORT), so it is closed for the
+// moment between the two, and a client's connection attempt then is
+// refused and retried. Its log line carries no "(port N)" (tests and
+// scripts wait for that in the real server's "serving on" line). Errors as
 // StartServer.
 inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
     const ServerOptions& options, const std::string& reason) {
@@ -262,16 +293,15 @@ inline absl::StatusOr<std::unique_ptr<LoadingServer>> StartLoadingServer(
   grpc::ServerBuilder builder;
   std::shared_ptr<grpc::ServerCredentials> credentials =
       internal::ListeningCredentials(options);
-  builder.AddListeningPort(options.listen_address, credentials, &loading->port);
+  internal::ListenExclusively(builder, options.listen_address, credentials,
+                              &loading->port);
   builder.RegisterCallbackGenericService(loading->service.get());
   builder.SetSyncServerOption(
       grpc::ServerBuilder::SyncServerOption::CQ_TIMEOUT_MSEC, 100);
   loading->server = builder.BuildAndStart();
   if (loading->server == nullptr || loading->port == 0) {
     loading->server.reset();
-    return absl::UnavailableError(
-        absl::StrCat("cannot listen on ", options.listen_address,
-                     " (address in use or not resolvable)"));
+    return internal::ListenError(options.listen_address);
   }
   if (grpc::HealthCheckServiceInterface* health =
           loading->server->GetHealthCheckService()) {

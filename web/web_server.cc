@@ -4,12 +4,14 @@
 #include <prometheus/counter.h>
 #include <prometheus/gauge.h>
 #include <prometheus/histogram.h>
+#include <sys/socket.h>
 
 #include <chrono>
 
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "common/listen_address.h"
 #include "common/logging.h"
 #include "web/console_files.h"
 #include "web/http_errors.h"
@@ -147,11 +149,18 @@ absl::StatusOr<std::unique_ptr<WebServer>> WebServer::Start(
   web->InstallHealth();
   web->Install(std::move(routes));
   web->InstallConsole();
+  // httplib's default socket options set SO_REUSEPORT, which would let a
+  // second tpr-web share the port; bind exclusively instead.
+  server.set_socket_options([](socket_t sock) {
+    const int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   web->port_ = port == 0 ? server.bind_to_any_port(host)
                          : (server.bind_to_port(host, port) ? port : -1);
   if (web->port_ <= 0) {
     return absl::UnavailableError(
-        absl::StrCat("cannot listen on ", options.listen));
+        absl::StrCat("cannot listen on ", options.listen, ": ",
+                     common::DescribeListenFailure(options.listen)));
   }
   web->thread_ = std::thread([&server] { server.listen_after_bind(); });
   return web;

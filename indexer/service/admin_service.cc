@@ -32,6 +32,29 @@ bool SamePath(const std::string& a, const std::string& b) {
   return fs::weakly_canonical(a, ec) == fs::weakly_canonical(b, ec);
 }
 
+// OK when `path` (request field `field`) lies under `root` (see
+// AdminOptions::backup_root); an empty path is left to the callee's own
+// check.
+absl::Status CheckUnderBackupRoot(const std::string& root, const char* field,
+                                  const std::string& path) {
+  if (root.empty()) {
+    return absl::FailedPreconditionError(
+        "backups and restores are off on this indexer: start it with "
+        "--backup-root DIR, under which backup sets and restores go");
+  }
+  if (path.empty()) return absl::OkStatus();
+  std::error_code ec;
+  const fs::path resolved = fs::weakly_canonical(fs::absolute(path, ec), ec);
+  const fs::path base = fs::weakly_canonical(fs::absolute(root, ec), ec);
+  const fs::path relative = resolved.lexically_relative(base);
+  if (ec || relative.empty() || *relative.begin() == "..") {
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, " '", path, "' is outside the backup root '", root,
+        "' (--backup-root)"));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 IndexerAdminService::IndexerAdminService(IndexerCore* core, Follower* follower,
@@ -48,6 +71,11 @@ IndexerAdminService::IndexerAdminService(IndexerCore* core, Follower* follower,
 grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
                                          const tpr::v1::BackupRequest* request,
                                          tpr::v1::BackupResponse* response) {
+  if (absl::Status st = CheckUnderBackupRoot(
+          options_.backup_root, "backup_dir", request->backup_dir());
+      !st.ok()) {
+    return common::ToGrpcStatus(st);
+  }
   if (request->keep_last() < 0) {
     return common::ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
         "keep_last is ", request->keep_last(), "; it must be >= 0")));
@@ -78,6 +106,16 @@ grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
 grpc::Status IndexerAdminService::Restore(
     grpc::ServerContext*, const tpr::v1::RestoreRequest* request,
     tpr::v1::RestoreResponse* response) {
+  for (const auto& [field, path] :
+       {std::pair<const char*, const std::string&>{"backup_dir",
+                                                   request->backup_dir()},
+        {"data_dir", request->data_dir()}}) {
+    if (absl::Status st =
+            CheckUnderBackupRoot(options_.backup_root, field, path);
+        !st.ok()) {
+      return common::ToGrpcStatus(st);
+    }
+  }
   if (!request->data_dir().empty() &&
       SamePath(request->data_dir(), core_->storage().dir())) {
     return common::ToGrpcStatus(absl::FailedPreconditionError(

@@ -30,6 +30,13 @@ struct AdminOptions {
   int heartbeat_ms = 500;
   // Receives one line per notable event. Default: none.
   std::function<void(const std::string&)> log;
+  // The directory every backup set (BackupRequest.backup_dir,
+  // RestoreRequest.backup_dir) and restore target (RestoreRequest.data_dir)
+  // must lie under, after resolving symbolic links and "..": a path
+  // outside it is INVALID_ARGUMENT naming the field and the path. Empty:
+  // Backup and Restore are FAILED_PRECONDITION (tpr-indexer
+  // --backup-root). Default empty.
+  std::string backup_root;
 };
 
 // IndexerAdminService: see the file comment. Thread-safe. `core` (and

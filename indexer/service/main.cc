@@ -50,6 +50,10 @@ int main(int argc, char** argv) {
   app.add_option("--data-dir", data_dir,
                  "Directory of the RocksDB store (created if missing)")
       ->required();
+  std::string backup_root;
+  app.add_option("--backup-root", backup_root,
+                 "Directory that backups (tpr backup --to) and restores (tpr "
+                 "restore --from, --into) must lie under; none: both refused");
   tpr::common::AddServerThreadsFlag(app, &ops_flags);
   app.add_option("--max-concurrent-searches", max_searches,
                  "Searches running at once; more get RESOURCE_EXHAUSTED")
@@ -126,7 +130,8 @@ int main(int argc, char** argv) {
   }
   // While the data directory opens (a store scan, possibly a tree build),
   // the port already answers health checks: alive, not ready; other calls
-  // get UNAVAILABLE. The real server then takes the same port over.
+  // get UNAVAILABLE. The real server then takes the same port over (closed
+  // for the moment in between: clients reconnect).
   absl::StatusOr<std::unique_ptr<tpr::common::LoadingServer>> loading =
       tpr::common::StartLoadingServer(server_options,
                                       "loading the data directory");
@@ -247,16 +252,18 @@ int main(int argc, char** argv) {
   }
   tpr::indexer::AdminOptions admin_options;
   admin_options.log = log;
+  admin_options.backup_root = backup_root;
   tpr::indexer::IndexerAdminService admin(core->get(), follower.get(),
                                           admin_options);
 
+  // The port is bound exclusively: the stand-in lets it go first.
+  loading->reset();
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(server_options, {&service, &admin});
   if (!started.ok()) {
     log(started.status().ToString());
     return 1;
   }
-  loading->reset();  // the real server holds the port now
   if (follower != nullptr) {
     // Fallen behind the primary's kept log: stop gracefully (as on SIGTERM),
     // then start again, which copies the primary afresh.

@@ -165,7 +165,8 @@ class ClusterTest : public ::testing::Test {
 
   absl::Status StartShard(int s, const std::string& listen) {
     return shards_[s].Start(BinaryPath("tpr-indexer"),
-                            {"--data-dir", Path(absl::StrCat("shard", s))},
+                            {"--data-dir", Path(absl::StrCat("shard", s)),
+                             "--backup-root", Path("")},
                             Path(absl::StrCat("shard", s, ".log")), listen);
   }
 

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "common/metrics.h"
 #include "common/server_lifecycle.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/ops_testing.h"
@@ -456,6 +457,55 @@ TEST(AuthLifetimeTest, ServerKeepsItsKeysAliveAfterItsOptionsAreGone) {
         << status.error_message();
   }
   started->server->Shutdown();
+}
+
+// Calls the key check refuses never reach a handler or an interceptor;
+// they are counted in tpr_rpc_requests_total with their code all the same.
+TEST(AuthMetricsTest, RefusedCallsAreCountedWithTheirCode) {
+  TempDir dir;
+  absl::StatusOr<std::string> key = common::NewApiKey();
+  ASSERT_TRUE(key.ok());
+  WriteFile(dir.path() + "/keys",
+            common::KeyFileLine(*key, Role::kRead, "") + "\n");
+  common::ServerOptions options;
+  absl::StatusOr<std::shared_ptr<common::ApiKeyAuthenticator>> keys =
+      common::ApiKeyAuthenticator::Open(dir.path() + "/keys", "metrics-test",
+                                        0);
+  ASSERT_TRUE(keys.ok()) << keys.status();
+  options.api_keys = *keys;
+  options.metrics = std::make_shared<common::Metrics>();
+  absl::StatusOr<common::StartedServer> started =
+      common::StartServer(options, {});
+  ASSERT_TRUE(started.ok()) << started.status();
+  auto stub = tpr::v1::Indexer::NewStub(
+      grpc::CreateChannel(absl::StrCat("127.0.0.1:", started->port),
+                          grpc::InsecureChannelCredentials()));
+  for (int i = 0; i < 3; ++i) {
+    grpc::ClientContext context;
+    tpr::v1::StatsResponse stats;
+    EXPECT_EQ(stub->Stats(&context, {}, &stats).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
+  }
+  {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + *key);
+    tpr::v1::DeleteRequest request;
+    tpr::v1::DeleteResponse response;
+    EXPECT_EQ(stub->Delete(&context, request, &response).error_code(),
+              grpc::StatusCode::PERMISSION_DENIED);
+  }
+  const std::string scrape = options.metrics->Scrape();
+  EXPECT_EQ(
+      Sample(scrape, "tpr_rpc_requests_total",
+             {"method=\"/tpr.v1.Indexer/Stats\"", "code=\"UNAUTHENTICATED\""}),
+      3)
+      << scrape;
+  EXPECT_EQ(Sample(scrape, "tpr_rpc_requests_total",
+                   {"method=\"/tpr.v1.Indexer/Delete\"",
+                    "code=\"PERMISSION_DENIED\""}),
+            1)
+      << scrape;
+  common::ShutdownGracefully(*started, options);
 }
 
 }  // namespace

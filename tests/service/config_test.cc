@@ -12,6 +12,7 @@
 
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "common/server_flags.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/ops_testing.h"
 
@@ -130,7 +131,33 @@ TEST(ConfigTest, DeployExamplesLoad) {
   ASSERT_EQ(r.exit_code, 0) << r.out;
   EXPECT_EQ(ParseConfig(r.out)["shard-map"], "\"/etc/tpr/shards.txt\"")
       << r.out;
-  EXPECT_EQ(ParseConfig(r.out)["metrics-listen"], "\"0.0.0.0:9103\"") << r.out;
+  EXPECT_EQ(ParseConfig(r.out)["metrics-listen"], "\"127.0.0.1:9103\"")
+      << r.out;
+}
+
+// The examples listen beyond loopback, so they must carry TLS and keys (or
+// the server refuses to start: common/server_flags.h, CheckOpenDefaults).
+TEST(ConfigTest, DeployExamplesAreNotOpen) {
+  const std::string deploy =
+      std::string(TPR_TEST_DATA_DIR) + "/../../deploy/config/";
+  auto unquote = [](std::string v) {
+    return v.size() >= 2 && v.front() == '"' ? v.substr(1, v.size() - 2) : v;
+  };
+  for (const char* service : {"tpr-indexer", "tpr-extractor", "tpr-gateway"}) {
+    const ShellResult r =
+        RunShell(absl::StrCat(BinaryPath(service), " --config ", deploy,
+                              service, ".toml --print-config"));
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    std::map<std::string, std::string> config = ParseConfig(r.out);
+    common::ServerFlags flags;
+    flags.tls.cert_file = unquote(config["tls-cert"]);
+    flags.api_keys = unquote(config["api-keys"]);
+    flags.metrics_listen = unquote(config["metrics-listen"]);
+    EXPECT_TRUE(
+        common::CheckOpenDefaults(flags, unquote(config["listen"])).ok())
+        << service << ": "
+        << common::CheckOpenDefaults(flags, unquote(config["listen"]));
+  }
 }
 
 TEST(ConfigTest, GatewayTakesEnvironmentAndMasksItsShardKey) {

@@ -150,6 +150,8 @@ class ServiceProcess {
       int status = 0;
       if (waitpid(pid_, &status, WNOHANG) == pid_) {
         pid_ = -1;
+        exit_code_ =
+            WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
         return absl::InternalError(absl::StrCat(binary, " exited early: ", s));
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -185,6 +187,9 @@ class ServiceProcess {
   int Signal(int signo) { return pid_ > 0 ? kill(pid_, signo) : -1; }
 
   int port() const { return port_; }
+  // The exit code (128 + signal when killed) of a process that exited
+  // before it reported its port (Start failed), else -1.
+  int exit_code() const { return exit_code_; }
   // The process id while running, else -1.
   pid_t pid() const { return pid_; }
   std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
@@ -193,6 +198,7 @@ class ServiceProcess {
  private:
   pid_t pid_ = -1;
   int port_ = 0;
+  int exit_code_ = -1;
   std::string log_path_;
 };
 

@@ -177,15 +177,20 @@ TEST(LoggingTest, WhileLoadingAliveNotReadyAndThePortIsHandedOver) {
     EXPECT_EQ(status.error_message(),
               "loading-test is not ready: loading the data directory");
   }
-  // The real server binds the same port while the stand-in still holds it.
+  // The port is exclusive: the real server cannot bind it while the
+  // stand-in holds it, and takes it once the stand-in is gone.
   options.listen_address =
       common::ListenAddressWithPort("127.0.0.1:0", (*loading)->port);
   EXPECT_EQ(options.listen_address, address);
+  const int port = (*loading)->port;
+  absl::StatusOr<common::StartedServer> shared =
+      common::StartServer(options, {});
+  EXPECT_EQ(shared.status().code(), absl::StatusCode::kUnavailable);
+  loading->reset();
   absl::StatusOr<common::StartedServer> started =
       common::StartServer(options, {});
   ASSERT_TRUE(started.ok()) << started.status();
-  EXPECT_EQ(started->port, (*loading)->port);
-  loading->reset();
+  EXPECT_EQ(started->port, port);
   // From now on the same address (same channel, reconnecting) is ready.
   bool ready = false;
   for (int i = 0; i < 200 && !ready; ++i) {

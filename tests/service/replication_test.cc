@@ -54,8 +54,10 @@ class Node {
     if (!core_options_.follow.empty()) {
       follower_ = std::make_unique<Follower>(core_.get(), follower_options_);
     }
+    AdminOptions admin_options;
+    admin_options.backup_root = "/";  // any path: the tests' temp dirs
     admin_ = std::make_unique<IndexerAdminService>(core_.get(), follower_.get(),
-                                                   AdminOptions{});
+                                                   admin_options);
     server_options_.shutdown_grace_ms = 2000;
     TPR_ASSIGN_OR_RETURN(tpr::common::StartedServer started,
                          tpr::common::StartServer(
@@ -362,6 +364,54 @@ std::vector<std::string> MediaAnswers(Node& node,
         ply.ok() ? *ply : absl::StrCat("error ", ply.status().code())));
   }
   return out;
+}
+
+// Backups and restores go only under the configured root (--backup-root),
+// and nowhere without one.
+TEST(BackupTest, PathsOutsideTheBackupRootAreRefused) {
+  TempDir tmp;
+  CoreOptions core_options;
+  core_options.data_dir = tmp.path() + "/data";
+  core_options.persist_interval_ms = 0;
+  absl::StatusOr<std::unique_ptr<IndexerCore>> core =
+      IndexerCore::Open(core_options);
+  ASSERT_TRUE(core.ok()) << core.status();
+  const std::string root = tmp.path() + "/backups";
+  std::filesystem::create_directories(root);
+  auto backup = [&](const std::string& backup_root, const std::string& dir) {
+    AdminOptions options;
+    options.backup_root = backup_root;
+    IndexerAdminService admin(core->get(), nullptr, options);
+    tpr::v1::BackupRequest request;
+    request.set_backup_dir(dir);
+    tpr::v1::BackupResponse response;
+    return admin.Backup(nullptr, &request, &response);
+  };
+  EXPECT_TRUE(backup(root, root + "/set").ok());
+  EXPECT_EQ(backup("", root + "/set").error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+  for (const std::string& outside :
+       {tmp.path() + "/elsewhere", root + "/../escaped", std::string("/etc")}) {
+    const grpc::Status refused = backup(root, outside);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << outside;
+    EXPECT_NE(refused.error_message().find("backup_dir '" + outside + "'"),
+              std::string::npos)
+        << refused.error_message();
+  }
+  AdminOptions options;
+  options.backup_root = root;
+  IndexerAdminService admin(core->get(), nullptr, options);
+  tpr::v1::RestoreRequest restore;
+  restore.set_backup_dir(root + "/set");
+  restore.set_data_dir(tmp.path() + "/restored");
+  tpr::v1::RestoreResponse restored;
+  const grpc::Status refused = admin.Restore(nullptr, &restore, &restored);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find("data_dir"), std::string::npos)
+      << refused.error_message();
+  restore.set_data_dir(root + "/restored");
+  EXPECT_TRUE(admin.Restore(nullptr, &restore, &restored).ok());
 }
 
 TEST(BackupTest, RestoreCarriesMedia) {
