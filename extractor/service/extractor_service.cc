@@ -75,6 +75,29 @@ class WorkerPool {
   std::vector<std::thread> threads_;
 };
 
+// CheckStreamMessage refuses what message `index` (0-based) of an upload
+// must not carry: an unknown format value in the first; any header field
+// (format, file_name, options, media: first message only) in a later one.
+// INVALID_ARGUMENT naming the field.
+absl::Status CheckStreamMessage(const v1::ExtractRequest& request, int index) {
+  if (index == 0) {
+    if (!v1::MeshFormat_IsValid(request.format())) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "format is ", request.format(), ", not a MeshFormat value"));
+    }
+    return absl::OkStatus();
+  }
+  const char* field = nullptr;
+  if (request.format() != 0) field = "format";
+  if (!request.file_name().empty()) field = "file_name";
+  if (request.has_options()) field = "options";
+  if (request.has_media()) field = "media";
+  if (field == nullptr) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrCat(field, " is set in message ", index + 1,
+                   " of the upload; only the first message may carry it"));
+}
+
 }  // namespace
 
 absl::StatusOr<v1::ExtractResponse> RunExtraction(
@@ -245,6 +268,11 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       FinishLocked(common::ToGrpcStatus(bad));
       return;
     }
+    if (absl::Status bad = CheckStreamMessage(request_, messages_++);
+        !bad.ok()) {
+      FinishLocked(common::ToGrpcStatus(bad));
+      return;
+    }
     if (!got_first_) {
       got_first_ = true;
       header_.set_format(request_.format());
@@ -362,6 +390,7 @@ class ExtractReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   // Written under mu_ while uploading; the worker owns it once kQueued.
   std::string bytes_;
   bool got_first_ = false;
+  int messages_ = 0;  // messages of the upload read so far
   std::atomic<bool> cancelled_{false};
 };
 

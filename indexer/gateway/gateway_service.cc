@@ -26,8 +26,9 @@ namespace {
 
 using Endpoint = Shards::Endpoint;
 
-// Sends the gateway's own API key to the shard and reports each call's end
-// (GatewayOptions::on_shard_call).
+// Sends the gateway's own API key and the shard's place in the map ("I/N",
+// kShardPlaceHeader: the shard refuses a place other than its stored one)
+// to the shard and reports each call's end (GatewayOptions::on_shard_call).
 class ShardCallInterceptor final : public grpc::experimental::Interceptor {
  public:
   ShardCallInterceptor(grpc::experimental::ClientRpcInfo* info, int shard,
@@ -41,10 +42,15 @@ class ShardCallInterceptor final : public grpc::experimental::Interceptor {
       grpc::experimental::InterceptorBatchMethods* methods) override {
     using grpc::experimental::InterceptionHookPoints;
     if (methods->QueryInterceptionHookPoint(
-            InterceptionHookPoints::PRE_SEND_INITIAL_METADATA) &&
-        !options_->shard_api_key.empty()) {
-      methods->GetSendInitialMetadata()->emplace(
-          "authorization", "Bearer " + options_->shard_api_key);
+            InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
+      auto* metadata = methods->GetSendInitialMetadata();
+      if (!options_->shard_api_key.empty()) {
+        metadata->emplace("authorization", "Bearer " + options_->shard_api_key);
+      }
+      metadata->emplace(
+          kShardPlaceHeader,
+          ShardPlaceOf(shard_,
+                       static_cast<int>(options_->shards.shards.size())));
     }
     if (methods->QueryInterceptionHookPoint(
             InterceptionHookPoints::POST_RECV_STATUS) &&
@@ -549,7 +555,10 @@ grpc::Status GatewayService::List(grpc::ServerContext* context,
     if ((*positions)[s].done) continue;
     tpr::v1::ListRequest shard_request;
     shard_request.set_page_size(page_size);
-    shard_request.set_page_token((*positions)[s].after);
+    if (!(*positions)[s].after.empty()) {
+      shard_request.set_page_token(
+          EncodeIndexerListToken((*positions)[s].after));
+    }
     shard_request.set_label(request->label());
     absl::Status status = Read(
         context, static_cast<int>(s), [&](Endpoint& e, grpc::ClientContext* c) {
@@ -558,7 +567,15 @@ grpc::Status GatewayService::List(grpc::ServerContext* context,
     if (!status.ok()) return Finish("List", status);
     for (const tpr::v1::Model& m : shard_pages[s].models())
       pages[s].ids.push_back(m.id());
-    pages[s].next_token = shard_pages[s].next_page_token();
+    absl::StatusOr<std::string> next =
+        DecodeIndexerListToken(shard_pages[s].next_page_token());
+    if (!next.ok()) {
+      return Finish(
+          "List", absl::InternalError(absl::StrCat(
+                      "shard ", s, " answered a List page token ",
+                      "this gateway cannot read: ", next.status().message())));
+    }
+    pages[s].next_token = *std::move(next);
   }
   ListMerge merge =
       MergeListPages(*positions, pages, static_cast<size_t>(page_size));

@@ -8,7 +8,9 @@
 //   tpr-gateway --listen 0.0.0.0:7003 --shard-map /etc/tpr/shards.txt
 //   tpr-gateway ... --shard-tls --shard-tls-ca ca.pem --shard-api-key KEY
 //               (or TPR_GATEWAY_SHARD_API_KEY): how it reaches secured shards
+#include <chrono>
 #include <fstream>
+#include <functional>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -23,6 +25,42 @@
 #include "indexer/gateway/shard_map.h"
 #include "tpr/client.h"
 #include "tpr/connection_flags.h"
+
+namespace {
+
+// CheckShardPlaces asks every shard's primary once (a Stats call, which
+// carries the shard's place in this map: gateway_service.h) whether it
+// accepts its place. Returns exit code 2 after logging the shard, its
+// address and its stored place when one refuses (the map lists the shards
+// in another order); nullopt when all accept. A shard that cannot be
+// reached is logged and checked on its first call instead.
+std::optional<int> CheckShardPlaces(
+    tpr::gateway::GatewayService& service,
+    const std::function<void(const std::string&)>& log) {
+  tpr::gateway::Shards& shards = service.shards();
+  for (int s = 0; s < shards.count(); ++s) {
+    tpr::gateway::Shards::Endpoint& primary = shards.primary(s);
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::seconds(5));
+    tpr::v1::StatsResponse stats;
+    const grpc::Status status =
+        primary.stub->Stats(&context, tpr::v1::StatsRequest(), &stats);
+    if (status.error_code() == grpc::StatusCode::FAILED_PRECONDITION) {
+      log(absl::StrCat("refusing to start: shard ", s, " (", primary.address,
+                       ") refuses its place: ", status.error_message()));
+      return 2;
+    }
+    if (!status.ok()) {
+      log(absl::StrCat("shard ", s, " (", primary.address,
+                       ") did not answer at start (", status.error_message(),
+                       "); its place is checked on every call"));
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -134,6 +172,9 @@ int main(int argc, char** argv) {
         replicas.empty() ? "" : absl::StrCat(", replicas", replicas)));
   }
   tpr::gateway::GatewayService service(std::move(options));
+  if (std::optional<int> refused = CheckShardPlaces(service, log)) {
+    return *refused;
+  }
   absl::StatusOr<tpr::common::StartedServer> started =
       tpr::common::StartServer(server_options, {&service});
   if (!started.ok()) {

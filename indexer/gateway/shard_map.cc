@@ -11,11 +11,20 @@
 #include "absl/strings/strip.h"
 
 namespace tpr::gateway {
+
 namespace {
 
 constexpr uint64_t kFnvOffsetBasis = 14695981039346656037ull;
 constexpr uint64_t kFnvPrime = 1099511628211ull;
-constexpr absl::string_view kTokenMagic = "tprgw1";
+constexpr absl::string_view kTokenMagic = "tprgw2";
+// Salt of the indexer page token's checksum.
+constexpr absl::string_view kIndexerTokenSalt = "tpr-indexer-list-1:";
+
+// The 16 hex digits of the checksum the List tokens carry.
+std::string TokenChecksum(absl::string_view salt, absl::string_view raw) {
+  return absl::StrCat(
+      absl::Hex(Fnv1a64(absl::StrCat(salt, raw)), absl::kZeroPad16));
+}
 
 // Checks "HOST:PORT" (HOST may be a bracketed IPv6 literal).
 absl::Status CheckAddress(absl::string_view address, absl::string_view where) {
@@ -110,6 +119,27 @@ absl::StatusOr<ShardMap> ParseShardFlags(
   return map;
 }
 
+std::string ShardPlaceOf(int shard, int shard_count) {
+  return absl::StrCat(shard, "/", shard_count);
+}
+
+std::string EncodeIndexerListToken(absl::string_view after) {
+  return absl::WebSafeBase64Escape(
+      absl::StrCat(TokenChecksum(kIndexerTokenSalt, after), after));
+}
+
+absl::StatusOr<std::string> DecodeIndexerListToken(absl::string_view token) {
+  if (token.empty()) return std::string();
+  std::string raw;
+  if (!absl::WebSafeBase64Unescape(token, &raw) || raw.size() < 16 ||
+      TokenChecksum(kIndexerTokenSalt, absl::string_view(raw).substr(16)) !=
+          absl::string_view(raw).substr(0, 16)) {
+    return absl::InvalidArgumentError(
+        "page_token is malformed (not a next_page_token of this indexer)");
+  }
+  return raw.substr(16);
+}
+
 std::string EncodeListToken(const std::vector<ListPosition>& positions) {
   std::string raw = absl::StrCat(kTokenMagic, ":", positions.size(), ":");
   for (const ListPosition& p : positions) {
@@ -119,7 +149,8 @@ std::string EncodeListToken(const std::vector<ListPosition>& positions) {
       absl::StrAppend(&raw, "a", p.after.size(), ":", p.after);
     }
   }
-  return absl::WebSafeBase64Escape(raw);
+  return absl::WebSafeBase64Escape(
+      absl::StrCat(raw, TokenChecksum(kTokenMagic, raw)));
 }
 
 absl::StatusOr<std::vector<ListPosition>> DecodeListToken(
@@ -128,8 +159,15 @@ absl::StatusOr<std::vector<ListPosition>> DecodeListToken(
   if (token.empty()) return positions;
   const absl::Status malformed = absl::InvalidArgumentError(
       "page_token is malformed (not a gateway List token)");
-  std::string raw;
-  if (!absl::WebSafeBase64Unescape(token, &raw)) return malformed;
+  std::string sealed;
+  if (!absl::WebSafeBase64Unescape(token, &sealed) || sealed.size() < 16)
+    return malformed;
+  const absl::string_view raw =
+      absl::string_view(sealed).substr(0, sealed.size() - 16);
+  if (TokenChecksum(kTokenMagic, raw) !=
+      absl::string_view(sealed).substr(sealed.size() - 16)) {
+    return malformed;
+  }
   absl::string_view rest = raw;
   if (!absl::ConsumePrefix(&rest, absl::StrCat(kTokenMagic, ":")))
     return malformed;

@@ -10,7 +10,9 @@
 // Fnv1a64(UTF-8 bytes of the id) mod S. FNV-1a is stable across builds,
 // platforms and languages (std::hash is not), so a data directory written
 // under one gateway build is routed the same way by the next. Changing S
-// moves ids between shards: resharding is not supported (re-ingest).
+// moves ids between shards, and every shard keeps its place (shard I of N,
+// kShardPlaceHeader): resharding is an offline re-ingest
+// (docs/scale-out.md).
 //
 // No gRPC, no Protobuf: unit-tested on its own.
 #ifndef TPR_INDEXER_GATEWAY_SHARD_MAP_H_
@@ -34,6 +36,16 @@ uint64_t Fnv1a64(absl::string_view bytes);
 // ShardOf returns the shard owning `id`: Fnv1a64(id) mod shard_count.
 // Precondition: shard_count >= 1. Cost O(size of id). Thread-safe.
 int ShardOf(absl::string_view id, int shard_count);
+
+// kShardPlaceHeader: the metadata key of every call the gateway makes to a
+// shard, value "I/N" (ShardPlaceOf): the shard's place in the map. The
+// shard keeps the first place it is given and refuses any other
+// (indexer/service/shard_place.h), so that a map listing the same shards in
+// another order is refused rather than routing ids to the wrong shard.
+inline constexpr char kShardPlaceHeader[] = "tpr-shard-place";
+
+// ShardPlaceOf returns "I/N" for shard `shard` of `shard_count`.
+std::string ShardPlaceOf(int shard, int shard_count);
 
 // ShardAddresses: how one shard is reached.
 struct ShardAddresses {
@@ -80,20 +92,32 @@ struct ListPosition {
   // True when the shard has nothing more to list.
   bool done = false;
   // The last id already returned from this shard; empty before its first.
-  // The next shard page starts after it (tpr-indexer's own page token is the
-  // last id of the page, indexer/service/indexer_core.cc, so it doubles as
-  // the shard's token).
+  // The next shard page starts after it (the shard's page token is
+  // EncodeIndexerListToken of it).
   std::string after;
 };
 
+// EncodeIndexerListToken returns one tpr-indexer's List page token for the
+// page that starts after id `after`: web-safe base64 of a 16-hex-digit
+// checksum (FNV-1a of a salt and the id) followed by the id, so that a
+// token is opaque and a damaged or invented one is refused. Cost O(size).
+std::string EncodeIndexerListToken(absl::string_view after);
+
+// DecodeIndexerListToken returns the id a token from EncodeIndexerListToken
+// starts after ("" for the empty token, the first page). Returns
+// INVALID_ARGUMENT naming page_token for anything else. Cost O(size).
+absl::StatusOr<std::string> DecodeIndexerListToken(absl::string_view token);
+
 // EncodeListToken returns the gateway's List page token for `positions`
-// (one per shard): web-safe base64 of "tprgw1", the shard count and each
-// position (length-prefixed ids), so ids of any bytes survive. Cost O(size).
+// (one per shard): web-safe base64 of "tprgw2", the shard count, each
+// position (length-prefixed ids, so ids of any bytes survive) and a
+// 16-hex-digit checksum of them all. Cost O(size).
 std::string EncodeListToken(const std::vector<ListPosition>& positions);
 
 // DecodeListToken parses a token from EncodeListToken. An empty token is the
-// first page (every shard at its start). Returns INVALID_ARGUMENT for a
-// malformed token or one made for a different number of shards.
+// first page (every shard at its start). Returns INVALID_ARGUMENT naming
+// page_token for a malformed or damaged token (the checksum differs) or one
+// made for a different number of shards.
 absl::StatusOr<std::vector<ListPosition>> DecodeListToken(
     absl::string_view token, int shard_count);
 

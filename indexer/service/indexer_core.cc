@@ -11,6 +11,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/string_view.h"
 #include "common/status_macros.h"
+#include "indexer/gateway/shard_map.h"
 #include "indexer/lib/ground_distance.h"
 #include "indexer/service/convert.h"
 
@@ -177,6 +178,9 @@ absl::Status IndexerCore::LoadIndex() {
         /*threads=*/2));
     // The scan must find every model the acknowledged writes left.
     TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size() + outdated.size()));
+    if (!items.empty()) {
+      TPR_RETURN_IF_ERROR(CheckBands(items.front().second, /*fix=*/true));
+    }
     table_.Put(infos);
     if (!outdated.empty()) {
       Log(absl::StrCat(
@@ -287,8 +291,26 @@ absl::Status IndexerCore::CheckModel(const tpr::v1::Model& model,
         sig.status().code(),
         absl::StrCat("model '", model.id(), "': ", sig.status().message()));
   }
+  if (absl::Status bands = CheckBands(*sig, /*fix=*/true); !bands.ok()) {
+    return absl::Status(bands.code(), absl::StrCat("model '", model.id(),
+                                                   "': ", bands.message()));
+  }
   *signature = std::move(*sig);
   return absl::OkStatus();
+}
+
+absl::Status IndexerCore::CheckBands(const tpr::index::Signature& s,
+                                     bool fix) const {
+  if (s.features.empty()) return absl::OkStatus();
+  const int bands = static_cast<int>(s.features.front().curvature.size());
+  int known = bands_.load();
+  if (known == 0 && fix && bands_.compare_exchange_strong(known, bands)) {
+    return absl::OkStatus();
+  }
+  if (known == 0 || known == bands) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "signature options.bands is ", bands, "; this index holds signatures of ",
+      known, " bands (extract with the same options as the stored models)"));
 }
 
 absl::StatusOr<std::vector<WriteOutcome>> IndexerCore::WriteGroup(
@@ -450,9 +472,12 @@ absl::StatusOr<tpr::v1::ListResponse> IndexerCore::List(
   const size_t page_size = request.page_size() == 0
                                ? 100
                                : std::min<size_t>(request.page_size(), 1000);
+  TPR_ASSIGN_OR_RETURN(
+      const std::string after,
+      tpr::gateway::DecodeIndexerListToken(request.page_token()));
   bool more = false;
   const std::vector<std::string> ids =
-      table_.Page(request.page_token(), request.label(), page_size, &more);
+      table_.Page(after, request.label(), page_size, &more);
   tpr::v1::ListResponse response;
   size_t bytes = 0;
   const std::string* last = nullptr;
@@ -474,11 +499,12 @@ absl::StatusOr<tpr::v1::ListResponse> IndexerCore::List(
     last = &id;
     *response.add_models() = std::move(*model);
   }
-  // The token is the last id of this page: ids are unique and ordered, so
-  // the next page starts right after it whatever was written meanwhile.
+  // The token seals the last id of this page: ids are unique and ordered,
+  // so the next page starts right after it whatever was written meanwhile.
   // (When every id of the page was deleted meanwhile, the page's last id.)
   if (more && last == nullptr && !ids.empty()) last = &ids.back();
-  if (more && last != nullptr) response.set_next_page_token(*last);
+  if (more && last != nullptr)
+    response.set_next_page_token(tpr::gateway::EncodeIndexerListToken(*last));
   return response;
 }
 
@@ -521,6 +547,7 @@ absl::StatusOr<std::unique_ptr<SearchSession>> IndexerCore::StartSearch(
   switch (request.query_case()) {
     case tpr::v1::SearchRequest::kSignature: {
       TPR_ASSIGN_OR_RETURN(query, ToIndexSignature(request.signature()));
+      TPR_RETURN_IF_ERROR(CheckBands(query, /*fix=*/false));
       break;
     }
     case tpr::v1::SearchRequest::kId: {

@@ -25,6 +25,7 @@
 #ifndef TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 #define TPR_INDEXER_SERVICE_INDEXER_CORE_H_
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -144,6 +145,12 @@ class IndexerCore {
   absl::Status CheckModel(const tpr::v1::Model& model,
                           tpr::index::Signature* signature) const;
 
+  // CheckBands refuses a signature whose band count (options.bands) differs
+  // from the index's: that of the first signature stored or loaded, which
+  // `fix` (a write) makes `s`'s when none is known yet. INVALID_ARGUMENT
+  // naming options.bands and both counts. O(1); thread-safe.
+  absl::Status CheckBands(const tpr::index::Signature& s, bool fix) const;
+
   // WriteGroup is the one write path of models (Upsert and BatchWriter use
   // it): it stores `requests` (validated by CheckModel, `signatures[i]`
   // converted from requests[i]) in one synced RocksDB write, then indexes
@@ -262,6 +269,10 @@ class IndexerCore {
   // index returns the in-memory index (for tests and benchmarks).
   const tpr::index::SignatureIndex& index() const { return *index_; }
 
+  // bands returns the band count of the index's signatures (CheckBands), 0
+  // while none is known. Thread-safe.
+  int bands() const { return bands_.load(); }
+
   // engine_stats returns the store's RocksDB counters and sizes (metrics;
   // Storage::engine_stats). Thread-safe.
   EngineStats engine_stats() const { return storage_->engine_stats(); }
@@ -283,6 +294,8 @@ class IndexerCore {
   std::unique_ptr<tpr::index::SignatureIndex> index_;
   ModelTable table_;
   std::unique_ptr<TreePersister> persister_;
+  // See CheckBands; 0 while no signature is known.
+  mutable std::atomic<int> bands_{0};
 
   // Serializes writes: storage write, then index, label map and table
   // updates. Order: write_mu_, then view_mu_.

@@ -19,14 +19,30 @@ absl::Status CancelledStatus(grpc::ServerContext* context) {
              : absl::OkStatus();
 }
 
+// The shard place a gateway's call claims (gateway::kShardPlaceHeader), "" when
+// none.
+absl::string_view ClaimedPlace(const grpc::ServerContext& context) {
+  const auto& metadata = context.client_metadata();
+  auto it = metadata.find(tpr::gateway::kShardPlaceHeader);
+  if (it == metadata.end()) return "";
+  return absl::string_view(it->second.data(), it->second.size());
+}
+
 }  // namespace
+
+absl::Status IndexerService::Admit(grpc::ServerContext* context) {
+  if (absl::Status c = CancelledStatus(context); !c.ok()) return c;
+  const absl::string_view claimed = ClaimedPlace(*context);
+  if (claimed.empty()) return absl::OkStatus();
+  return place_.Check(claimed, /*may_store=*/core_->following().empty());
+}
 
 // The index of BatchUpsert among tpr.v1.Indexer's methods (their order in
 // indexer.proto, as the generated code numbers them).
 constexpr int kBatchUpsertMethod = 1;
 
 IndexerService::IndexerService(IndexerCore* core, ServiceOptions options)
-    : core_(core), options_(std::move(options)) {
+    : core_(core), options_(std::move(options)), place_(&core->storage()) {
   // The generated handler reads tpr.v1.UpsertRequest, and gRPC's typed
   // reader ends the stream on a message that does not parse; this one reads
   // raw bytes (common/stream_messages.h).
@@ -58,8 +74,7 @@ grpc::Status IndexerService::Finish(const char* method,
 grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
                                     const tpr::v1::UpsertRequest* request,
                                     tpr::v1::UpsertResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("Upsert", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("Upsert", c);
   absl::StatusOr<bool> created = core_->Upsert(*request);
   if (created.ok()) response->set_created(*created);
   return Finish("Upsert", created.status());
@@ -68,6 +83,7 @@ grpc::Status IndexerService::Upsert(grpc::ServerContext* context,
 grpc::Status IndexerService::BatchUpsertRaw(
     grpc::ServerContext* context, grpc::ServerReader<grpc::ByteBuffer>* reader,
     tpr::v1::BatchUpsertResponse* response) {
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("BatchUpsert", c);
   BatchWriter batch(core_);
   tpr::common::StreamParser<tpr::v1::UpsertRequest> parser("BatchUpsert");
   grpc::ByteBuffer raw;
@@ -97,16 +113,14 @@ grpc::Status IndexerService::BatchUpsertRaw(
 grpc::Status IndexerService::Delete(grpc::ServerContext* context,
                                     const tpr::v1::DeleteRequest* request,
                                     tpr::v1::DeleteResponse*) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("Delete", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("Delete", c);
   return Finish("Delete", core_->Delete(request->id()));
 }
 
 grpc::Status IndexerService::Get(grpc::ServerContext* context,
                                  const tpr::v1::GetRequest* request,
                                  tpr::v1::Model* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("Get", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("Get", c);
   absl::StatusOr<tpr::v1::Model> model = core_->Get(request->id());
   if (model.ok()) *response = std::move(*model);
   return Finish("Get", model.status());
@@ -115,8 +129,7 @@ grpc::Status IndexerService::Get(grpc::ServerContext* context,
 grpc::Status IndexerService::List(grpc::ServerContext* context,
                                   const tpr::v1::ListRequest* request,
                                   tpr::v1::ListResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("List", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("List", c);
   absl::StatusOr<tpr::v1::ListResponse> page = core_->List(*request);
   if (page.ok()) *response = std::move(*page);
   return Finish("List", page.status());
@@ -125,8 +138,7 @@ grpc::Status IndexerService::List(grpc::ServerContext* context,
 grpc::Status IndexerService::Stats(grpc::ServerContext* context,
                                    const tpr::v1::StatsRequest*,
                                    tpr::v1::StatsResponse* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("Stats", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("Stats", c);
   *response = core_->Stats();
   return grpc::Status::OK;
 }
@@ -134,7 +146,7 @@ grpc::Status IndexerService::Stats(grpc::ServerContext* context,
 grpc::Status IndexerService::GetThumbnail(
     grpc::ServerContext* context, const tpr::v1::GetThumbnailRequest* request,
     tpr::v1::Thumbnail* response) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
+  if (absl::Status c = Admit(context); !c.ok())
     return Finish("GetThumbnail", c);
   absl::StatusOr<std::string> png = core_->GetThumbnail(request->id());
   if (png.ok()) response->set_png(std::move(*png));
@@ -144,8 +156,7 @@ grpc::Status IndexerService::GetThumbnail(
 grpc::Status IndexerService::GetPreview(
     grpc::ServerContext* context, const tpr::v1::GetPreviewRequest* request,
     grpc::ServerWriter<tpr::v1::PreviewChunk>* writer) {
-  if (absl::Status c = CancelledStatus(context); !c.ok())
-    return Finish("GetPreview", c);
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("GetPreview", c);
   absl::StatusOr<std::string> ply = core_->GetPreview(request->id());
   if (!ply.ok()) return Finish("GetPreview", ply.status());
   tpr::v1::PreviewChunk chunk;
@@ -165,6 +176,7 @@ grpc::Status IndexerService::GetPreview(
 grpc::Status IndexerService::Search(
     grpc::ServerContext* context, const tpr::v1::SearchRequest* request,
     grpc::ServerWriter<tpr::v1::SearchResponse>* writer) {
+  if (absl::Status c = Admit(context); !c.ok()) return Finish("Search", c);
   // Admission: a slot or RESOURCE_EXHAUSTED, never an unbounded queue.
   if (searches_.fetch_add(1) >= options_.max_concurrent_searches) {
     searches_.fetch_sub(1);

@@ -1,7 +1,9 @@
 // IndexerService: the tpr.v1.Indexer gRPC service (indexer.proto), a thin
 // shell over IndexerCore. Each handler checks the call's cancellation and
 // deadline, hands the request to the core and maps its absl::Status with
-// tpr::common::ToGrpcStatus (common/grpc_status.h); no logic lives here.
+// tpr::common::ToGrpcStatus (common/grpc_status.h); no logic lives here. A
+// call from tpr-gateway names the shard's place in the gateway's map, which
+// must match the place stored with the data (shard_place.h).
 //
 //   auto core = IndexerCore::Open(options);
 //   IndexerService service(core->get(), ServiceOptions{});
@@ -18,6 +20,7 @@
 #include <string>
 
 #include "indexer/service/indexer_core.h"
+#include "indexer/service/shard_place.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
 namespace tpr::indexer {
@@ -87,6 +90,9 @@ class IndexerService final : public tpr::v1::Indexer::Service {
   }
 
  private:
+  // The checks before every call: its cancellation, then the shard place a
+  // gateway's call claims (shard_place.h).
+  absl::Status Admit(grpc::ServerContext* context);
   // Logs failures that are the server's fault (not the caller's input).
   grpc::Status Finish(const char* method, const absl::Status& status) const;
   // Streams `session`'s neighbours and then its stats.
@@ -95,6 +101,7 @@ class IndexerService final : public tpr::v1::Indexer::Service {
 
   IndexerCore* core_;
   const ServiceOptions options_;
+  ShardPlace place_;
   std::atomic<int> searches_{0};
   std::atomic<int64_t> emd_computations_{0};
 };
