@@ -132,7 +132,8 @@ struct StartedServer {
 // StartServer builds and starts a server that serves `services` (sync or
 // callback services; the caller keeps them alive until the server is shut
 // down and destroyed) plus the default health service (overall status
-// SERVING) and v1alpha server reflection.
+// SERVING) and v1alpha server reflection. With options.metrics, a service
+// that is a CallMetricsSource (common/metrics.h) first adds its metrics.
 // Returns UNAVAILABLE when the address cannot be bound (in use, bad host),
 // INVALID_ARGUMENT for an empty address.
 // Cost: thread start-up, a few milliseconds. Not thread-safe with respect to
@@ -162,8 +163,13 @@ inline absl::StatusOr<StartedServer> StartServer(
         std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
-    if (options.metrics != nullptr)
+    if (options.metrics != nullptr) {
+      for (grpc::Service* service : services) {
+        if (auto* source = dynamic_cast<CallMetricsSource*>(service))
+          source->AddCallMetrics(*options.metrics);
+      }
       interceptors.push_back(options.metrics->InterceptorFactory());
+    }
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);

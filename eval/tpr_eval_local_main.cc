@@ -284,7 +284,12 @@ Described Describe(const Model& model, const Config& config, size_t index) {
   for (const extract::Feature& f : result->signature.features) {
     (f.kind == extract::FeatureKind::kPoint ? out.points : out.rings) += 1;
   }
-  out.raw = ToIndexSignature(result->signature);
+  absl::StatusOr<index::Signature> raw = ConvertSignature(result->signature);
+  if (!raw.ok()) {
+    out.error = std::string(raw.status().message());
+    return out;
+  }
+  out.raw = *std::move(raw);
   if (!PrepareTpr(config, &out)) return out;
   out.d2 = D2Histogram(loaded->mesh, config.d2);
   out.ok = true;

@@ -15,6 +15,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/parallel.h"
+#include "common/signature_limits.h"
 #include "common/status_macros.h"
 #include "extractor/lib/critical_points.h"
 #include "extractor/lib/features.h"
@@ -64,9 +65,10 @@ void ParallelFor(const MeshGraph& graph, DijkstraSolver& caller_solver,
 }
 
 absl::Status ValidateOptions(const Options& o) {
-  if (o.bands < 1 || o.bands > 1000) {
+  if (!common::BandsInRange(o.bands)) {
     return absl::InvalidArgumentError(
-        absl::StrCat("options: bands ", o.bands, " not in [1, 1000]"));
+        absl::StrCat("options: bands ", o.bands, " not in [", common::kMinBands,
+                     ", ", common::kMaxBands, "]"));
   }
   if (o.cycle_min_vertices < 0) {
     return absl::InvalidArgumentError(
@@ -76,25 +78,25 @@ absl::Status ValidateOptions(const Options& o) {
     return absl::InvalidArgumentError(
         "options: cycle_search_hops must be >= cycle_min_vertices + 1");
   }
-  if (!(o.ring_length_threshold >= 0.0 && o.ring_length_threshold <= 1.0)) {
+  if (!common::RingLengthInRange(o.ring_length_threshold)) {
     return absl::InvalidArgumentError(
-        "options: ring_length_threshold not in [0, 1]");
+        "options: ring_length_threshold not in [0, 1)");
   }
-  if (!(o.ring_min_length >= 0.0 && o.ring_min_length <= 1.0)) {
-    return absl::InvalidArgumentError("options: ring_min_length not in [0, 1]");
+  if (!common::RingLengthInRange(o.ring_min_length)) {
+    return absl::InvalidArgumentError("options: ring_min_length not in [0, 1)");
   }
   if (o.topology != TopologyMethod::kPersistence &&
       o.topology != TopologyMethod::kPaper) {
     return absl::InvalidArgumentError("options: unknown topology method");
   }
-  if (!(o.point_min_prominence >= 0.0 && o.point_min_prominence <= 1.0)) {
+  if (!common::ProminenceInRange(o.point_min_prominence)) {
     return absl::InvalidArgumentError(
         "options: point_min_prominence not in [0, 1]");
   }
-  if (o.spectrum_eigenvalues < 0 || o.spectrum_eigenvalues > 1000) {
+  if (!common::SpectrumEigenvaluesInRange(o.spectrum_eigenvalues)) {
     return absl::InvalidArgumentError(
         absl::StrCat("options: spectrum_eigenvalues ", o.spectrum_eigenvalues,
-                     " not in [0, 1000]"));
+                     " not in [0, ", common::kMaxSpectrumEigenvalues, "]"));
   }
   if (o.threads < 0 || o.threads > 256) {
     return absl::InvalidArgumentError("options: threads not in [0, 256]");
