@@ -121,10 +121,9 @@ struct Options {
   // docs/results.md); a search comparing more pads a shorter spectrum with
   // its Weyl asymptote. Cost: see SpectrumOptions::eigenvalues.
   int spectrum_eigenvalues = 50;
-  // The rest of the spectrum's parameters (simplification bound, solver);
-  // its `eigenvalues` is ignored in favour of spectrum_eigenvalues.
-  // Defaults there.
-  SpectrumOptions spectrum;
+  // The rest of the spectrum's parameters (simplification bound, solver;
+  // the count is spectrum_eigenvalues). Defaults there.
+  SpectrumSolverOptions spectrum;
   // Threads for independent Dijkstra sweeps; <= 1 runs on the caller's
   // thread. With more than 1 the spectrum also runs on a thread of its
   // own beside the TPR stages. The result does not depend on it.
