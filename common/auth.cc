@@ -1,5 +1,6 @@
 #include "common/auth.h"
 
+#include <google/protobuf/descriptor.h>
 #include <grpc/grpc.h>
 #include <grpc/grpc_security.h>
 #include <grpc/slice.h>
@@ -19,6 +20,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "common/logging.h"
+#include "tpr/v1/access.pb.h"
 
 namespace tpr::common {
 namespace {
@@ -163,20 +165,27 @@ Role RequiredRole(absl::string_view method) {
       absl::StartsWith(method, "/grpc.reflection.")) {
     return Role::kNone;
   }
-  static const auto* const kRoles = new std::unordered_map<std::string, Role>{
-      {"/tpr.v1.Indexer/Search", Role::kRead},
-      {"/tpr.v1.Indexer/Get", Role::kRead},
-      {"/tpr.v1.Indexer/List", Role::kRead},
-      {"/tpr.v1.Indexer/Stats", Role::kRead},
-      {"/tpr.v1.Indexer/GetThumbnail", Role::kRead},
-      {"/tpr.v1.Indexer/GetPreview", Role::kRead},
-      {"/tpr.v1.Extractor/Extract", Role::kRead},
-      {"/tpr.v1.Indexer/Upsert", Role::kWrite},
-      {"/tpr.v1.Indexer/BatchUpsert", Role::kWrite},
-      {"/tpr.v1.Indexer/Delete", Role::kWrite},
-  };
-  auto it = kRoles->find(std::string(method));
-  return it == kRoles->end() ? Role::kAdmin : it->second;
+  // "/pkg.Service/Method" -> "pkg.Service.Method", as the descriptor pool
+  // names it; anything else is no method and needs admin.
+  const size_t slash = method.rfind('/');
+  if (method.size() < 2 || method[0] != '/' || slash == 0 ||
+      slash == absl::string_view::npos) {
+    return Role::kAdmin;
+  }
+  const std::string full_name =
+      absl::StrCat(method.substr(1, slash - 1), ".", method.substr(slash + 1));
+  const google::protobuf::MethodDescriptor* descriptor =
+      google::protobuf::DescriptorPool::generated_pool()->FindMethodByName(
+          full_name);
+  if (descriptor == nullptr) return Role::kAdmin;
+  switch (descriptor->options().GetExtension(tpr::v1::required_role)) {
+    case tpr::v1::ACCESS_ROLE_READ:
+      return Role::kRead;
+    case tpr::v1::ACCESS_ROLE_WRITE:
+      return Role::kWrite;
+    default:
+      return Role::kAdmin;
+  }
 }
 
 absl::StatusOr<std::string> NewApiKey() {

@@ -12,12 +12,14 @@
 // password hash (nothing to brute-force), and it keeps the check to one
 // hash per call.
 //
-// Roles nest: read < write < admin.
+// Roles nest: read < write < admin. Each method declares the role it needs
+// in the contract (the tpr.v1.required_role option, proto/tpr/v1/access.proto),
+// read here from the compiled-in descriptors; today
 //   read:  Search, Get, List, Stats, GetThumbnail, GetPreview
 //          (tpr.v1.Indexer),
 //          Extract (tpr.v1.Extractor)
 //   write: read + Upsert, BatchUpsert, Delete
-//   admin: write + every other method (backup, restore, ... as they come)
+//   admin: write + every method that declares no role (backup, restore, ...)
 // Health checks (grpc.health.v1) and reflection stay open. Every other call
 // needs `authorization: Bearer <key>` metadata: a missing, malformed or
 // unknown key gets UNAUTHENTICATED, a key whose role is too low
@@ -59,8 +61,10 @@ absl::StatusOr<Role> ParseRole(absl::string_view name);
 absl::string_view RoleName(Role role);
 
 // RequiredRole returns the role a call of `method` ("/tpr.v1.Indexer/Search")
-// needs: kNone for health checks and reflection (open), kRead, kWrite as
-// listed above, kAdmin for any other method. Thread-safe.
+// needs: kNone for health checks and reflection (open), the method's
+// tpr.v1.required_role option when it declares one, kAdmin for any other
+// method (a method this binary does not know included). One descriptor
+// lookup. Thread-safe.
 Role RequiredRole(absl::string_view method);
 
 // NewApiKey returns a fresh key, "tpr_" + 64 hex digits from RAND_bytes.

@@ -8,7 +8,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "eval/lib/report.h"
+#include "common/json_text.h"
 
 namespace tpr::common {
 namespace {
@@ -47,7 +47,7 @@ std::string TomlValue(const std::string& value) {
   double number;
   if (value == "true" || value == "false" || absl::SimpleAtod(value, &number))
     return value;
-  return ::tpr::eval::JsonString(value);
+  return JsonString(value);
 }
 
 }  // namespace

@@ -12,14 +12,10 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "eval/lib/report.h"
+#include "common/json_text.h"
 
 namespace tpr::common {
 namespace {
-
-// The one JSON string escaper of the project (valid UTF-8 kept, other bytes
-// replaced), shared with the evaluation reports.
-using ::tpr::eval::JsonString;
 
 std::atomic<LogFormat>& Format() {
   static std::atomic<LogFormat> format{LogFormat::kText};

@@ -1,10 +1,6 @@
 #include "common/metrics.h"
 
 #include <google/protobuf/descriptor.h>
-#include <google/protobuf/io/coded_stream.h>
-#include <google/protobuf/wire_format_lite.h>
-#include <grpcpp/support/byte_buffer.h>
-#include <grpcpp/support/proto_buffer_reader.h>
 #include <prometheus/collectable.h>
 #include <prometheus/exposer.h>
 #include <prometheus/text_serializer.h>
@@ -18,8 +14,6 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
-#include "tpr/v1/extractor.pb.h"
-#include "tpr/v1/indexer.pb.h"
 
 namespace tpr::common {
 
@@ -39,7 +33,6 @@ const prometheus::Histogram::BucketBoundaries& FineSecondsBuckets() {
   return *buckets;
 }
 
-// Counts per search, 1 to 100000 (an exhaustive search of a large index).
 const prometheus::Histogram::BucketBoundaries& CountBuckets() {
   static const auto* const buckets =
       new prometheus::Histogram::BucketBoundaries{
@@ -62,44 +55,23 @@ struct Metrics::Families {
         in_flight(prometheus::BuildGauge()
                       .Name("tpr_rpc_in_flight")
                       .Help("Calls started and not yet finished, by method")
-                      .Register(r)),
-        stage(prometheus::BuildHistogram()
-                  .Name("tpr_extractor_stage_duration_seconds")
-                  .Help("Duration of each extraction stage "
-                        "(ExtractResponse.timings)")
-                  .Register(r)),
-        mesh_bytes(prometheus::BuildHistogram()
-                       .Name("tpr_extractor_mesh_bytes")
-                       .Help("Size of each uploaded mesh, in bytes")
-                       .Register(r)
-                       .Add({},
-                            prometheus::Histogram::BucketBoundaries{
-                                1e3, 1e4, 1e5, 1e6, 1e7, 1e8})),
-        emds(prometheus::BuildHistogram()
-                 .Name("tpr_indexer_search_emd_computations")
-                 .Help("Full EMD computations per search (SearchStats)")
-                 .Register(r)
-                 .Add({}, CountBuckets())),
-        lower_bounds(prometheus::BuildHistogram()
-                         .Name("tpr_indexer_search_lower_bounds")
-                         .Help("Lower bounds computed per search (SearchStats)")
-                         .Register(r)
-                         .Add({}, CountBuckets())),
-        search_seconds(
-            prometheus::BuildHistogram()
-                .Name("tpr_indexer_search_duration_seconds")
-                .Help("Server-side time of each search (SearchStats)")
-                .Register(r)
-                .Add({}, SecondsBuckets())) {}
+                      .Register(r)) {}
 
   prometheus::Family<prometheus::Counter>& requests;
   prometheus::Family<prometheus::Histogram>& duration;
   prometheus::Family<prometheus::Gauge>& in_flight;
-  prometheus::Family<prometheus::Histogram>& stage;
-  prometheus::Histogram& mesh_bytes;
-  prometheus::Histogram& emds;
-  prometheus::Histogram& lower_bounds;
-  prometheus::Histogram& search_seconds;
+
+  // Observer factories by method (ObserveMethod).
+  std::mutex observers_mu;
+  std::unordered_map<std::string, MessageObserverFactory> observers;
+
+  // Observer(method): a new observer for a call of `method`, or null when
+  // no service observes it. Thread-safe.
+  std::unique_ptr<MessageObserver> Observer(const std::string& method) {
+    std::lock_guard<std::mutex> lock(observers_mu);
+    auto it = observers.find(method);
+    return it == observers.end() ? nullptr : it->second();
+  }
 
   // The series of one method, made on its first call and kept (never
   // removed) for the life of the registry. prometheus-cpp's Family::Add
@@ -223,32 +195,6 @@ namespace {
 
 using grpc::experimental::InterceptionHookPoints;
 
-// The bytes of the `data` field (the mesh chunk) in one serialized
-// tpr.v1.ExtractRequest, read from its wire form without copying the chunk
-// (the extractor parses the message itself). 0 for bytes that do not parse.
-size_t UploadBytes(grpc::ByteBuffer* raw) {
-  using google::protobuf::internal::WireFormatLite;
-  grpc::ProtoBufferReader reader(raw);
-  google::protobuf::io::CodedInputStream in(&reader);
-  const uint32_t data_tag =
-      WireFormatLite::MakeTag(tpr::v1::ExtractRequest::kDataFieldNumber,
-                              WireFormatLite::WIRETYPE_LENGTH_DELIMITED);
-  size_t total = 0;
-  while (const uint32_t tag = in.ReadTag()) {
-    if (tag == data_tag) {
-      uint32_t length = 0;
-      if (!in.ReadVarint32(&length) || !in.Skip(static_cast<int>(length)))
-        return 0;
-      total += length;
-    } else if (!WireFormatLite::SkipField(&in, tag)) {
-      return 0;
-    }
-  }
-  return total;
-}
-
-enum class Kind { kOther, kExtract, kSearch };
-
 class MetricsInterceptor final : public grpc::experimental::Interceptor {
  public:
   MetricsInterceptor(grpc::experimental::ServerRpcInfo* info,
@@ -257,8 +203,7 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
     series_ = &families_->Of(info->method() != nullptr ? info->method() : "",
                              &method_);
     series_->in_flight->Increment();
-    if (method_ == "/tpr.v1.Extractor/Extract") kind_ = Kind::kExtract;
-    if (method_ == "/tpr.v1.Indexer/Search") kind_ = Kind::kSearch;
+    observer_ = families_->Observer(method_);
   }
 
   ~MetricsInterceptor() override {
@@ -268,41 +213,16 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
 
   void Intercept(
       grpc::experimental::InterceptorBatchMethods* methods) override {
-    if (kind_ == Kind::kExtract &&
-        methods->QueryInterceptionHookPoint(
-            InterceptionHookPoints::POST_RECV_MESSAGE)) {
-      // The extractor reads its upload as raw bytes (common/stream_messages.h),
-      // so the received message is a grpc::ByteBuffer holding one serialized
-      // ExtractRequest.
-      if (auto* raw =
-              static_cast<grpc::ByteBuffer*>(methods->GetRecvMessage())) {
-        upload_bytes_ += UploadBytes(raw);
+    if (observer_ != nullptr) {
+      if (methods->QueryInterceptionHookPoint(
+              InterceptionHookPoints::POST_RECV_MESSAGE)) {
+        if (void* message = methods->GetRecvMessage())
+          observer_->OnReceive(message);
       }
-    }
-    if (kind_ != Kind::kOther &&
-        methods->QueryInterceptionHookPoint(
-            InterceptionHookPoints::PRE_SEND_MESSAGE)) {
-      const void* message = methods->GetSendMessage();
-      if (message != nullptr && kind_ == Kind::kExtract) {
-        const auto* response =
-            static_cast<const tpr::v1::ExtractResponse*>(message);
-        for (const tpr::v1::StageTiming& t : response->timings()) {
-          families_->stage.Add({{"stage", t.stage()}}, SecondsBuckets())
-              .Observe(t.milliseconds() / 1000);
-        }
-        families_->mesh_bytes.Observe(static_cast<double>(upload_bytes_));
-      }
-      if (message != nullptr && kind_ == Kind::kSearch) {
-        const auto* response =
-            static_cast<const tpr::v1::SearchResponse*>(message);
-        if (response->has_stats()) {
-          families_->emds.Observe(
-              static_cast<double>(response->stats().emd_computations()));
-          families_->lower_bounds.Observe(
-              static_cast<double>(response->stats().lower_bounds()));
-          families_->search_seconds.Observe(response->stats().milliseconds() /
-                                            1000);
-        }
+      if (methods->QueryInterceptionHookPoint(
+              InterceptionHookPoints::PRE_SEND_MESSAGE)) {
+        if (const void* message = methods->GetSendMessage())
+          observer_->OnSend(message);
       }
     }
     if (methods->QueryInterceptionHookPoint(
@@ -326,10 +246,9 @@ class MetricsInterceptor final : public grpc::experimental::Interceptor {
 
   Metrics::Families* families_;
   std::string method_;
-  Kind kind_ = Kind::kOther;
+  std::unique_ptr<MessageObserver> observer_;  // null: nobody observes it
   std::chrono::steady_clock::time_point start_;
   Metrics::Families::MethodSeries* series_ = nullptr;
-  size_t upload_bytes_ = 0;
   bool finished_ = false;
 };
 
@@ -377,6 +296,12 @@ int Metrics::port() const {
 void Metrics::AddGaugeCallback(const std::string& name, const std::string& help,
                                std::function<double()> read) {
   callbacks_->Add(name, help, std::move(read));
+}
+
+void Metrics::ObserveMethod(const std::string& method,
+                            MessageObserverFactory make) {
+  std::lock_guard<std::mutex> lock(families_->observers_mu);
+  families_->observers[method] = std::move(make);
 }
 
 void Metrics::AddCounterCallback(const std::string& name,

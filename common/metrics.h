@@ -9,13 +9,10 @@
 //     tpr_rpc_requests_total{method,code}          counter
 //     tpr_rpc_duration_seconds{method,code}        histogram
 //     tpr_rpc_in_flight{method}                    gauge
-//   tpr-extractor (read from the Extract call's messages):
-//     tpr_extractor_stage_duration_seconds{stage}  histogram (StageTiming)
-//     tpr_extractor_mesh_bytes                     histogram (upload size)
-//   tpr-indexer (read from the Search stream's final SearchStats):
-//     tpr_indexer_search_emd_computations          histogram per search
-//     tpr_indexer_search_lower_bounds              histogram per search
-//     tpr_indexer_search_duration_seconds          histogram (server time)
+//   what a service reads from its own calls' messages, through a
+//   MessageObserver it registers (ObserveMethod; the extractor's stage
+//   durations and upload sizes, extractor/service/extract_metrics.h; the
+//   searches' counts and times, indexer/service/search_metrics.h);
 // plus gauges and counters read at scrape time that each main.cc adds
 // (AddGaugeCallback, AddCounterCallback): the indexer's models, indexed,
 // buffered, tombstoned, tree rebuilds, storage stalls and sizes, the
@@ -50,6 +47,38 @@ class Exposer;
 
 namespace tpr::common {
 
+class Metrics;
+
+// MessageObserver reads the messages of one call of a method a service
+// registered with Metrics::ObserveMethod, into that service's own families
+// (registered in Metrics::registry()). One per call, used by one thread at
+// a time, destroyed when the call ends.
+class MessageObserver {
+ public:
+  virtual ~MessageObserver() = default;
+  // OnReceive is called with each message the server receives, as the
+  // interceptor sees it: the handler's request type, or a grpc::ByteBuffer
+  // for a method whose handler reads raw bytes.
+  virtual void OnReceive(void* message) { (void)message; }
+  // OnSend is called with each message the server sends (the method's
+  // response type).
+  virtual void OnSend(const void* message) { (void)message; }
+};
+
+// MessageObserverFactory makes the observer of one call.
+using MessageObserverFactory =
+    std::function<std::unique_ptr<MessageObserver>()>;
+
+// CallMetricsSource: a service that reads metrics from its own calls
+// implements it; StartServer (common/server_lifecycle.h) calls
+// AddCallMetrics once, before the server starts, when it has Metrics.
+class CallMetricsSource {
+ public:
+  virtual ~CallMetricsSource() = default;
+  // AddCallMetrics registers the service's families and observers.
+  virtual void AddCallMetrics(Metrics& metrics) = 0;
+};
+
 // SecondsBuckets: histogram boundaries for call durations, 0.5 ms to 30 s (a
 // cached search takes a fraction of a millisecond, an extraction of a large
 // mesh tens of seconds).
@@ -57,6 +86,9 @@ const prometheus::Histogram::BucketBoundaries& SecondsBuckets();
 // FineSecondsBuckets: boundaries for storage operations, 10 us to 1 s (a
 // synced write is tens of microseconds on tmpfs, milliseconds on disks).
 const prometheus::Histogram::BucketBoundaries& FineSecondsBuckets();
+// CountBuckets: boundaries for counts per call, 1 to 100000 (the distances
+// an exhaustive search of a large index computes).
+const prometheus::Histogram::BucketBoundaries& CountBuckets();
 
 // Metrics: one registry, its families, and the HTTP endpoint. Thread-safe.
 class Metrics {
@@ -81,6 +113,11 @@ class Metrics {
   // Prometheus counter; `name` should end in _total).
   void AddCounterCallback(const std::string& name, const std::string& help,
                           std::function<double()> read);
+
+  // ObserveMethod makes every later call of `method` ("/pkg.Service/Method")
+  // feed a MessageObserver from `make` (replacing an earlier one for the same
+  // method). Call before the server starts. Thread-safe.
+  void ObserveMethod(const std::string& method, MessageObserverFactory make);
 
   // registry holds every family; a service registers its own there (with
   // prometheus::BuildHistogram() etc.). Thread-safe (prometheus-cpp's

@@ -153,7 +153,8 @@ struct StartedServer {
 // StartServer builds and starts a server that serves `services` (sync or
 // callback services; the caller keeps them alive until the server is shut
 // down and destroyed) plus the default health service (overall status
-// SERVING) and v1alpha server reflection.
+// SERVING) and v1alpha server reflection. With options.metrics, a service
+// that is a CallMetricsSource (common/metrics.h) first adds its metrics.
 // The port is bound without SO_REUSEPORT: no other process can share it.
 // Returns UNAVAILABLE naming the address and the cause when it cannot be
 // bound (in use, bad host), INVALID_ARGUMENT for an empty address.
@@ -193,8 +194,13 @@ inline absl::StatusOr<StartedServer> StartServer(
         std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(MakeCallInterceptorFactory(std::move(calls)));
-    if (options.metrics != nullptr)
+    if (options.metrics != nullptr) {
+      for (grpc::Service* service : services) {
+        if (auto* source = dynamic_cast<CallMetricsSource*>(service))
+          source->AddCallMetrics(*options.metrics);
+      }
       interceptors.push_back(options.metrics->InterceptorFactory());
+    }
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);

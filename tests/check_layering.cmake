@@ -8,11 +8,16 @@
 # Rules, by folder (direct #include lines of *.h and *.cc):
 # - every pure library (extractor/lib, extractor/synth, indexer/lib,
 #   eval/lib): no gRPC, Protobuf, RocksDB or generated contract (tpr/v1/);
-#   no service, gateway or client header; from common/ only status_macros.h
-#   and parallel.h (the other common/ headers are server plumbing over gRPC);
+#   no service, gateway or client header; from common/ only status_macros.h,
+#   parallel.h, signature_limits.h and json_text.h (the other common/ headers are server
+#   plumbing over gRPC);
 # - extractor/lib and extractor/synth: nothing from indexer/ or eval/ (the
 #   halves never see each other; eval/lib bridges them);
-# - indexer/lib: nothing from extractor/ or eval/.
+# - indexer/lib: nothing from extractor/ or eval/;
+# - common/ (shared by everything): nothing from extractor/, indexer/
+#   (gateway included), eval/, client/ (nor the SDK's tpr/ headers) or
+#   web/, and no service contract (tpr/v1/extractor, tpr/v1/indexer); the services feed it what it needs
+#   (metrics observers, the roles declared in the contract's options).
 if(NOT ROOT)
   message(FATAL_ERROR "usage: cmake -DROOT=<source tree> -P check_layering.cmake")
 endif()
@@ -42,7 +47,7 @@ foreach(dir IN LISTS pure_dirs)
   file(GLOB files ${ROOT}/${dir}/*.h ${ROOT}/${dir}/*.cc)
   foreach(f IN LISTS files)
     file(STRINGS ${f} hits REGEX "${common_regex}")
-    list(FILTER hits EXCLUDE REGEX "#include \"common/(status_macros|parallel)\\.h\"")
+    list(FILTER hits EXCLUDE REGEX "#include \"common/(status_macros|parallel|signature_limits|json_text)\\.h\"")
     if(hits)
       string(APPEND failures "${f}: a pure library includes server plumbing from common/: ${hits}\n")
     endif()
@@ -52,9 +57,12 @@ foreach(dir extractor/lib extractor/synth)
   check(${dir} "#include \"(indexer|eval)/" "the extractor includes the indexer or eval")
 endforeach()
 check(indexer/lib "#include \"(extractor|eval)/" "the indexer library includes the extractor or eval")
+check(common "#include [<\"]((extractor|indexer|eval|client|web)/|tpr/[^v]|tpr/v1/(extractor|indexer)[.])"
+      "common/ includes code above it")
 
 if(failures)
   message(FATAL_ERROR "layering broken:\n${failures}")
 endif()
 message(STATUS "layering holds: pure libraries include no gRPC/Protobuf/RocksDB, "
-               "service or server header; extractor and indexer libraries apart")
+               "service or server header; extractor and indexer libraries apart; "
+               "common/ below them all")

@@ -22,6 +22,7 @@ file(REMOVE_RECURSE ${good})
 file(WRITE ${good}/extractor/lib/a.h "#include \"extractor/lib/mesh.h\"\n#include \"common/status_macros.h\"\n#include \"common/parallel.h\"\n")
 file(WRITE ${good}/indexer/lib/a.cc "#include \"indexer/lib/emd.h\"\n#include <vector>\n")
 file(WRITE ${good}/eval/lib/a.h "#include \"extractor/lib/signature.h\"\n#include \"indexer/lib/signature.h\"\n")
+file(WRITE ${good}/common/a.cc "#include \"common/auth.h\"\n#include \"tpr/v1/access.pb.h\"\n")
 file(WRITE ${good}/extractor/service/a.cc "#include <grpcpp/grpcpp.h>\n#include \"indexer/lib/signature.h\"\n")
 run_check(${good} result output)
 if(NOT result EQUAL 0)
@@ -45,7 +46,16 @@ set(cases
   "indexer/lib/bad.cc|#include <rocksdb/db.h>"
   "indexer/lib/bad.cc|#include \"common/config.h\""
   "eval/lib/bad.cc|#include \"extractor/service/convert.h\""
-  "eval/lib/bad.cc|#include <google/protobuf/message.h>")
+  "eval/lib/bad.cc|#include <google/protobuf/message.h>"
+  "common/bad.cc|#include \"eval/lib/report.h\""
+  "common/bad.h|#include \"extractor/lib/mesh.h\""
+  "common/bad.cc|#include \"indexer/service/convert.h\""
+  "common/bad.cc|#include \"indexer/gateway/shard_map.h\""
+  "common/bad.cc|#include \"client/include/tpr/client.h\""
+  "common/bad.cc|#include \"web/api.h\""
+  "common/bad.cc|#include \"tpr/client.h\""
+  "common/bad.cc|#include \"tpr/v1/indexer.pb.h\""
+  "common/bad.cc|#include \"tpr/v1/extractor.grpc.pb.h\"")
 set(i 0)
 foreach(case IN LISTS cases)
   string(FIND "${case}" "|" bar)

@@ -18,24 +18,15 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
+#include "common/json_text.h"
 #include "eval/lib/metrics.h"
 
 namespace tpr::eval {
 
-// JsonString returns `s` as a JSON string literal (RFC 8259): quote,
-// backslash and control characters escaped (\n, \t, \r, \b, \f or \u00XX),
-// valid UTF-8 kept as is, and each byte that is not part of valid UTF-8
-// replaced by U+FFFD, so that the output is always valid JSON whatever
-// bytes an id holds. O(size). Pure.
-std::string JsonString(absl::string_view s);
-
-// TextField returns `s` safe to print as one field of a line of text
-// output: a backslash becomes "\\", a newline "\n", a tab "\t", a carriage
-// return "\r" and any other control byte (below 0x20, and 0x7F) "\xHH", so
-// that an id or label can neither break a line nor move the cursor, and
-// an id printed this way reads back unambiguously. Other bytes (UTF-8
-// included) are kept. Pure.
-std::string TextField(absl::string_view s);
+// JsonString and TextField: the escapers of common/json_text.h, here
+// beside the other report primitives.
+using ::tpr::common::JsonString;
+using ::tpr::common::TextField;
 
 // JsonNumber returns `x` with full precision (%.17g, so that a reader can
 // compare it with its own computation), or null when x is NaN or infinite:

@@ -41,7 +41,7 @@ enum class TopologyMethod {
 // values where it gives one; otherwise the comment says how it was chosen.
 struct Options {
   // Geodesic bands per feature for the surface vectors (5.3, Fig. 8).
-  // Default 20.
+  // In common::kMinBands..kMaxBands (1..256). Default 20.
   int bands = 20;
   // Geodesic bands span [0, the largest geodesic distance from the feature]
   // when true (each feature's own extent); when false they span [0, the
@@ -78,7 +78,8 @@ struct Options {
   // measurement on the synthetic classes (see
   // tests/extractor/extract_test.cc): 0.05 keeps the joints of bipeds and
   // quadrupeds and drops the slivers of near-simultaneous merges. Ignored
-  // by kPersistence (ring_min_length). Default 0.05.
+  // by kPersistence (ring_min_length). In [0, 1) (common::RingLengthInRange).
+  // Default 0.05.
   double ring_length_threshold = 0.05;
   // Topological Ring Extraction under TopologyMethod::kPersistence: the
   // same test with the threshold as this fraction of sqrt(total area)
@@ -86,7 +87,8 @@ struct Options {
   // hierarchical search of 4.5 places on a flat minimum of G (a torso's
   // front or back), so it moved by a tenth between a generated biped and a
   // rotated, scaled copy of it, and every ring length near the threshold
-  // flips with it; the area does not move. In [0, 1]. Default 0.04: on the
+  // flips with it; the area does not move. In [0, 1)
+  // (common::RingLengthInRange). Default 0.04: on the
   // SCAPE person MAX g_o is 0.8 to 0.9 sqrt(area), so this is the paper
   // threshold's 0.05 of MAX g_o in the area's unit (docs/tpr-stability.md).
   double ring_min_length = 0.04;
@@ -119,10 +121,9 @@ struct Options {
   // docs/results.md); a search comparing more pads a shorter spectrum with
   // its Weyl asymptote. Cost: see SpectrumOptions::eigenvalues.
   int spectrum_eigenvalues = 50;
-  // The rest of the spectrum's parameters (simplification bound, solver);
-  // its `eigenvalues` is ignored in favour of spectrum_eigenvalues.
-  // Defaults there.
-  SpectrumOptions spectrum;
+  // The rest of the spectrum's parameters (simplification bound, solver;
+  // the count is spectrum_eigenvalues). Defaults there.
+  SpectrumSolverOptions spectrum;
   // Threads for independent Dijkstra sweeps; <= 1 runs on the caller's
   // thread. With more than 1 the spectrum also runs on a thread of its
   // own beside the TPR stages. The result does not depend on it.

@@ -443,8 +443,24 @@ ManifoldRepair RepairNonManifold(std::vector<Eigen::Vector3d>* positions,
 }
 
 int64_t CompactVertices(std::vector<Eigen::Vector3d>* positions,
-                        Triangles* triangles) {
+                        Triangles* triangles, VertexOrder order) {
   const int64_t nv = static_cast<int64_t>(positions->size());
+  if (order == VertexOrder::kFirstReference) {
+    std::vector<int32_t> remap(nv, -1);
+    std::vector<Eigen::Vector3d> kept;
+    for (auto& t : *triangles) {
+      for (int32_t& v : t) {
+        int32_t& r = remap[v];
+        if (r < 0) {
+          r = static_cast<int32_t>(kept.size());
+          kept.push_back((*positions)[v]);
+        }
+        v = r;
+      }
+    }
+    *positions = std::move(kept);
+    return nv - static_cast<int64_t>(positions->size());
+  }
   std::vector<int32_t> remap(nv, -1);
   for (const auto& t : *triangles) {
     for (int32_t v : t) remap[v] = 0;

@@ -36,33 +36,10 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
+#include "extractor/lib/intake.h"
 #include "extractor/lib/mesh.h"
 
 namespace tpr::extract {
-
-// kMaxCoordinate bounds every coordinate's magnitude, in files and
-// BuildMesh alike. Beyond it, squared lengths, areas and the products of
-// four lengths that curvature and cotangent weights form lose their meaning
-// long before a double overflows (a float-range 3e38 squared twice is
-// 8e153); 1e15 keeps a mesh in metres well past the solar system.
-inline constexpr double kMaxCoordinate = 1e15;
-
-// IntakeOptions bounds what intake accepts.
-struct IntakeOptions {
-  // Meshes with more vertices are RESOURCE_EXHAUSTED. Default 2,000,000.
-  int64_t max_vertices = 2'000'000;
-  // Meshes with more faces (after triangulation) are RESOURCE_EXHAUSTED.
-  // Default 4,000,000.
-  int64_t max_faces = 4'000'000;
-};
-
-// LoadedMesh is a validated mesh with its statistics.
-struct LoadedMesh {
-  Mesh mesh;
-  MeshStats stats;
-  // Dropped faces and similar, one sentence each.
-  std::vector<std::string> warnings;
-};
 
 // PolygonSoup is vertices plus polygons as flat corner lists, the form every
 // reader produces (one allocation per array, not per polygon).
@@ -185,11 +162,21 @@ struct ManifoldRepair {
 ManifoldRepair RepairNonManifold(std::vector<Eigen::Vector3d>* positions,
                                  Triangles* triangles);
 
+// VertexOrder is how CompactVertices numbers the vertices it keeps.
+enum class VertexOrder {
+  // In their original order (intake: a file's vertex ids stay recognizable).
+  kOriginal,
+  // In the order triangles first reference them (the spectrum's matrices
+  // and the decimater's input are numbered so).
+  kFirstReference,
+};
+
 // CompactVertices removes the vertices no triangle references, renumbers
-// the rest in their original order, and returns how many it removed.
-// O(V + F). Thread-safe.
+// the rest in `order`, and returns how many it removed. O(V + F).
+// Thread-safe.
 int64_t CompactVertices(std::vector<Eigen::Vector3d>* positions,
-                        Triangles* triangles);
+                        Triangles* triangles,
+                        VertexOrder order = VertexOrder::kOriginal);
 
 // CleanPolygonSoup runs the steps at the top of this header and returns the
 // mesh, its ComputeMeshStats figures with the dropped/unreferenced counters

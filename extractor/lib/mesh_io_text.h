@@ -17,7 +17,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
-#include "extractor/lib/mesh_clean.h"
+#include "extractor/lib/intake.h"
 
 namespace tpr::extract::mesh_io {
 
@@ -90,7 +90,7 @@ absl::Status TooManyVertices(int64_t n, const IntakeOptions& options);
 absl::Status TooManyFaces(int64_t n, const IntakeOptions& options);
 
 // CheckCoordinate checks a coordinate value already decoded (binary
-// formats): finite and within kMaxCoordinate (mesh_clean.h). `where` names the
+// formats): finite and within kMaxCoordinate (intake.h). `where` names the
 // element
 // ("vertex 3", "triangle 2 corner 1").
 absl::Status CheckCoordinateValue(absl::string_view format,

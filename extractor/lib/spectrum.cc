@@ -1,7 +1,11 @@
 // Laplace-Beltrami spectrum: linear-FEM matrices assembled here (a dozen
 // lines; no Debian library assembles the cotangent/mass pair for our Mesh),
-// the eigenproblem solved by Spectra, the simplification by OpenMesh.
+// the eigenproblem solved by Spectra, the simplification by OpenMesh
+// (decimation.cc).
 #include "extractor/lib/spectrum.h"
+
+#include <Spectra/SymEigsSolver.h>
+#include <Spectra/Util/SimpleRandom.h>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -13,28 +17,16 @@
 #include <exception>
 #include <limits>
 #include <utility>
-// OpenMesh's property vectors default-construct VectorT without
-// initializing it, which g++ 12 flags at -O3 inside OpenMesh's headers.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
-#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
-#include <OpenMesh/Tools/Decimater/ModRoundnessT.hh>
-#pragma GCC diagnostic pop
-#include <Spectra/SymEigsSolver.h>
-#include <Spectra/Util/SimpleRandom.h>
 
 #include "absl/strings/str_cat.h"
 #include "common/status_macros.h"
 #include "extractor/lib/disjoint_sets.h"
+#include "extractor/lib/mesh_clean.h"
 
 namespace tpr::extract {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-// Smallest triangle angle a simplifying collapse may create (SimplifyMesh).
-constexpr float kMinAngleDegrees = 20.0f;
 
 using SparseMatrix = Eigen::SparseMatrix<double>;
 // Every factorization works on matrices already permuted by one
@@ -42,33 +34,6 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 // mesh instead of once per factorization, and no solve permutes vectors.
 using Ldlt = Eigen::SimplicialLDLT<SparseMatrix, Eigen::Lower,
                                    Eigen::NaturalOrdering<int>>;
-
-struct DoubleTraits : public OpenMesh::DefaultTraits {
-  using Point = OpenMesh::Vec3d;
-  using Normal = OpenMesh::Vec3d;
-};
-using OmMesh = OpenMesh::TriMesh_ArrayKernelT<DoubleTraits>;
-
-// Compact returns `mesh` without unreferenced vertices (they would make a
-// zero row of M).
-Mesh Compact(const Mesh& mesh) {
-  std::vector<int32_t> remap(mesh.positions.size(), -1);
-  Mesh out;
-  out.triangles.reserve(mesh.triangles.size());
-  for (const auto& t : mesh.triangles) {
-    std::array<int32_t, 3> nt;
-    for (int k = 0; k < 3; ++k) {
-      int32_t& r = remap[t[k]];
-      if (r < 0) {
-        r = static_cast<int32_t>(out.positions.size());
-        out.positions.push_back(mesh.positions[t[k]]);
-      }
-      nt[k] = r;
-    }
-    out.triangles.push_back(nt);
-  }
-  return out;
-}
 
 int64_t CountComponents(const Mesh& mesh) {
   DisjointSets sets(mesh.positions.size());
@@ -596,63 +561,6 @@ absl::Status ValidateOptions(const SpectrumOptions& o) {
 
 }  // namespace
 
-absl::StatusOr<Mesh> SimplifyMesh(const Mesh& mesh, int target_vertices) {
-  if (target_vertices < 4) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "SimplifyMesh: target_vertices ", target_vertices, " < 4"));
-  }
-  Mesh compact = Compact(mesh);
-  if (static_cast<int64_t>(compact.positions.size()) <= target_vertices)
-    return compact;
-  OmMesh om;
-  std::vector<OmMesh::VertexHandle> handles;
-  handles.reserve(compact.positions.size());
-  for (const Eigen::Vector3d& p : compact.positions) {
-    handles.push_back(om.add_vertex(OmMesh::Point(p.x(), p.y(), p.z())));
-  }
-  for (size_t f = 0; f < compact.triangles.size(); ++f) {
-    const auto& t = compact.triangles[f];
-    if (!om.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "SimplifyMesh: triangle ", f, " (", t[0], ", ", t[1], ", ", t[2],
-          ") is not manifold with the triangles before it"));
-    }
-  }
-  OpenMesh::Decimater::DecimaterT<OmMesh> decimater(om);
-  OpenMesh::Decimater::ModQuadricT<OmMesh>::Handle quadric;
-  decimater.add(quadric);
-  decimater.module(quadric).unset_max_err();
-  // Quadric collapses alone leave slivers, and linear FEM eigenvalues on
-  // slivers are far off: on the 10k-vertex biped simplified to 3000
-  // vertices the 50th scaled eigenvalue moved 14% from the full mesh's
-  // with quadrics alone, 4% with this binary constraint (no collapse may
-  // create a triangle with an angle under 20 degrees); 30 degrees blocks
-  // the decimater above 6000 vertices.
-  OpenMesh::Decimater::ModRoundnessT<OmMesh>::Handle roundness;
-  decimater.add(roundness);
-  decimater.module(roundness).set_min_angle(kMinAngleDegrees, /*binary=*/true);
-  if (!decimater.initialize()) {
-    return absl::InternalError(
-        "SimplifyMesh: OpenMesh decimater did not initialize");
-  }
-  decimater.decimate_to(static_cast<size_t>(target_vertices));
-  om.garbage_collection();
-  Mesh out;
-  out.positions.reserve(om.n_vertices());
-  for (const OmMesh::VertexHandle v : om.vertices()) {
-    const OmMesh::Point& p = om.point(v);
-    out.positions.emplace_back(p[0], p[1], p[2]);
-  }
-  out.triangles.reserve(om.n_faces());
-  for (const OmMesh::FaceHandle f : om.faces()) {
-    std::array<int32_t, 3> t;
-    int k = 0;
-    for (const OmMesh::VertexHandle v : om.fv_range(f)) t[k++] = v.idx();
-    out.triangles.push_back(t);
-  }
-  return Compact(out);
-}
-
 absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
     const Mesh& mesh, const SpectrumOptions& options) {
   TPR_RETURN_IF_ERROR(ValidateOptions(options));
@@ -664,7 +572,10 @@ absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
       static_cast<int64_t>(mesh.positions.size()) > options.max_vertices) {
     TPR_ASSIGN_OR_RETURN(work, SimplifyMesh(mesh, options.max_vertices));
   } else {
-    work = Compact(mesh);
+    // Unreferenced vertices would make a zero row of M.
+    work = mesh;
+    CompactVertices(&work.positions, &work.triangles,
+                    VertexOrder::kFirstReference);
   }
   Spectrum result;
   result.vertices = static_cast<int64_t>(work.positions.size());

@@ -16,24 +16,19 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "extractor/lib/decimation.h"  // SimplifyMesh, which it uses
 #include "extractor/lib/mesh.h"
 
 namespace tpr::extract {
 
-// SpectrumOptions configures LaplaceBeltramiSpectrum.
-struct SpectrumOptions {
-  // Non-zero eigenvalues to return (N). Must be >= 1. Default 50, the
-  // extractor's default (Options::spectrum_eigenvalues says why). The cost
-  // grows faster than linearly with it (more Lanczos steps, each
-  // orthogonalized against more vectors): BM_SpectrumEigenvalues compares
-  // 20 with 50, and a whole extraction at 10k vertices stays within 150
-  // Dijkstra sweeps with 50 (BM_Extract/10000/1 over BM_Dijkstra/10000,
-  // docs/benchmarks.md).
-  int eigenvalues = 50;
+// SpectrumSolverOptions: how LaplaceBeltramiSpectrum computes, whatever the
+// count asked for (the extractor's Options::spectrum; the count is
+// Options::spectrum_eigenvalues there, so it has one source).
+struct SpectrumSolverOptions {
   // Meshes with more (referenced) vertices than this are first simplified
   // to this many vertices with OpenMesh's quadric decimater
-  // (SimplifyMesh). 0 never simplifies. The bound sits well above 10k
-  // vertices because below it simplifying costs more than it saves: the
+  // (SimplifyMesh, decimation.h). 0 never simplifies. The bound sits well above
+  // 10k vertices because below it simplifying costs more than it saves: the
   // decimater's collapses cost more than the eigensolve of the whole mesh
   // (BM_SimplifyMesh against BM_SpectrumFullMesh), and it adds an error of
   // its own (StableUnderSimplification in tests/extractor/spectrum_test.cc
@@ -75,6 +70,19 @@ struct SpectrumOptions {
   // O(V^2) memory, as fast as the iterative solver at 300). In [0, 5000].
   // Default 300.
   int dense_max_vertices = 300;
+};
+
+// SpectrumOptions configures LaplaceBeltramiSpectrum: the solver's options
+// plus how many eigenvalues to return.
+struct SpectrumOptions : SpectrumSolverOptions {
+  // Non-zero eigenvalues to return (N). Must be >= 1. Default 50, the
+  // extractor's default (Options::spectrum_eigenvalues says why). The cost
+  // grows faster than linearly with it (more Lanczos steps, each
+  // orthogonalized against more vectors): BM_SpectrumEigenvalues compares
+  // 20 with 50, and a whole extraction at 10k vertices stays within 150
+  // Dijkstra sweeps with 50 (BM_Extract/10000/1 over BM_Dijkstra/10000,
+  // docs/benchmarks.md).
+  int eigenvalues = 50;
   // When the mesh solved has too few vertices for `eigenvalues` (V vertices
   // in C components have V - C non-zero eigenvalues; above
   // dense_max_vertices the iterative solver reaches V - C - 1), return that
@@ -130,19 +138,6 @@ struct Spectrum {
 // function, no shared state).
 absl::StatusOr<Spectrum> LaplaceBeltramiSpectrum(
     const Mesh& mesh, const SpectrumOptions& options);
-
-// SimplifyMesh returns `mesh` decimated with OpenMesh's DecimaterT and its
-// quadric error module (Garland-Heckbert edge collapses) until at most
-// target_vertices vertices remain, unreferenced vertices removed. A
-// roundness constraint refuses collapses that would create a triangle
-// with an angle under 20 degrees (slivers spoil the FEM eigenvalues, see
-// spectrum.cc), so the decimater may stop above the target. A mesh
-// already at or below the target is returned compacted but otherwise
-// unchanged. Topology is preserved. Errors: INVALID_ARGUMENT for
-// target_vertices < 4 or a triangle OpenMesh refuses (a non-manifold
-// configuration; the message names the triangle). Cost O(V log V).
-// Thread-safe (no shared state).
-absl::StatusOr<Mesh> SimplifyMesh(const Mesh& mesh, int target_vertices);
 
 }  // namespace tpr::extract
 

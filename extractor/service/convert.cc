@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
+#include "common/signature_limits.h"
 
 // The version comes from CMake's project() through tpr_extract's compile
 // definition when available; the extractor/CMakeLists.txt sets it PRIVATE on
@@ -19,10 +20,11 @@ absl::StatusOr<extract::Options> OptionsFromProto(
     const v1::ExtractOptions& proto, int max_threads) {
   extract::Options options;
   if (proto.bands() != 0) {
-    if (proto.bands() < 1 || proto.bands() > 256) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "options.bands must be in 1..256 (0 for the default 20), got ",
-          proto.bands()));
+    if (!common::BandsInRange(proto.bands())) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("options.bands must be in ", common::kMinBands, "..",
+                       common::kMaxBands, " (0 for the default ",
+                       extract::Options{}.bands, "), got ", proto.bands()));
     }
     options.bands = proto.bands();
   }
@@ -33,9 +35,18 @@ absl::StatusOr<extract::Options> OptionsFromProto(
   }
   if (proto.cycle_min_vertices() != 0)
     options.cycle_min_vertices = proto.cycle_min_vertices();
-  // NaN fails both comparisons below, so test it the other way round.
-  if (!(proto.ring_length_threshold() >= 0.0 &&
-        proto.ring_length_threshold() < 1.0)) {
+  // The library would name its internal cycle_search_hops; the caller set
+  // cycle_min_vertices, so name that and its range.
+  if (options.cycle_min_vertices >= options.cycle_search_hops) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.cycle_min_vertices must be in [0, ",
+                     options.cycle_search_hops - 1,
+                     "] (cycles around a saddle are searched within ",
+                     options.cycle_search_hops, " edges), got ",
+                     proto.cycle_min_vertices()));
+  }
+  // The range rules refuse NaN.
+  if (!common::RingLengthInRange(proto.ring_length_threshold())) {
     return absl::InvalidArgumentError(
         absl::StrCat("options.ring_length_threshold must be in [0, 1), got ",
                      proto.ring_length_threshold()));
@@ -49,18 +60,17 @@ absl::StatusOr<extract::Options> OptionsFromProto(
   }
   options.threads = std::clamp(proto.threads(), 1, std::max(1, max_threads));
   options.explain = proto.explain();
-  if (proto.spectrum_eigenvalues() < 0 || proto.spectrum_eigenvalues() > 1000) {
+  if (!common::SpectrumEigenvaluesInRange(proto.spectrum_eigenvalues())) {
     return absl::InvalidArgumentError(
-        absl::StrCat("options.spectrum_eigenvalues must be in 1..1000 (0 for "
-                     "the default ",
+        absl::StrCat("options.spectrum_eigenvalues must be in 1..",
+                     common::kMaxSpectrumEigenvalues, " (0 for the default ",
                      extract::Options{}.spectrum_eigenvalues, "), got ",
                      proto.spectrum_eigenvalues()));
   }
   if (proto.spectrum_eigenvalues() != 0) {
     options.spectrum_eigenvalues = proto.spectrum_eigenvalues();
   }
-  if (!(proto.point_min_prominence() >= 0.0 &&
-        proto.point_min_prominence() <= 1.0)) {
+  if (!common::ProminenceInRange(proto.point_min_prominence())) {
     return absl::InvalidArgumentError(
         absl::StrCat("options.point_min_prominence must be in [0, 1], got ",
                      proto.point_min_prominence()));
@@ -68,7 +78,7 @@ absl::StatusOr<extract::Options> OptionsFromProto(
   if (proto.point_min_prominence() != 0.0) {
     options.point_min_prominence = proto.point_min_prominence();
   }
-  if (!(proto.ring_min_length() >= 0.0 && proto.ring_min_length() < 1.0)) {
+  if (!common::RingLengthInRange(proto.ring_min_length())) {
     return absl::InvalidArgumentError(
         absl::StrCat("options.ring_min_length must be in [0, 1), got ",
                      proto.ring_min_length()));

@@ -9,6 +9,7 @@
 #define TPR_EXTRACTOR_SERVICE_CONVERT_H_
 
 #include "absl/status/statusor.h"
+#include "common/signature_limits.h"
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/lib/signature.h"
@@ -22,15 +23,14 @@ namespace tpr::extractor {
 extern const char kExtractorVersion[];
 
 // kSignatureVersion is stamped into every signature
-// (Signature.signature_version): 3, TPR features plus a Laplace-Beltrami
-// spectrum of 50 eigenvalues by default (signature.proto describes the
-// versions). The indexer compares only this version (indexer/service/
-// convert.h holds the same number).
-inline constexpr int kSignatureVersion = 3;
+// (Signature.signature_version); common/signature_limits.h defines it.
+using common::kSignatureVersion;
 
 // OptionsFromProto returns the library options for `proto`, a zero field
 // meaning the default documented in extractor/lib/extract.h.
-// Errors: INVALID_ARGUMENT when bands is outside 1..256,
+// Errors (limits from common/signature_limits.h): INVALID_ARGUMENT when
+// bands is outside 1..256, cycle_min_vertices not below the library's
+// cycle_search_hops,
 // spectrum_eigenvalues outside 0..1000, point_min_prominence outside [0, 1],
 // handles or topology not a value this build knows,
 // ring_length_threshold or ring_min_length outside [0, 1) or another field

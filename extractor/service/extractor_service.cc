@@ -18,6 +18,7 @@
 #include "extractor/lib/extract.h"
 #include "extractor/lib/mesh_io.h"
 #include "extractor/service/convert.h"
+#include "extractor/service/extract_metrics.h"
 #include "extractor/service/media.h"
 
 namespace tpr::extractor {
@@ -109,16 +110,6 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(
   TPR_ASSIGN_OR_RETURN(
       extract::Options extract_options,
       OptionsFromProto(header.options(), options.max_threads_per_extraction));
-  // The library would name its internal cycle_search_hops; the caller set
-  // cycle_min_vertices, so name that and its range.
-  if (extract_options.cycle_min_vertices >= extract_options.cycle_search_hops) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("options.cycle_min_vertices must be in [0, ",
-                     extract_options.cycle_search_hops - 1,
-                     "] (cycles around a saddle are searched within ",
-                     extract_options.cycle_search_hops, " edges), got ",
-                     header.options().cycle_min_vertices()));
-  }
   if (cancelled())
     return absl::CancelledError("extraction cancelled before intake");
 
@@ -479,5 +470,9 @@ grpc::ServerReadReactor<grpc::ByteBuffer>* ExtractorService::ExtractRaw(
 }
 
 int ExtractorService::InFlight() const { return state_->in_flight.load(); }
+
+void ExtractorService::AddCallMetrics(common::Metrics& metrics) {
+  AddExtractMetrics(metrics);
+}
 
 }  // namespace tpr::extractor

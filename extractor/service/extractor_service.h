@@ -16,6 +16,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "common/metrics.h"
 #include "tpr/v1/extractor.grpc.pb.h"
 #include "tpr/v1/extractor.pb.h"
 
@@ -89,7 +90,8 @@ absl::StatusOr<v1::ExtractResponse> RunExtraction(
 // ExtractorService implements tpr.v1.Extractor with the callback API. The
 // object must outlive the server it is registered with; its destructor
 // waits for running extractions and joins the worker threads.
-class ExtractorService final : public v1::Extractor::CallbackService {
+class ExtractorService final : public v1::Extractor::CallbackService,
+                               public common::CallMetricsSource {
  public:
   explicit ExtractorService(const ServiceOptions& options);
   ~ExtractorService() override;
@@ -108,6 +110,9 @@ class ExtractorService final : public v1::Extractor::CallbackService {
 
   // InFlight returns the number of admitted calls not yet done. Thread-safe.
   int InFlight() const;
+
+  // AddCallMetrics adds the Extract calls' metrics (extract_metrics.h).
+  void AddCallMetrics(common::Metrics& metrics) override;
 
   // State is defined in the .cc; named here only so that the call objects
   // there can refer to it.

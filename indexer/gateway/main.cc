@@ -23,6 +23,7 @@
 #include "common/server_lifecycle.h"
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
+#include "indexer/service/search_metrics.h"
 #include "tpr/client.h"
 #include "tpr/connection_flags.h"
 
@@ -161,6 +162,9 @@ int main(int argc, char** argv) {
   if (server_options.metrics != nullptr) {
     options.on_shard_call =
         tpr::gateway::ShardCallMetrics(*server_options.metrics);
+    // The gateway serves tpr.v1.Indexer/Search, so it records the same
+    // per-search metrics as an indexer.
+    tpr::indexer::AddSearchMetrics(*server_options.metrics);
   }
   for (size_t s = 0; s < options.shards.shards.size(); ++s) {
     const tpr::gateway::ShardAddresses& shard = options.shards.shards[s];

@@ -31,6 +31,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "common/signature_limits.h"
 
 namespace tpr::index {
 
@@ -44,8 +45,8 @@ absl::StatusOr<SpectralTransform> ParseSpectralTransform(
     absl::string_view name);
 
 // kMaxSpectrum: the longest spectrum a signature may carry and the largest
-// options.eigenvalues.
-inline constexpr int kMaxSpectrum = 1000;
+// options.eigenvalues: the contract's (common/signature_limits.h).
+inline constexpr int kMaxSpectrum = common::kMaxSpectrumEigenvalues;
 
 // SpectralOptions: the spectral term of the combined distance. Every
 // signature of one index is prepared with the same options.

@@ -260,7 +260,7 @@ class VpTree {
   // or corrupt ones. Never crashes on arbitrary input.
   static absl::StatusOr<VpTree> Deserialize(absl::string_view bytes);
 
-  struct Node;  // defined in vp_tree.cc
+  struct Node;  // defined in internal/vp_tree_data.h
 
  private:
   friend class VpTreeBuilder;

@@ -6,36 +6,11 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "common/status_macros.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/signature_check.h"
 
 namespace tpr::indexer {
-namespace {
-
-// Rounding slack for fractions computed as sums of floating-point areas.
-constexpr double kAreaSlack = 1e-9;
-
-// CheckBand returns INVALID_ARGUMENT naming feature `i`, `field` and the
-// band at fault when an entry of `values` is not finite or outside [lo, hi].
-absl::Status CheckBand(int i, const char* field,
-                       const google::protobuf::RepeatedField<double>& values,
-                       double lo, double hi) {
-  for (int b = 0; b < values.size(); ++b) {
-    const double x = values[b];
-    if (!std::isfinite(x) || x < lo || x > hi) {
-      const std::string range =
-          std::isfinite(hi)   ? absl::StrCat(" and in [", lo, ", ", hi, "]")
-          : std::isfinite(lo) ? absl::StrCat(" and >= ", lo)
-                              : "";
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature feature ", i, ": ", field, "[", b, "] is ", x,
-                       "; must be finite", range));
-    }
-  }
-  return absl::OkStatus();
-}
-
-}  // namespace
-
 absl::StatusOr<tpr::index::Signature> ToIndexSignature(
     const tpr::v1::Signature& s) {
   if (s.features_size() == 0) {
@@ -60,12 +35,11 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(
                      tpr::index::kMaxFeatures, " are accepted"));
   }
   const int bands = s.options().bands();
-  if (bands < 1 || bands > kMaxBands) {
+  if (!common::BandsInRange(bands)) {
     return absl::InvalidArgumentError(
         absl::StrCat("signature options.bands is ", bands, "; must be in 1..",
                      kMaxBands, " (the extractor fills it)"));
   }
-  constexpr double kInf = HUGE_VAL;
   tpr::index::Signature out;
   out.features.reserve(static_cast<size_t>(s.features_size()));
   for (int i = 0; i < s.features_size(); ++i) {
@@ -75,30 +49,13 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(
       return absl::InvalidArgumentError(absl::StrCat(
           "signature feature ", i, " has no kind (point or ring)"));
     }
+    // Before copying, so that an oversized band vector costs nothing.
     if (f.curvature_size() != bands || f.area_size() != bands ||
         f.distance_size() != bands) {
       return absl::InvalidArgumentError(absl::StrCat(
           "signature feature ", i, ": curvature, area, distance have ",
           f.curvature_size(), ", ", f.area_size(), ", ", f.distance_size(),
           " entries; each must have options.bands = ", bands));
-    }
-    if (!(f.weight() >= 0.0 && f.weight() < kInf)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature feature ", i, ": weight is ", f.weight(),
-                       "; must be finite and >= 0"));
-    }
-    if (!(f.integral_geodesic() >= 0.0 && f.integral_geodesic() <= 1.0)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("signature feature ", i, ": integral_geodesic is ",
-                       f.integral_geodesic(), "; must be in [0, 1]"));
-    }
-    if (absl::Status st = CheckBand(i, "curvature", f.curvature(),
-                                    -kMaxBandMagnitude, kMaxBandMagnitude);
-        !st.ok() ||
-        !(st = CheckBand(i, "area", f.area(), 0.0, 1.0 + kAreaSlack)).ok() ||
-        !(st = CheckBand(i, "distance", f.distance(), 0.0, kMaxBandMagnitude))
-             .ok()) {
-      return st;
     }
     tpr::index::Feature g;
     g.weight = f.weight();
@@ -108,36 +65,11 @@ absl::StatusOr<tpr::index::Signature> ToIndexSignature(
     g.distance.assign(f.distance().begin(), f.distance().end());
     out.features.push_back(std::move(g));
   }
-  // options.spectrum_eigenvalues 0 means "the default", so only the hard
-  // bound applies then.
-  const int requested = s.options().spectrum_eigenvalues();
-  const int max_spectrum = requested > 0
-                               ? std::min(requested, tpr::index::kMaxSpectrum)
-                               : tpr::index::kMaxSpectrum;
-  if (s.spectrum_size() > max_spectrum) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "signature spectrum has ", s.spectrum_size(), " values; at most ",
-        max_spectrum, " allowed (options.spectrum_eigenvalues is ", requested,
-        ")"));
-  }
-  for (int i = 0; i < s.spectrum_size(); ++i) {
-    const double x = s.spectrum(i);
-    if (!std::isfinite(x) || x <= 0.0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "signature spectrum[", i, "] is ", x, "; must be finite and > 0"));
-    }
-    if (i > 0 && x < s.spectrum(i - 1)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "signature spectrum[", i, "] is ", x, ", below spectrum[", i - 1,
-          "] = ", s.spectrum(i - 1), "; must be ascending"));
-    }
-  }
   out.spectrum.assign(s.spectrum().begin(), s.spectrum().end());
-  // What is left for the library's own check: the weights' sum (Eq. 6).
-  if (absl::Status valid = tpr::index::ValidateSignature(out); !valid.ok()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("malformed signature: ", valid.message()));
-  }
+  // Every value range and the weights' sum: the library-form check the
+  // in-process bridge (eval/lib/tpr_descriptor.cc) uses too.
+  TPR_RETURN_IF_ERROR(tpr::index::CheckSignatureContract(
+      out, s.options().spectrum_eigenvalues()));
   return out;
 }
 

@@ -12,34 +12,29 @@
 #define TPR_INDEXER_SERVICE_CONVERT_H_
 
 #include "absl/status/statusor.h"
+#include "common/signature_limits.h"
 #include "indexer/lib/intent.h"
 #include "indexer/lib/signature.h"
+#include "indexer/lib/signature_check.h"
 #include "tpr/v1/indexer.pb.h"
 #include "tpr/v1/signature.pb.h"
 
 namespace tpr::indexer {
 
-// kMaxBands: the largest band count a signature may carry (the extractor's
-// options.bands range, 1..256).
-inline constexpr int kMaxBands = 256;
+// kMaxBands (the largest band count a signature may carry) and
+// kSignatureVersion (the Signature.signature_version this indexer compares):
+// the contract's, defined once in common/signature_limits.h.
+using common::kMaxBands;
+using common::kSignatureVersion;
 
-// kSignatureVersion: the Signature.signature_version this indexer compares
-// (3: TPR features plus a Laplace-Beltrami spectrum of 50 eigenvalues by
-// default; signature.proto describes the versions). The extractor stamps
-// the same number (extractor/service/convert.h).
-inline constexpr int kSignatureVersion = 3;
-
-// kMaxBandMagnitude bounds |curvature| and distance band values. Far beyond
-// what a mesh gives (curvature bands are area-weighted curvature integrals,
-// order 10-100; distances order 0.1), and small enough that the ground
-// distance's sums of squared differences over 3 x kMaxBands bands stay
-// finite: (2e15)^2 x 768 ~ 3e33. Without it a finite 1e200 made every EMD
-// +inf (found by tests/fuzz fuzz_signature_convert).
-inline constexpr double kMaxBandMagnitude = 1e15;
+// kMaxBandMagnitude bounds |curvature| and distance band values
+// (indexer/lib/signature_check.h defines it).
+using tpr::index::kMaxBandMagnitude;
 
 // ToIndexSignature validates the wire signature `s` against every range the
 // contract (proto/tpr/v1/signature.proto) documents and returns it in the
-// library's form. Errors:
+// library's form: the version, feature count, band count and kinds here,
+// the values through tpr::index::CheckSignatureContract. Errors:
 //  - FAILED_PRECONDITION: signature_version is not kSignatureVersion (an
 //    older one, 0 or 1, says to re-extract with `tpr add --update`);
 //  - RESOURCE_EXHAUSTED: more than tpr::index::kMaxFeatures features;

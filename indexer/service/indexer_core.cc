@@ -1,9 +1,11 @@
 #include "indexer/service/indexer_core.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <optional>
 #include <set>
+#include <thread>
 #include <unordered_map>
 #include <utility>
 
@@ -108,6 +110,13 @@ absl::Status CheckMedia(const tpr::v1::Model& model) {
   return absl::OkStatus();
 }
 
+// OpenThreads returns `requested`, or one per hardware thread when it is 0
+// (at least 1).
+int OpenThreads(int requested) {
+  if (requested > 0) return requested;
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -147,8 +156,8 @@ absl::Status IndexerCore::LoadIndex() {
   size_t after_marker = 0;
   {
     // Parsing and converting the stored signatures is most of the open's
-    // CPU; two threads do it (the machine has two cores), and only the
-    // cheap bookkeeping is serialized.
+    // CPU; options_.open_threads threads do it, and only the cheap
+    // bookkeeping is serialized.
     tpr::common::Mutex items_mu;
     std::vector<std::pair<std::string, ModelInfo>> infos;
     std::set<std::string> outdated;
@@ -175,7 +184,7 @@ absl::Status IndexerCore::LoadIndex() {
           items.emplace_back(std::move(*model.mutable_id()), std::move(*sig));
           return absl::OkStatus();
         },
-        /*threads=*/2));
+        OpenThreads(options_.open_threads)));
     // The scan must find every model the acknowledged writes left.
     TPR_RETURN_IF_ERROR(storage_->CheckScanned(items.size() + outdated.size()));
     if (!items.empty()) {

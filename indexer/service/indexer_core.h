@@ -95,6 +95,10 @@ struct CoreOptions {
   // it, and ApplyReplicated brings the primary's writes in. Promote ends
   // it. Default empty (a primary).
   std::string follow;
+  // Threads that parse and convert the stored signatures at Open (most of
+  // the open's CPU); 0 uses one per hardware thread
+  // (std::thread::hardware_concurrency, at least 1). Default 0.
+  int open_threads = 0;
 };
 
 // WriteOutcome: what a write group did with one request.

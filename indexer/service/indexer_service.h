@@ -19,7 +19,9 @@
 #include <cstdint>
 #include <string>
 
+#include "common/metrics.h"
 #include "indexer/service/indexer_core.h"
+#include "indexer/service/search_metrics.h"
 #include "indexer/service/shard_place.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
@@ -35,7 +37,8 @@ struct ServiceOptions {
 };
 
 // IndexerService: see the file comment. Thread-safe. `core` must outlive it.
-class IndexerService final : public tpr::v1::Indexer::Service {
+class IndexerService final : public tpr::v1::Indexer::Service,
+                             public common::CallMetricsSource {
  public:
   IndexerService(IndexerCore* core, ServiceOptions options);
 
@@ -87,6 +90,11 @@ class IndexerService final : public tpr::v1::Indexer::Service {
   };
   SearchCounters search_counters() const {
     return {searches_.load(), emd_computations_.load()};
+  }
+
+  // AddCallMetrics adds the searches' metrics (search_metrics.h).
+  void AddCallMetrics(common::Metrics& metrics) override {
+    AddSearchMetrics(metrics);
   }
 
  private:
