@@ -216,7 +216,8 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
       << refused.status();
   EXPECT_NE(refused.status().message().find("shard 0"), absl::string_view::npos)
       << refused.status();
-  // Its metrics count the shard's refusal per shard and code.
+  // Its metrics count the shard's refusals per shard and code: the call's
+  // and the start-up check's (each shard's place, indexer/gateway/main.cc).
   const int port = MetricsPort(ReadText(logs_[&keyless]));
   ASSERT_GT(port, 0);
   const ShellResult m = ScrapeMetrics(port);
@@ -224,7 +225,7 @@ TEST_F(GatewayOpsTest, KeysAreCheckedAtTheGatewayAndItsOwnKeyAtTheShards) {
   EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_errors_total",
                    {"shard=\"0\"", "method=\"/tpr.v1.Indexer/Stats\"",
                     "code=\"UNAUTHENTICATED\""}),
-            1)
+            2)
       << m.out;
 }
 
@@ -437,9 +438,10 @@ TEST_F(GatewayOpsTest, MetricsCountEachShardsCalls) {
                      {shard, "method=\"/tpr.v1.Indexer/Upsert\""}),
               upserts[static_cast<size_t>(s)])
         << m.out;
+    // The three calls and the start-up check of the shard's place.
     EXPECT_EQ(Sample(m.out, "tpr_gateway_shard_duration_seconds_count",
                      {shard, "method=\"/tpr.v1.Indexer/Stats\""}),
-              3);
+              4);
     EXPECT_GT(Sample(m.out, "tpr_gateway_shard_duration_seconds_sum",
                      {shard, "method=\"/tpr.v1.Indexer/Stats\""}),
               0);
