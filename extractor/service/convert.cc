@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/signature_limits.h"
+#include "common/status_macros.h"
 
 // The version comes from CMake's project() through tpr_extract's compile
 // definition when available; the extractor/CMakeLists.txt sets it PRIVATE on
@@ -15,6 +16,46 @@
 namespace tpr::extractor {
 
 const char kExtractorVersion[] = TPR_VERSION_STRING;
+
+namespace {
+
+// SetMethods sets the topology method and the handle treatment of
+// `options` from `proto`; UNSPECIFIED keeps the library's default.
+// INVALID_ARGUMENT for a value this build does not know.
+absl::Status SetMethods(const v1::ExtractOptions& proto,
+                        extract::Options* options) {
+  switch (proto.topology()) {
+    case v1::TOPOLOGY_METHOD_UNSPECIFIED:
+      break;  // the library's default
+    case v1::TOPOLOGY_METHOD_PERSISTENCE:
+      options->topology = extract::TopologyMethod::kPersistence;
+      break;
+    case v1::TOPOLOGY_METHOD_PAPER:
+      options->topology = extract::TopologyMethod::kPaper;
+      break;
+    default:  // a newer client's value
+      return absl::InvalidArgumentError(absl::StrCat(
+          "options.topology has unknown value ", proto.topology(),
+          " (1 = TOPOLOGY_METHOD_PERSISTENCE, 2 = TOPOLOGY_METHOD_PAPER)"));
+  }
+  switch (proto.handles()) {
+    case v1::HANDLE_TREATMENT_UNSPECIFIED:
+      break;  // the library's default
+    case v1::HANDLE_TREATMENT_CUT:
+      options->cut_handles = true;
+      break;
+    case v1::HANDLE_TREATMENT_KEEP:
+      options->cut_handles = false;
+      break;
+    default:  // a newer client's value
+      return absl::InvalidArgumentError(absl::StrCat(
+          "options.handles has unknown value ", proto.handles(),
+          " (1 = HANDLE_TREATMENT_CUT, 2 = HANDLE_TREATMENT_KEEP)"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 absl::StatusOr<extract::Options> OptionsFromProto(
     const v1::ExtractOptions& proto, int max_threads) {
@@ -86,34 +127,7 @@ absl::StatusOr<extract::Options> OptionsFromProto(
   if (proto.ring_min_length() != 0.0) {
     options.ring_min_length = proto.ring_min_length();
   }
-  switch (proto.topology()) {
-    case v1::TOPOLOGY_METHOD_UNSPECIFIED:
-      break;  // the library's default
-    case v1::TOPOLOGY_METHOD_PERSISTENCE:
-      options.topology = extract::TopologyMethod::kPersistence;
-      break;
-    case v1::TOPOLOGY_METHOD_PAPER:
-      options.topology = extract::TopologyMethod::kPaper;
-      break;
-    default:  // a newer client's value
-      return absl::InvalidArgumentError(absl::StrCat(
-          "options.topology has unknown value ", proto.topology(),
-          " (1 = TOPOLOGY_METHOD_PERSISTENCE, 2 = TOPOLOGY_METHOD_PAPER)"));
-  }
-  switch (proto.handles()) {
-    case v1::HANDLE_TREATMENT_UNSPECIFIED:
-      break;  // the library's default
-    case v1::HANDLE_TREATMENT_CUT:
-      options.cut_handles = true;
-      break;
-    case v1::HANDLE_TREATMENT_KEEP:
-      options.cut_handles = false;
-      break;
-    default:  // a newer client's value
-      return absl::InvalidArgumentError(absl::StrCat(
-          "options.handles has unknown value ", proto.handles(),
-          " (1 = HANDLE_TREATMENT_CUT, 2 = HANDLE_TREATMENT_KEEP)"));
-  }
+  TPR_RETURN_IF_ERROR(SetMethods(proto, &options));
   return options;
 }
 
