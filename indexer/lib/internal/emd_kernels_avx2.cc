@@ -46,7 +46,8 @@ inline int CollectBlocksAvx2(const double* cost, int cs, int n, const double* u,
       const __m256d r =
           _mm256_sub_pd(_mm256_add_pd(_mm256_loadu_pd(row + 4 * b), ui), vj[b]);
       const __m256d lt = _mm256_cmp_pd(r, mn[b], _CMP_LT_OQ);
-      mn[b] = _mm256_blendv_pd(mn[b], r, lt);
+      // min(r, mn) is r < mn ? r : mn, the blend on lt, in one uop.
+      mn[b] = _mm256_min_pd(r, mn[b]);
       arg[b] = _mm256_blendv_pd(arg[b], idx, lt);
     }
     idx = _mm256_add_pd(idx, one);

@@ -45,65 +45,75 @@ void WidenAvx2(const KernelCoords& b, double* buffer) {
   }
 }
 
-// One block of 8 columns (two registers) per row of a: 6 independent
-// accumulator chains.
-double MatrixAvx2(const KernelCoords& a, const KernelCoords& b, double* wide,
-                  double* out, int out_stride) {
-  WidenAvx2(b, wide);
+// Avx2Blocks computes the columns of blocks k0 .. k0 + B - 1 (8 columns,
+// two registers each) of the matrix from b's widened coordinates (`rows`
+// rows per block), as Avx512Blocks does: each broadcast coordinate of a
+// serves 2 B registers, whose 6 B accumulators are independent chains,
+// every lane in the one order. Returns max(mx, what it wrote).
+template <int B>
+inline __m256d Avx2Blocks(const KernelCoords& a, const double* wide,
+                          size_t rows, int k0, double* out, int out_stride,
+                          __m256d mx) {
+  constexpr int V = 2 * B;
   const int bands = a.bands;
   const size_t as = static_cast<size_t>(a.size);
   const float* ac = a.coords;
   const __m256d sign = _mm256_set1_pd(-0.0);
-  __m256d mx = _mm256_setzero_pd();
-  const size_t rows = static_cast<size_t>(1 + 3 * b.bands);
-  const int stride = (b.size + 7) / 8 * 8;
-  for (int j0 = 0; j0 < stride; j0 += 8) {
-    const double* blk = wide + static_cast<size_t>(j0) * rows;
-    for (int i = 0; i < a.size; ++i) {
-      double* row = out + static_cast<size_t>(i) * out_stride;
-      __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
-      __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd();
-      __m256d h0 = _mm256_setzero_pd(), h1 = _mm256_setzero_pd();
-      for (int d = 0; d < bands; ++d) {
-        const size_t rk = static_cast<size_t>(1 + d);
-        const size_t ra = rk + static_cast<size_t>(bands);
-        const size_t rh = ra + static_cast<size_t>(bands);
-        const __m256d xk = _mm256_set1_pd(ac[rk * as + i]);
-        const __m256d xa = _mm256_set1_pd(ac[ra * as + i]);
-        const __m256d xh = _mm256_set1_pd(ac[rh * as + i]);
-        const double* yk = blk + rk * 8;
-        const double* ya = blk + ra * 8;
-        const double* yh = blk + rh * 8;
+  const double* blk[V];
+  for (int v = 0; v < V; ++v) {
+    blk[v] = wide + static_cast<size_t>(k0 + v / 2) * rows * 8 + 4 * (v % 2);
+  }
+  for (int i = 0; i < a.size; ++i) {
+    __m256d k[V], ar[V], h[V];
+    for (int v = 0; v < V; ++v) {
+      k[v] = _mm256_setzero_pd();
+      ar[v] = _mm256_setzero_pd();
+      h[v] = _mm256_setzero_pd();
+    }
+    for (int d = 0; d < bands; ++d) {
+      const size_t rk = static_cast<size_t>(1 + d);
+      const size_t ra = rk + static_cast<size_t>(bands);
+      const size_t rh = ra + static_cast<size_t>(bands);
+      const __m256d xk = _mm256_set1_pd(ac[rk * as + i]);
+      const __m256d xa = _mm256_set1_pd(ac[ra * as + i]);
+      const __m256d xh = _mm256_set1_pd(ac[rh * as + i]);
+      for (int v = 0; v < V; ++v) {
         __m256d t;
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk));
-        k0 = _mm256_fmadd_pd(t, t, k0);
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk + 4));
-        k1 = _mm256_fmadd_pd(t, t, k1);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya));
-        a0 = _mm256_fmadd_pd(t, t, a0);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya + 4));
-        a1 = _mm256_fmadd_pd(t, t, a1);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh));
-        h0 = _mm256_fmadd_pd(t, t, h0);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh + 4));
-        h1 = _mm256_fmadd_pd(t, t, h1);
+        t = _mm256_sub_pd(xk, _mm256_loadu_pd(blk[v] + rk * 8));
+        k[v] = _mm256_fmadd_pd(t, t, k[v]);
+        t = _mm256_sub_pd(xa, _mm256_loadu_pd(blk[v] + ra * 8));
+        ar[v] = _mm256_fmadd_pd(t, t, ar[v]);
+        t = _mm256_sub_pd(xh, _mm256_loadu_pd(blk[v] + rh * 8));
+        h[v] = _mm256_fmadd_pd(t, t, h[v]);
       }
-      const __m256d xg = _mm256_set1_pd(ac[i]);
-      __m256d g0 =
-          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk)));
-      __m256d g1 =
-          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk + 4)));
-      g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
-                                       _mm256_sqrt_pd(a0)),
-                         _mm256_sqrt_pd(h0));
-      g1 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g1, _mm256_sqrt_pd(k1)),
-                                       _mm256_sqrt_pd(a1)),
-                         _mm256_sqrt_pd(h1));
-      _mm256_storeu_pd(row + j0, g0);
-      _mm256_storeu_pd(row + j0 + 4, g1);
-      mx = _mm256_max_pd(mx, _mm256_max_pd(g0, g1));
+    }
+    const __m256d xg = _mm256_set1_pd(ac[i]);
+    double* row = out + static_cast<size_t>(i) * out_stride + 8 * k0;
+    for (int v = 0; v < V; ++v) {
+      __m256d g =
+          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk[v])));
+      g = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g, _mm256_sqrt_pd(k[v])),
+                                      _mm256_sqrt_pd(ar[v])),
+                        _mm256_sqrt_pd(h[v]));
+      _mm256_storeu_pd(row + 4 * v, g);
+      mx = _mm256_max_pd(mx, g);
     }
   }
+  return mx;
+}
+
+// Two blocks (16 columns, 12 accumulators) at a time, then the odd one.
+double MatrixAvx2(const KernelCoords& a, const KernelCoords& b, double* wide,
+                  double* out, int out_stride) {
+  WidenAvx2(b, wide);
+  const size_t rows = static_cast<size_t>(1 + 3 * b.bands);
+  const int blocks = (b.size + 7) / 8;
+  __m256d mx = _mm256_setzero_pd();
+  int k = 0;
+  for (; k + 2 <= blocks; k += 2) {
+    mx = Avx2Blocks<2>(a, wide, rows, k, out, out_stride, mx);
+  }
+  if (k < blocks) mx = Avx2Blocks<1>(a, wide, rows, k, out, out_stride, mx);
   mx = _mm256_max_pd(mx, _mm256_permute2f128_pd(mx, mx, 0x01));
   mx = _mm256_max_pd(mx, _mm256_permute_pd(mx, 0x5));
   return _mm256_cvtsd_f64(mx);
