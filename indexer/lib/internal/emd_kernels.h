@@ -50,7 +50,8 @@ using ColumnMinFn = void (*)(const double* cost, int cs, int n, double* out);
 
 // RankOrderFn writes order[r_i] = i for i < n, where r_i counts the k < n
 // with w[k] < w[i], or w[k] == w[i] and k < i: the indices in increasing
-// order of w, ties by index (a stable sort).
+// order of w, ties by index (a stable sort). Precondition: 1 <= n <= 256
+// (the EMD's n <= kMaxFeatures).
 using RankOrderFn = void (*)(const double* w, int n, int* order);
 
 // EmdKernels: one variant of every EMD kernel.

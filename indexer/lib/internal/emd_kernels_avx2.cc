@@ -17,11 +17,6 @@ namespace {
 constexpr double kInf = __builtin_inf();
 
 inline int Min(int a, int b) { return a < b ? a : b; }
-inline int Max(int a, int b) { return a < b ? b : a; }
-
-inline uint64_t ClosedWord(uint64_t closed_lo, const uint64_t* closed, int j) {
-  return j < 64 ? closed_lo : closed[j >> 6];
-}
 
 // Blocks of 8 columns (two registers each) are priced B at a time, so
 // that 2 B independent compare-and-blend chains overlap (one register is
@@ -79,15 +74,37 @@ int CollectAvx2(const double* cost, int cs, int n, const double* u,
   return count;
 }
 
-// Open lanes j .. j + 3 (j a multiple of 4) as a mask vector (all ones
-// where open), from the closed set's bits.
-inline __m256d OpenMask(uint64_t closed_lo, const uint64_t* closed, int j) {
-  const __m256i bits = _mm256_set1_epi64x(
-      static_cast<long long>(ClosedWord(closed_lo, closed, j) >> (j & 63)));
-  const __m256i lane = _mm256_setr_epi64x(1, 2, 4, 8);
-  return _mm256_castsi256_pd(
-      _mm256_cmpeq_epi64(_mm256_and_si256(bits, lane), _mm256_setzero_si256()));
-}
+// ClosedBits walks the closed set 4 columns at a time from column 0: the
+// current 64-column word broadcast once, and a running vector of the 4
+// lanes' bits in it, so that each step costs a shift, an and and a
+// compare.
+class ClosedBits {
+ public:
+  ClosedBits(uint64_t closed_lo, const uint64_t* closed)
+      : closed_(closed),
+        word_(_mm256_set1_epi64x(static_cast<long long>(closed_lo))),
+        bit_(_mm256_setr_epi64x(1, 2, 4, 8)) {}
+  // Open lanes of columns j .. j + 3, j = 4 x (the number of calls before),
+  // as a mask vector (all ones where open).
+  // The next word is read only when its first column is asked for.
+  __m256d Next() {
+    if (j_ > 0 && (j_ & 63) == 0) {
+      word_ = _mm256_set1_epi64x(static_cast<long long>(closed_[j_ >> 6]));
+      bit_ = _mm256_setr_epi64x(1, 2, 4, 8);
+    }
+    const __m256d open = _mm256_castsi256_pd(_mm256_cmpeq_epi64(
+        _mm256_and_si256(word_, bit_), _mm256_setzero_si256()));
+    j_ += 4;
+    bit_ = _mm256_slli_epi64(bit_, 4);
+    return open;
+  }
+
+ private:
+  const uint64_t* closed_;
+  __m256i word_;
+  __m256i bit_;
+  int j_ = 0;
+};
 
 // row + offset where open, +inf where closed (as OpenValues of the AVX-512
 // kernel: the open lanes' sums are the same doubles).
@@ -98,30 +115,28 @@ inline __m256d OpenValues(const double* row, const double* offset,
       _mm256_add_pd(_mm256_loadu_pd(row), _mm256_loadu_pd(offset)), open);
 }
 
-inline __m256d Values(const double* row, const double* offset,
-                      uint64_t closed_lo, const uint64_t* closed, int j) {
-  return OpenValues(row + j, offset + j, OpenMask(closed_lo, closed, j));
-}
-
-// The AVX-512 kernel's method: the minimum first (two chains of 8 columns
-// each, then two in-register swaps), then the first open column equal to
-// it, from movemask bits.
+// The AVX-512 kernel's method: the minimum first (two chains of 4
+// columns, then two in-register swaps), then the first open column equal
+// to it, from movemask bits.
 int RowArgMinAvx2(const double* row, const double* offset, uint64_t closed_lo,
                   const uint64_t* closed, int cs) {
-  __m256d m0 = Values(row, offset, closed_lo, closed, 0);
-  __m256d m1 = Values(row, offset, closed_lo, closed, 4);
+  ClosedBits walk(closed_lo, closed);
+  __m256d m0 = OpenValues(row, offset, walk.Next());
+  __m256d m1 = OpenValues(row + 4, offset + 4, walk.Next());
   for (int j0 = 8; j0 < cs; j0 += 8) {
-    m0 = _mm256_min_pd(m0, Values(row, offset, closed_lo, closed, j0));
-    m1 = _mm256_min_pd(m1, Values(row, offset, closed_lo, closed, j0 + 4));
+    m0 = _mm256_min_pd(m0, OpenValues(row + j0, offset + j0, walk.Next()));
+    m1 = _mm256_min_pd(m1,
+                       OpenValues(row + j0 + 4, offset + j0 + 4, walk.Next()));
   }
   __m256d mn = _mm256_min_pd(m0, m1);
   mn = _mm256_min_pd(mn, _mm256_permute2f128_pd(mn, mn, 0x01));
   mn = _mm256_min_pd(mn, _mm256_permute_pd(mn, 0x5));
+  ClosedBits again(closed_lo, closed);
   for (int g = 0; g < cs; g += 64) {
     const int end = Min(cs, g + 64);
     uint64_t bits = 0;
     for (int j = g; j < end; j += 4) {
-      const __m256d open = OpenMask(closed_lo, closed, j);
+      const __m256d open = again.Next();
       const __m256d eq = _mm256_and_pd(
           open,
           _mm256_cmp_pd(OpenValues(row + j, offset + j, open), mn, _CMP_EQ_OQ));
@@ -147,28 +162,34 @@ void ColumnMinAvx2(const double* cost, int cs, int n, double* out) {
   }
 }
 
-// Four comparisons per instruction pair, gathered by movemask and counted
-// by popcount; the last, partial block is a masked load (lanes past n
-// neither read nor counted).
+// Four comparisons per instruction pair, counted in the lanes (a compare
+// is -1 where true) and summed once per i. w is copied once into a buffer
+// padded with +inf, which is neither below nor equal to any w[i], so no
+// lane needs masking; "k < i" is a compare of lane indices.
 void RankOrderAvx2(const double* w, int n, int* order) {
+  constexpr int kMaxN = 256;  // kMaxFeatures (200) rounded up
+  alignas(32) double padded[kMaxN + 4];
+  for (int k = 0; k < n; ++k) padded[k] = w[k];
+  for (int k = n; k < n + 4; ++k) padded[k] = kInf;
+  const __m256i step = _mm256_set1_epi64x(4);
   for (int i = 0; i < n; ++i) {
     const __m256d wi = _mm256_set1_pd(w[i]);
-    int rank = 0;
+    const __m256i iv = _mm256_set1_epi64x(i);
+    __m256i kv = _mm256_setr_epi64x(0, 1, 2, 3);
+    __m256i count = _mm256_setzero_si256();
     for (int k0 = 0; k0 < n; k0 += 4) {
-      const int valid = Min(n - k0, 4);
-      const unsigned in = (1u << valid) - 1u;
-      const int below = Min(Max(i - k0, 0), 4);  // lanes k < i
-      const unsigned lower = (1u << below) - 1u;
-      const __m256i load = _mm256_cmpgt_epi64(_mm256_set1_epi64x(valid),
-                                              _mm256_setr_epi64x(0, 1, 2, 3));
-      const __m256d wk = _mm256_maskload_pd(w + k0, load);
-      const unsigned lt = static_cast<unsigned>(
-          _mm256_movemask_pd(_mm256_cmp_pd(wk, wi, _CMP_LT_OQ)));
-      const unsigned eq = static_cast<unsigned>(
-          _mm256_movemask_pd(_mm256_cmp_pd(wk, wi, _CMP_EQ_OQ)));
-      rank += __builtin_popcount((lt & in) | (eq & lower));
+      const __m256d wk = _mm256_load_pd(padded + k0);
+      const __m256d lt = _mm256_cmp_pd(wk, wi, _CMP_LT_OQ);
+      const __m256d eq =
+          _mm256_and_pd(_mm256_cmp_pd(wk, wi, _CMP_EQ_OQ),
+                        _mm256_castsi256_pd(_mm256_cmpgt_epi64(iv, kv)));
+      count =
+          _mm256_sub_epi64(count, _mm256_castpd_si256(_mm256_or_pd(lt, eq)));
+      kv = _mm256_add_epi64(kv, step);
     }
-    order[rank] = i;
+    const __m128i c2 = _mm_add_epi64(_mm256_castsi256_si128(count),
+                                     _mm256_extracti128_si256(count, 1));
+    order[_mm_cvtsi128_si32(c2) + _mm_extract_epi32(c2, 2)] = i;
   }
 }
 
