@@ -57,9 +57,8 @@
 #include <limits>
 #include <utility>
 
-#if defined(__GNUC__) && defined(__x86_64__)
-#include <immintrin.h>
-#endif
+#include "indexer/lib/internal/emd_kernels.h"
+#include "indexer/lib/internal/ground_distance_kernels.h"
 
 namespace tpr::index {
 namespace {
@@ -80,306 +79,12 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // data-dependent branch (the per-row version, with one reduction and two
 // unpredictable branches per row, cost about 2.5x more). `v` is padded to
 // `cs` entries with -inf so padded columns never qualify; cand_i and
-// cand_j hold cs entries.
-int CollectScalar(const double* cost, int cs, int n, const double* u,
-                  const double* v, double tol, int* cand_i, int* cand_j) {
-  int count = 0;
-  for (int j0 = 0; j0 < cs; j0 += 8) {
-    double mn[8];
-    int arg[8];
-    for (int l = 0; l < 8; ++l) {
-      mn[l] = -tol;
-      arg[l] = -1;
-    }
-    for (int i = 0; i < n; ++i) {
-      const double* row = cost + static_cast<size_t>(i) * cs + j0;
-      const double ui = u[i];
-      for (int l = 0; l < 8; ++l) {
-        const double r = (row[l] + ui) - v[j0 + l];
-        const bool lt = r < mn[l];
-        mn[l] = lt ? r : mn[l];
-        arg[l] = lt ? i : arg[l];
-      }
-    }
-    for (int l = 0; l < 8; ++l) {
-      cand_i[count] = arg[l];
-      cand_j[count] = j0 + l;
-      count += arg[l] >= 0;
-    }
-  }
-  return count;
-}
-
-#if defined(__GNUC__) && defined(__x86_64__)
-#define TPR_HAVE_X86_PRICING 1
-// Why intrinsics: pricing is the hot loop of the simplex and the build's
-// baseline is SSE2. GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized
-// on its own _mm512_undefined_pd (a known false positive).
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-// Blocks of 8 columns are priced B at a time, so that B independent
-// compare-and-blend chains overlap (one block alone is latency-bound:
-// about 4 cycles per row).
-template <int B>
-__attribute__((target("avx512f"))) inline int CollectBlocksAvx512(
-    const double* cost, int cs, int n, const double* u, const double* v,
-    double tol, int j0, int* cand_i, int* cand_j, int count) {
-  const __m512d one = _mm512_set1_pd(1.0);
-  __m512d vj[B], mn[B], arg[B];
-  for (int b = 0; b < B; ++b) {
-    vj[b] = _mm512_loadu_pd(v + j0 + 8 * b);
-    mn[b] = _mm512_set1_pd(-tol);
-    arg[b] = _mm512_set1_pd(-1.0);
-  }
-  __m512d idx = _mm512_setzero_pd();
-  for (int i = 0; i < n; ++i) {
-    const double* row = cost + static_cast<size_t>(i) * cs + j0;
-    const __m512d ui = _mm512_set1_pd(u[i]);
-    for (int b = 0; b < B; ++b) {
-      const __m512d r =
-          _mm512_sub_pd(_mm512_add_pd(_mm512_loadu_pd(row + 8 * b), ui), vj[b]);
-      const __mmask8 lt = _mm512_cmp_pd_mask(r, mn[b], _CMP_LT_OQ);
-      mn[b] = _mm512_mask_blend_pd(lt, mn[b], r);
-      arg[b] = _mm512_mask_blend_pd(lt, arg[b], idx);
-    }
-    idx = _mm512_add_pd(idx, one);
-  }
-  for (int b = 0; b < B; ++b) {
-    alignas(64) double rows[8];
-    _mm512_store_pd(rows, arg[b]);
-    for (int l = 0; l < 8; ++l) {
-      cand_i[count] = static_cast<int>(rows[l]);
-      cand_j[count] = j0 + 8 * b + l;
-      count += rows[l] >= 0.0;
-    }
-  }
-  return count;
-}
-
-__attribute__((target("avx512f"))) int CollectAvx512(const double* cost, int cs,
-                                                     int n, const double* u,
-                                                     const double* v,
-                                                     double tol, int* cand_i,
-                                                     int* cand_j) {
-  int count = 0;
-  int j0 = 0;
-  for (; j0 + 32 <= cs; j0 += 32) {
-    count = CollectBlocksAvx512<4>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
-                                   count);
-  }
-  if (j0 + 16 <= cs) {
-    count = CollectBlocksAvx512<2>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
-                                   count);
-    j0 += 16;
-  }
-  if (j0 < cs) {
-    count = CollectBlocksAvx512<1>(cost, cs, n, u, v, tol, j0, cand_i, cand_j,
-                                   count);
-  }
-  return count;
-}
-#pragma GCC diagnostic pop
-#endif
-
-using CollectFn = int (*)(const double*, int, int, const double*, const double*,
-                          double, int*, int*);
-
-// RowArgMin returns the first j < cs minimizing row[j] + offset[j] among
-// the columns whose bit in the closed set is clear: bit j of closed_lo for
-// j < 64, bit j % 64 of closed[j / 64] above (closed[0] is not read;
-// padding columns are closed; cs a positive multiple of 8; at least one
-// column open). Why a bit set, and the first 64 columns' part passed in a
-// register: the start closes a column after about half of its
-// allocations, by a store whose address comes from the search just done,
-// and the next search reads the closed set at once. With the set in
-// memory (as +inf offsets, or as bits) a whole EMD at n = m = 30 took
-// about 5% longer than with the word in a register (side by side, same
-// values; likely the next search's loads issued ahead of that store and
-// replayed, which this machine has no counters to confirm).
-inline uint64_t ClosedWord(uint64_t closed_lo, const uint64_t* closed, int j) {
-  return j < 64 ? closed_lo : closed[j >> 6];
-}
-
-int RowArgMinScalar(const double* row, const double* offset, uint64_t closed_lo,
-                    const uint64_t* closed, int cs) {
-  int best = -1;
-  double bv = kInf;
-  for (int j = 0; j < cs; ++j) {
-    const bool shut = (ClosedWord(closed_lo, closed, j) >> (j & 63)) & 1u;
-    const double c = shut ? kInf : row[j] + offset[j];
-    const bool take = best < 0 ? !shut : c < bv;
-    best = take ? j : best;
-    bv = take ? c : bv;
-  }
-  return best;
-}
-
-#ifdef TPR_HAVE_X86_PRICING
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-// Lanes j..j+7 open (j a multiple of 8), and their row + offset values,
-// +inf where closed.
-inline __mmask8 OpenLanes(uint64_t closed_lo, const uint64_t* closed, int j) {
-  return static_cast<__mmask8>(~(ClosedWord(closed_lo, closed, j) >> (j & 63)));
-}
-__attribute__((target("avx512f"))) inline __m512d OpenValues(
-    const double* row, const double* offset, __mmask8 open) {
-  return _mm512_mask_add_pd(_mm512_set1_pd(kInf), open, _mm512_loadu_pd(row),
-                            _mm512_loadu_pd(offset));
-}
-
-// The minimum first (two independent min chains, then three in-register
-// swaps that leave it in every lane), then the first open column equal to
-// it (one compare per block, the masks gathered into a bit set): about
-// half the latency of a lane-wise argmin followed by two horizontal
-// reductions, and the same column (minima round nothing; ties go to the
-// first).
-__attribute__((target("avx512f"))) int RowArgMinAvx512(const double* row,
-                                                       const double* offset,
-                                                       uint64_t closed_lo,
-                                                       const uint64_t* closed,
-                                                       int cs) {
-  const __m512d inf = _mm512_set1_pd(kInf);
-  __m512d m0 = OpenValues(row, offset, OpenLanes(closed_lo, closed, 0));
-  __m512d m1 = inf;
-  int j0 = 8;
-  for (; j0 + 16 <= cs; j0 += 16) {
-    m0 = _mm512_min_pd(m0, OpenValues(row + j0, offset + j0,
-                                      OpenLanes(closed_lo, closed, j0)));
-    m1 = _mm512_min_pd(m1, OpenValues(row + j0 + 8, offset + j0 + 8,
-                                      OpenLanes(closed_lo, closed, j0 + 8)));
-  }
-  if (j0 < cs) {
-    m1 = _mm512_min_pd(m1, OpenValues(row + j0, offset + j0,
-                                      OpenLanes(closed_lo, closed, j0)));
-  }
-  __m512d mn = _mm512_min_pd(m0, m1);
-  mn = _mm512_min_pd(mn, _mm512_shuffle_f64x2(mn, mn, 0x4E));
-  mn = _mm512_min_pd(mn, _mm512_permutex_pd(mn, 0x4E));
-  mn = _mm512_min_pd(mn, _mm512_permute_pd(mn, 0x55));
-  for (int g = 0; g < cs; g += 64) {
-    const int end = std::min(cs, g + 64);
-    uint64_t bits = 0;
-    for (int j = g; j < end; j += 8) {
-      const __mmask8 open = OpenLanes(closed_lo, closed, j);
-      bits |= static_cast<uint64_t>(_mm512_mask_cmp_pd_mask(
-                  open, OpenValues(row + j, offset + j, open), mn, _CMP_EQ_OQ))
-              << (j - g);
-    }
-    if (bits != 0) return g + __builtin_ctzll(bits);
-  }
-  return 0;  // not reached: some column is open, so equals the minimum
-}
-#pragma GCC diagnostic pop
-#endif
-
-using RowArgMinFn = int (*)(const double*, const double*, uint64_t,
-                            const uint64_t*, int);
-
-// ColumnMin writes out[j] = min over i < n of cost[i cs + j], for j < cs
-// (cs a positive multiple of 8; n >= 1). Exact either way (a minimum
-// rounds nothing), so both versions give the same values.
-void ColumnMinScalar(const double* cost, int cs, int n, double* out) {
-  for (int j = 0; j < cs; ++j) out[j] = cost[j];
-  for (int i = 1; i < n; ++i) {
-    const double* row = cost + static_cast<size_t>(i) * cs;
-    for (int j = 0; j < cs; ++j) out[j] = std::min(out[j], row[j]);
-  }
-}
-
-#ifdef TPR_HAVE_X86_PRICING
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-// One zmm chain per block of 8 columns, rows in order (the SSE2 loop the
-// compiler makes of ColumnMinScalar was about 5% of InitialBasis).
-__attribute__((target("avx512f"))) void ColumnMinAvx512(const double* cost,
-                                                        int cs, int n,
-                                                        double* out) {
-  for (int j0 = 0; j0 < cs; j0 += 8) {
-    __m512d mn = _mm512_loadu_pd(cost + j0);
-    for (int i = 1; i < n; ++i) {
-      mn = _mm512_min_pd(
-          mn, _mm512_loadu_pd(cost + static_cast<size_t>(i) * cs + j0));
-    }
-    _mm512_storeu_pd(out + j0, mn);
-  }
-}
-#pragma GCC diagnostic pop
-#endif
-
-using ColumnMinFn = void (*)(const double*, int, int, double*);
-
-// RankOrder writes order[r_i] = i for i < n, where r_i counts the k < n
-// with w[k] < w[i], or w[k] == w[i] and k < i: the indices in increasing
-// order of w, ties by index (a stable sort). O(n^2) comparisons, but
-// branch-free and vectorizable, which beats a comparison sort's
-// unpredictable branches at these sizes.
-void RankOrderScalar(const double* w, int n, int* order) {
-  for (int i = 0; i < n; ++i) {
-    const double wi = w[i];
-    int rank = 0;
-    for (int k = 0; k < n; ++k) {
-      const double wk = w[k];
-      rank += (wk < wi) | ((wk == wi) & (k < i));
-    }
-    order[rank] = i;
-  }
-}
-
-#ifdef TPR_HAVE_X86_PRICING
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-// Eight comparisons per instruction pair, counted by popcount (the
-// compiler's SSE2 code for RankOrderScalar took about 2% of a solve at
-// n = 30).
-__attribute__((target("avx512f"))) void RankOrderAvx512(const double* w, int n,
-                                                        int* order) {
-  for (int i = 0; i < n; ++i) {
-    const __m512d wi = _mm512_set1_pd(w[i]);
-    int rank = 0;
-    for (int k0 = 0; k0 < n; k0 += 8) {
-      const int valid = std::min(n - k0, 8);
-      const __mmask8 in = static_cast<__mmask8>((1u << valid) - 1u);
-      const int below = std::min(std::max(i - k0, 0), 8);  // lanes k < i
-      const __mmask8 lower = static_cast<__mmask8>((1u << below) - 1u);
-      const __m512d wk = _mm512_maskz_loadu_pd(in, w + k0);
-      const __mmask8 lt = _mm512_mask_cmp_pd_mask(in, wk, wi, _CMP_LT_OQ);
-      const __mmask8 eq = _mm512_mask_cmp_pd_mask(lower, wk, wi, _CMP_EQ_OQ);
-      rank += __builtin_popcount(static_cast<unsigned>(lt | eq));
-    }
-    order[rank] = i;
-  }
-}
-#pragma GCC diagnostic pop
-#endif
-
-using RankOrderFn = void (*)(const double*, int, int*);
-
-// The pricing kernels this CPU runs, chosen once by one CPU check: the
-// avx512f pair where the CPU has it, else the scalar pair (same results).
-struct PricingKernels {
-  CollectFn collect;
-  RowArgMinFn row_arg_min;
-  ColumnMinFn column_min;
-  RankOrderFn rank_order;
-};
-
-PricingKernels PickPricingKernels() {
-#ifdef TPR_HAVE_X86_PRICING
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) {
-    return {CollectAvx512, RowArgMinAvx512, ColumnMinAvx512, RankOrderAvx512};
-  }
-#endif
-  return {CollectScalar, RowArgMinScalar, ColumnMinScalar, RankOrderScalar};
-}
-
-const PricingKernels& Kernels() {
-  static const PricingKernels kernels = PickPricingKernels();
+// cand_j hold cs entries. The kernels (this pass, and the start's column
+// minima, row arg-min and rank order) live in internal/emd_kernels.h, in
+// scalar, AVX2 and AVX-512F variants with the same values bit for bit.
+const internal::EmdKernels& Kernels() {
+  static const internal::EmdKernels& kernels =
+      *internal::EmdKernelsFor(internal::ChosenSimdLevel());
   return kernels;
 }
 
@@ -546,7 +251,7 @@ void EmdSolver::Impl::InitialBasis() {
   }
   // Columns 0..63 are tracked in a register from here on (RowArgMin).
   uint64_t closed_lo = closed_cols[0];
-  const RowArgMinFn row_arg_min = Kernels().row_arg_min;
+  const internal::RowArgMinFn row_arg_min = Kernels().row_arg_min;
   // Rows go in increasing order of mass: small rows take their best
   // columns whole and leave the large rows to spread over what is left,
   // which measured 8% fewer pivots than index order at n = m = 30 (ties
@@ -796,7 +501,7 @@ double EmdSolver::Impl::Solve() {
   // strongly feasible tree excludes cycling in exact arithmetic).
   const int64_t max_pivots = 1000 + 50LL * (n + m) * (n + m);
   for (int j = m; j < cs; ++j) vpad[j] = -kInf;
-  const CollectFn collect = Kernels().collect;
+  const internal::CollectFn collect = Kernels().collect;
   int candidates = 0;
   bool fresh = false;  // no pivot since the last major pass
   while (stats.pivots < max_pivots) {

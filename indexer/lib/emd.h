@@ -150,8 +150,9 @@ double ConstrainedTransportBound(const PreparedSignature& a,
                                  const PreparedSignature& b);
 
 // ConstrainedTransportBound32 returns ConstrainedTransportBound computed on
-// a float32 ground-distance matrix (internal::GroundDistanceMatrix32, 16
-// AVX-512 lanes, no widening) and divided by 1 + theta, theta =
+// a float32 ground-distance matrix (internal::GroundDistanceMatrix32 in
+// internal/ground_distance_kernels.h: 16 AVX-512F or 8 AVX2 lanes, the
+// same values, no widening) and divided by 1 + theta, theta =
 // internal::Float32MatrixError(bands) (about 2e-6 at 20 bands), the
 // rounding margin that keeps it a lower bound (proof in emd.cc):
 //   (1 - 2 theta) ConstrainedTransportBound <= it
@@ -159,7 +160,7 @@ double ConstrainedTransportBound(const PreparedSignature& a,
 //                                           <= Emd(a, b).
 // A search's level-2 bound: most items it bounds never reach the EMD,
 // which then computes its own double matrix. Where the float32 kernel is
-// unavailable (no AVX-512F, or band counts that differ) it is
+// unavailable (the scalar kernel level, or band counts that differ) it is
 // ConstrainedTransportBound itself. Uses the thread_local solver of Emd().
 // Cost: about half the arithmetic of the double matrix plus O(n m);
 // thread-safe.

@@ -10,10 +10,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-
-#if defined(__GNUC__) && defined(__x86_64__)
-#include <immintrin.h>
-#endif
+#include "indexer/lib/internal/ground_distance_kernels.h"
 
 namespace tpr::index {
 namespace {
@@ -310,9 +307,10 @@ double GroundDistance(const PreparedSignature& a, int i,
 namespace {
 
 // Kernels return the largest entry they wrote (padding included), which the
-// EMD uses to scale its optimality tolerance at no extra pass.
-using KernelFn = double (*)(const PreparedSignature&, const PreparedSignature&,
-                            double*, int);
+// EMD uses to scale its optimality tolerance at no extra pass. The wide
+// ones are hand-written (internal/ground_distance_kernels.h): the build
+// targets baseline x86-64 (SSE2), GCC does not vectorize sqrt without
+// -fno-math-errno, and the matrix is about a third of an EMD.
 
 // Portable kernel, also used when the two signatures have different band
 // counts (never the case within one index).
@@ -332,304 +330,62 @@ double KernelScalar(const PreparedSignature& a, const PreparedSignature& b,
   return mx;
 }
 
-#if defined(__GNUC__) && defined(__x86_64__)
-#define TPR_HAVE_X86_KERNELS 1
-
-// Why intrinsics: the build targets baseline x86-64 (SSE2), and GCC does
-// not vectorize sqrt without -fno-math-errno; the matrix is about a third
-// of an EMD, so it gets hand-written AVX2 and AVX-512 versions chosen once
-// at run time. Lanes run over 8 consecutive features of b (the
-// dimension-major layout of PreparedSignature); a's coordinates are
-// broadcast. Coordinates are stored in float32 without padding: b's are
-// widened to double once per matrix (Widen, features at or past b.size()
-// as 0), so the arithmetic is the scalar kernel's. Each lane accumulates
-// its bands in the same order, so the matrix is symmetric under swapping a
-// and b exactly: (x - y)^2 and (y - x)^2 are the same double and
-// fma(d, d, s) depends on d only through d * d.
-
-// WideBuffer returns the calling thread's buffer for Widen and
-// WidenAvx512, grown to b's widened size (rows x blocks of 8 doubles).
+// WideBuffer returns the calling thread's scratch for a wide kernel's
+// widened coordinates of b (MatrixFn), grown to b.rows() x b.stride()
+// doubles. No allocation after warm-up.
 double* WideBuffer(const PreparedSignature& b) {
   thread_local std::vector<double> buffer;
   const size_t size =
-      static_cast<size_t>(b.rows()) * (static_cast<size_t>(b.stride()) / 8) * 8;
+      static_cast<size_t>(b.rows()) * static_cast<size_t>(b.stride());
   if (buffer.size() < size) buffer.resize(size);
   return buffer.data();
 }
 
-// Widen returns b's float32 coordinates widened to double in a per-thread
-// buffer, block by block: columns 8k .. 8k + 7 of row r at [(k rows + r) 8]
-// (rows = b.rows()), columns at or past b.size() as 0. It reads b's
-// coordinates once, row after row in memory order, so that a signature
-// not in cache streams in behind the hardware prefetcher. Widening each
-// block of 8 features in its own strided pass, with a variable-length
-// zero fill per row, cost as much CPU as the distance arithmetic in a
-// 10-NN search (perf; docs/search-cost.md). No allocation after warm-up.
-const double* Widen(const PreparedSignature& b) {
-  double* const buffer = WideBuffer(b);
-  const size_t rows = static_cast<size_t>(b.rows());
-  const size_t n = static_cast<size_t>(b.size());
-  const size_t blocks = static_cast<size_t>(b.stride()) / 8;
-  const float* in = b.coords();
-  for (size_t r = 0; r < rows; ++r, in += n) {
-    for (size_t k = 0; k < blocks; ++k) {
-      double* out = buffer + (k * rows + r) * 8;
-      const float* x = in + 8 * k;
-      if (8 * k + 8 <= n) {  // fixed length: vectorized
-        for (int c = 0; c < 8; ++c) out[c] = static_cast<double>(x[c]);
-      } else {
-        for (int c = 0; c < 8; ++c) out[c] = 0.0;
-        for (size_t c = 0; c < n - 8 * k; ++c) {
-          out[c] = static_cast<double>(x[c]);
-        }
-      }
-    }
-  }
-  return buffer;
+internal::KernelCoords CoordsOf(const PreparedSignature& p) {
+  return {p.coords(), p.size(), p.bands()};
 }
 
-__attribute__((target("avx2,fma"))) double KernelAvx2(
-    const PreparedSignature& a, const PreparedSignature& b, double* out,
-    int out_stride) {
-  const int bands = a.bands();
-  const size_t as = static_cast<size_t>(a.size());
-  const float* ac = a.coords();
-  const __m256d sign = _mm256_set1_pd(-0.0);
-  __m256d mx = _mm256_setzero_pd();
-  const double* wide = Widen(b);
-  const size_t rows = static_cast<size_t>(b.rows());
-  for (int j0 = 0; j0 < b.stride(); j0 += 8) {
-    const double* blk = wide + static_cast<size_t>(j0) * rows;
-    for (int i = 0; i < a.size(); ++i) {
-      double* row = out + static_cast<size_t>(i) * out_stride;
-      __m256d k0 = _mm256_setzero_pd(), k1 = _mm256_setzero_pd();
-      __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd();
-      __m256d h0 = _mm256_setzero_pd(), h1 = _mm256_setzero_pd();
-      for (int d = 0; d < bands; ++d) {
-        const size_t rk = static_cast<size_t>(1 + d);
-        const size_t ra = rk + static_cast<size_t>(bands);
-        const size_t rh = ra + static_cast<size_t>(bands);
-        const __m256d xk = _mm256_set1_pd(ac[rk * as + i]);
-        const __m256d xa = _mm256_set1_pd(ac[ra * as + i]);
-        const __m256d xh = _mm256_set1_pd(ac[rh * as + i]);
-        const double* yk = blk + rk * 8;
-        const double* ya = blk + ra * 8;
-        const double* yh = blk + rh * 8;
-        __m256d t;
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk));
-        k0 = _mm256_fmadd_pd(t, t, k0);
-        t = _mm256_sub_pd(xk, _mm256_loadu_pd(yk + 4));
-        k1 = _mm256_fmadd_pd(t, t, k1);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya));
-        a0 = _mm256_fmadd_pd(t, t, a0);
-        t = _mm256_sub_pd(xa, _mm256_loadu_pd(ya + 4));
-        a1 = _mm256_fmadd_pd(t, t, a1);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh));
-        h0 = _mm256_fmadd_pd(t, t, h0);
-        t = _mm256_sub_pd(xh, _mm256_loadu_pd(yh + 4));
-        h1 = _mm256_fmadd_pd(t, t, h1);
-      }
-      const __m256d xg = _mm256_set1_pd(ac[i]);
-      __m256d g0 =
-          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk)));
-      __m256d g1 =
-          _mm256_andnot_pd(sign, _mm256_sub_pd(xg, _mm256_loadu_pd(blk + 4)));
-      g0 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g0, _mm256_sqrt_pd(k0)),
-                                       _mm256_sqrt_pd(a0)),
-                         _mm256_sqrt_pd(h0));
-      g1 = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(g1, _mm256_sqrt_pd(k1)),
-                                       _mm256_sqrt_pd(a1)),
-                         _mm256_sqrt_pd(h1));
-      _mm256_storeu_pd(row + j0, g0);
-      _mm256_storeu_pd(row + j0 + 4, g1);
-      mx = _mm256_max_pd(mx, _mm256_max_pd(g0, g1));
-    }
-  }
-  alignas(32) double lanes[4];
-  _mm256_store_pd(lanes, mx);
-  return std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3]));
-}
-
-// GCC 12's avx512fintrin.h trips -Wmaybe-uninitialized on its own
-// _mm512_undefined_pd (a known false positive).
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-// Avx512Blocks computes the columns of blocks k0 .. k0 + B - 1 of the
-// matrix from b's widened coordinates (Widen; `rows` rows per block): each
-// broadcast coordinate of a serves B blocks, and the 3 B accumulators are
-// independent chains. Every lane accumulates its bands in the one-block
-// order, so the values do not depend on B. Returns max(mx, what it wrote).
-template <int B>
-__attribute__((target("avx512f"))) inline __m512d Avx512Blocks(
-    const PreparedSignature& a, const double* wide, size_t rows, int k0,
-    double* out, int out_stride, __m512d mx) {
-  const int bands = a.bands();
-  const size_t as = static_cast<size_t>(a.size());
-  const float* ac = a.coords();
-  const double* blk[B];
-  for (int b = 0; b < B; ++b) {
-    blk[b] = wide + static_cast<size_t>(k0 + b) * rows * 8;
-  }
-  for (int i = 0; i < a.size(); ++i) {
-    __m512d k[B], ar[B], h[B];
-    for (int b = 0; b < B; ++b) {
-      k[b] = _mm512_setzero_pd();
-      ar[b] = _mm512_setzero_pd();
-      h[b] = _mm512_setzero_pd();
-    }
-    for (int d = 0; d < bands; ++d) {
-      const size_t rk = static_cast<size_t>(1 + d);
-      const size_t ra = rk + static_cast<size_t>(bands);
-      const size_t rh = ra + static_cast<size_t>(bands);
-      const __m512d xk = _mm512_set1_pd(ac[rk * as + i]);
-      const __m512d xa = _mm512_set1_pd(ac[ra * as + i]);
-      const __m512d xh = _mm512_set1_pd(ac[rh * as + i]);
-      for (int b = 0; b < B; ++b) {
-        __m512d t;
-        t = _mm512_sub_pd(xk, _mm512_loadu_pd(blk[b] + rk * 8));
-        k[b] = _mm512_fmadd_pd(t, t, k[b]);
-        t = _mm512_sub_pd(xa, _mm512_loadu_pd(blk[b] + ra * 8));
-        ar[b] = _mm512_fmadd_pd(t, t, ar[b]);
-        t = _mm512_sub_pd(xh, _mm512_loadu_pd(blk[b] + rh * 8));
-        h[b] = _mm512_fmadd_pd(t, t, h[b]);
-      }
-    }
-    const __m512d xg = _mm512_set1_pd(ac[i]);
-    double* row = out + static_cast<size_t>(i) * out_stride + 8 * k0;
-    for (int b = 0; b < B; ++b) {
-      __m512d g = _mm512_abs_pd(_mm512_sub_pd(xg, _mm512_loadu_pd(blk[b])));
-      g = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(g, _mm512_sqrt_pd(k[b])),
-                                      _mm512_sqrt_pd(ar[b])),
-                        _mm512_sqrt_pd(h[b]));
-      _mm512_storeu_pd(row + 8 * b, g);
-      mx = _mm512_max_pd(mx, g);
-    }
-  }
-  return mx;
-}
-
-// WidenAvx512 is Widen (same layout, same values: widening float32 to
-// double is exact) with one masked load and one conversion per block
-// row: Widen's scalar tail for the last, partial block (features 24 ..
-// 29 at 30) was about a sixth of the matrix's time at n = m = 30 (perf).
-// Masked-off lanes are not read, so nothing past b's block is touched.
-__attribute__((target("avx512f"))) const double* WidenAvx512(
-    const PreparedSignature& b) {
-  double* const buffer = WideBuffer(b);
-  const size_t rows = static_cast<size_t>(b.rows());
-  const size_t n = static_cast<size_t>(b.size());
-  const size_t blocks = static_cast<size_t>(b.stride()) / 8;
-  const float* in = b.coords();
-  const __mmask16 tail =
-      static_cast<__mmask16>((1u << (n - 8 * (blocks - 1))) - 1);
-  for (size_t r = 0; r < rows; ++r, in += n) {
-    for (size_t k = 0; k + 1 < blocks; ++k) {
-      _mm512_storeu_pd(buffer + (k * rows + r) * 8,
-                       _mm512_cvtps_pd(_mm256_loadu_ps(in + 8 * k)));
-    }
-    const size_t k = blocks - 1;
-    const __m512 x = _mm512_maskz_loadu_ps(tail, in + 8 * k);
-    _mm512_storeu_pd(buffer + (k * rows + r) * 8,
-                     _mm512_cvtps_pd(_mm512_castps512_ps256(x)));
-  }
-  return buffer;
-}
-
-__attribute__((target("avx512f"))) double KernelAvx512(
-    const PreparedSignature& a, const PreparedSignature& b, double* out,
-    int out_stride) {
-  const double* wide = WidenAvx512(b);
-  const size_t rows = static_cast<size_t>(b.rows());
-  const int blocks = b.stride() / 8;
-  __m512d mx = _mm512_setzero_pd();
-  int k = 0;
-  for (; k + 4 <= blocks; k += 4) {
-    mx = Avx512Blocks<4>(a, wide, rows, k, out, out_stride, mx);
-  }
-  if (k + 2 <= blocks) {
-    mx = Avx512Blocks<2>(a, wide, rows, k, out, out_stride, mx);
-    k += 2;
-  }
-  if (k < blocks) mx = Avx512Blocks<1>(a, wide, rows, k, out, out_stride, mx);
-  return _mm512_reduce_max_pd(mx);
-}
-
-// Avx512Rows32 computes rows i0 .. i0 + I - 1 of the float32 matrix
-// (GroundDistanceMatrix32), all of b's 16-feature blocks: per block, each
-// row of b's coordinates is one masked load straight from the stored
-// float32 values (no widening; lanes past b.size() read as 0), shared by
-// the I rows of a, whose 3 I accumulators are independent chains.
-template <int I>
-__attribute__((target("avx512f"))) inline void Avx512Rows32(
-    const PreparedSignature& a, const PreparedSignature& b, int i0, float* out,
-    int out_stride) {
-  const int bands = a.bands();
-  const size_t as = static_cast<size_t>(a.size());
-  const size_t bs = static_cast<size_t>(b.size());
-  const float* ac = a.coords() + i0;
-  for (int j0 = 0; j0 < b.size(); j0 += 16) {
-    const int lanes = std::min(16, b.size() - j0);
-    const __mmask16 mask = static_cast<__mmask16>((1u << lanes) - 1u);
-    const float* bc = b.coords() + j0;
-    __m512 k[I], ar[I], h[I];
-    for (int r = 0; r < I; ++r) {
-      k[r] = _mm512_setzero_ps();
-      ar[r] = _mm512_setzero_ps();
-      h[r] = _mm512_setzero_ps();
-    }
-    for (int d = 0; d < bands; ++d) {
-      const size_t rk = static_cast<size_t>(1 + d);
-      const size_t ra = rk + static_cast<size_t>(bands);
-      const size_t rh = ra + static_cast<size_t>(bands);
-      const __m512 yk = _mm512_maskz_loadu_ps(mask, bc + rk * bs);
-      const __m512 ya = _mm512_maskz_loadu_ps(mask, bc + ra * bs);
-      const __m512 yh = _mm512_maskz_loadu_ps(mask, bc + rh * bs);
-      for (int r = 0; r < I; ++r) {
-        __m512 t;
-        t = _mm512_sub_ps(_mm512_set1_ps(ac[rk * as + r]), yk);
-        k[r] = _mm512_fmadd_ps(t, t, k[r]);
-        t = _mm512_sub_ps(_mm512_set1_ps(ac[ra * as + r]), ya);
-        ar[r] = _mm512_fmadd_ps(t, t, ar[r]);
-        t = _mm512_sub_ps(_mm512_set1_ps(ac[rh * as + r]), yh);
-        h[r] = _mm512_fmadd_ps(t, t, h[r]);
-      }
-    }
-    const __m512 yg = _mm512_maskz_loadu_ps(mask, bc);
-    for (int r = 0; r < I; ++r) {
-      __m512 g = _mm512_abs_ps(_mm512_sub_ps(_mm512_set1_ps(ac[r]), yg));
-      g = _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(g, _mm512_sqrt_ps(k[r])),
-                                      _mm512_sqrt_ps(ar[r])),
-                        _mm512_sqrt_ps(h[r]));
-      _mm512_storeu_ps(out + static_cast<size_t>(i0 + r) * out_stride + j0, g);
-    }
-  }
-}
-
-__attribute__((target("avx512f"))) void KernelAvx512Float(
-    const PreparedSignature& a, const PreparedSignature& b, float* out,
-    int out_stride) {
-  int i = 0;
-  for (; i + 4 <= a.size(); i += 4) Avx512Rows32<4>(a, b, i, out, out_stride);
-  for (; i < a.size(); ++i) Avx512Rows32<1>(a, b, i, out, out_stride);
-}
-#pragma GCC diagnostic pop
-#endif
-
-// KernelByNumber returns kernel `kernel` (numbers as in
-// internal::KernelSupported); the portable one for a number this build has
-// no kernel for.
-KernelFn KernelByNumber(int kernel) {
-  switch (kernel) {
+// MatrixKernelsFor returns the wide matrix kernels of `level`, nullptr for
+// the scalar level or one this CPU cannot run.
+const internal::MatrixKernels* MatrixKernelsFor(internal::SimdLevel level) {
+  if (!internal::SimdLevelSupported(level)) return nullptr;
+  switch (level) {
 #ifdef TPR_HAVE_X86_KERNELS
-    case 1:
-      return KernelAvx2;
-    case 2:
-      return KernelAvx512;
+    case internal::SimdLevel::kAvx2:
+      return internal::MatrixKernelsAvx2Table();
+    case internal::SimdLevel::kAvx512:
+      return internal::MatrixKernelsAvx512Table();
 #endif
     default:
-      return KernelScalar;
+      return nullptr;
   }
+}
+
+// The chosen level's wide kernels (nullptr: the scalar level), once.
+const internal::MatrixKernels* ChosenMatrixKernels() {
+  static const internal::MatrixKernels* const kernels =
+      MatrixKernelsFor(internal::ChosenSimdLevel());
+  return kernels;
+}
+
+double RunMatrix(const internal::MatrixKernels* kernels,
+                 const PreparedSignature& a, const PreparedSignature& b,
+                 double* out, int out_stride) {
+  if (kernels == nullptr || a.bands() != b.bands()) {
+    return KernelScalar(a, b, out, out_stride);
+  }
+  return kernels->matrix(CoordsOf(a), CoordsOf(b), WideBuffer(b), out,
+                         out_stride);
+}
+
+bool RunMatrix32(const internal::MatrixKernels* kernels,
+                 const PreparedSignature& a, const PreparedSignature& b,
+                 float* out, int out_stride) {
+  assert(out_stride >= internal::Stride32(b) && out_stride % 16 == 0);
+  if (kernels == nullptr || a.bands() != b.bands()) return false;
+  kernels->matrix32(CoordsOf(a), CoordsOf(b), internal::Stride32(b), out,
+                    out_stride);
+  return true;
 }
 
 }  // namespace
@@ -638,65 +394,32 @@ double GroundDistanceMatrix(const PreparedSignature& a,
                             const PreparedSignature& b, double* out,
                             int out_stride) {
   assert(out_stride >= b.stride());
-  static const KernelFn kernel = KernelByNumber(internal::ChosenKernel());
-  if (a.bands() != b.bands()) return KernelScalar(a, b, out, out_stride);
-  return kernel(a, b, out, out_stride);
+  return RunMatrix(ChosenMatrixKernels(), a, b, out, out_stride);
 }
 
 namespace internal {
 
-bool KernelSupported(int kernel) {
-  switch (kernel) {
-    case 0:
-      return true;
-#ifdef TPR_HAVE_X86_KERNELS
-    case 1:
-      __builtin_cpu_init();
-      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-    case 2:
-      __builtin_cpu_init();
-      return __builtin_cpu_supports("avx512f");
-#endif
-    default:
-      return false;
-  }
+bool GroundDistanceMatrixAt(SimdLevel level, const PreparedSignature& a,
+                            const PreparedSignature& b, double* out,
+                            int out_stride) {
+  if (!SimdLevelSupported(level)) return false;
+  if (level != SimdLevel::kScalar && a.bands() != b.bands()) return false;
+  RunMatrix(MatrixKernelsFor(level), a, b, out, out_stride);
+  return true;
 }
 
-int ChosenKernel() {
-  static const int chosen = [] {
-    for (int kernel = 2; kernel > 0; --kernel) {
-      if (KernelSupported(kernel)) return kernel;
-    }
-    return 0;
-  }();
-  return chosen;
-}
+int Stride32(const PreparedSignature& b) { return (b.size() + 15) / 16 * 16; }
 
 bool GroundDistanceMatrix32(const PreparedSignature& a,
                             const PreparedSignature& b, float* out,
                             int out_stride) {
-  assert(out_stride >= Stride32(b) && out_stride % 16 == 0);
-#ifdef TPR_HAVE_X86_KERNELS
-  static const bool supported = KernelSupported(2);
-  if (!supported || a.bands() != b.bands()) return false;
-  KernelAvx512Float(a, b, out, out_stride);
-  return true;
-#else
-  (void)a;
-  (void)b;
-  (void)out;
-  (void)out_stride;
-  return false;
-#endif
+  return RunMatrix32(ChosenMatrixKernels(), a, b, out, out_stride);
 }
 
-bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
-                                    const PreparedSignature& b, double* out,
-                                    int out_stride) {
-  if (!KernelSupported(kernel)) return false;
-  if (a.bands() != b.bands() && kernel != 0) return false;
-  KernelByNumber(kernel)(a, b, out, out_stride);
-  return true;
+bool GroundDistanceMatrix32At(SimdLevel level, const PreparedSignature& a,
+                              const PreparedSignature& b, float* out,
+                              int out_stride) {
+  return RunMatrix32(MatrixKernelsFor(level), a, b, out, out_stride);
 }
 
 }  // namespace internal

@@ -257,75 +257,17 @@ double GroundDistance(const PreparedSignature& a, int i,
 // distances into `out`, row i at out[i * out_stride], with
 // out_stride >= b.stride(); entries past b.size() in a row (up to
 // b.stride()) are written with finite values (the distance to the
-// origin). This is the vectorized kernel (AVX-512 or AVX2, chosen at run time)
-// the EMD uses; entries equal GroundDistance to rounding (about 1e-15 relative)
-// and the matrix of (b, a) is exactly the transpose of that of (a, b). Returns
-// an upper bound of the entries (the largest value written, padding included),
-// for scaling tolerances. Cost O(a.size() x b.size() x bands); thread-safe.
+// origin). The EMD's kernel, in the variant chosen once per process
+// (internal/simd.h: AVX-512F, AVX2 + FMA or scalar; TPR_SIMD forces a
+// lower one): the two wide ones write the same values bit for bit, the
+// scalar one GroundDistance's; entries equal GroundDistance to rounding
+// (about 1e-15 relative) and the matrix of (b, a) is exactly the
+// transpose of that of (a, b). Returns an upper bound of the entries (the
+// largest value written, padding included), for scaling tolerances. Cost
+// O(a.size() x b.size() x bands); thread-safe.
 double GroundDistanceMatrix(const PreparedSignature& a,
                             const PreparedSignature& b, double* out,
                             int out_stride);
-
-namespace internal {
-// The kernels of GroundDistanceMatrix, by number: 0 = portable, 1 = AVX2
-// with FMA, 2 = AVX-512F.
-
-// KernelSupported returns whether this CPU and build can run `kernel`: 0
-// always; 1 and 2 in an x86-64 GCC or Clang build on a CPU (and OS) with
-// those features; false for any other number. The one CPU-feature check
-// behind both the run-time choice and GroundDistanceMatrixWithKernel. Cost:
-// a CPU-feature query; thread-safe.
-bool KernelSupported(int kernel);
-
-// ChosenKernel returns the kernel GroundDistanceMatrix runs when the band
-// counts match: the highest supported one, chosen once per process.
-// Thread-safe.
-int ChosenKernel();
-
-// GroundDistanceMatrixWithKernel runs one kernel of GroundDistanceMatrix
-// regardless of the run-time choice, for tests. Returns false, writing
-// nothing, when !KernelSupported(kernel), or for a vectorized kernel when
-// the band counts differ. Same contract as GroundDistanceMatrix otherwise.
-bool GroundDistanceMatrixWithKernel(int kernel, const PreparedSignature& a,
-                                    const PreparedSignature& b, double* out,
-                                    int out_stride);
-
-// Stride32 returns the row length of GroundDistanceMatrix32's output for
-// b as the column side: b.size() rounded up to a multiple of 16 (whole
-// 16-lane registers).
-inline int Stride32(const PreparedSignature& b) {
-  return (b.size() + 15) / 16 * 16;
-}
-
-// Float32MatrixError returns theta(bands) = (bands + 12) 2^-24, the
-// relative error bound of GroundDistanceMatrix32's entries. Why it holds,
-// with u = 2^-24 (float32 rounding) and c = |g - g'| + sqrt(S_K) +
-// sqrt(S_A) + sqrt(S_H) the entry in exact arithmetic on the stored
-// float32 coordinates, S_X the sum of B = bands squared differences: each
-// difference is rounded once (t = (x - y)(1 + d), |d| <= u) and each fused
-// multiply-add once, so the computed S~ = sum_k t_k^2 prod (1 + d_j) lies
-// within (1 + u)^(B + 2) - 1 <= (B + 2) u (1 + 1e-5) of S relatively (all
-// terms >= 0); the correctly rounded sqrt halves that and adds u; |g - g'|
-// is rounded once; the three additions of non-negative terms add u each.
-// So |c~ - c| <= ((B + 2) / 2 + 5) u (1 + 1e-5) c <= theta c. O(1).
-inline double Float32MatrixError(int bands) { return (bands + 12) * 0x1p-24; }
-
-// GroundDistanceMatrix32 writes the a.size() x b.size() ground distances,
-// computed in float32 arithmetic, into `out`: row i at out[i * out_stride],
-// out_stride a multiple of 16 and >= Stride32(b); entries past b.size() in
-// a row (up to Stride32(b)) are written with finite values. Each entry c~
-// of the exact entry c (Eq. 7 in exact arithmetic on the stored float32
-// coordinates; GroundDistance computes it in double, within about 1e-15)
-// satisfies |c~ - c| <= Float32MatrixError(a.bands()) c. The AVX-512
-// kernel: 16 features of b per register, read straight from the stored
-// float32 values, about half the arithmetic of GroundDistanceMatrix and no
-// widening. Returns false, writing nothing, when this CPU or build has no
-// AVX-512F or the band counts differ (callers then use
-// GroundDistanceMatrix). Cost O(a.size() x b.size() x bands); thread-safe.
-bool GroundDistanceMatrix32(const PreparedSignature& a,
-                            const PreparedSignature& b, float* out,
-                            int out_stride);
-}  // namespace internal
 
 }  // namespace tpr::index
 

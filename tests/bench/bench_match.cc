@@ -35,6 +35,7 @@
 #include "indexer/lib/centroid_table.h"
 #include "indexer/lib/emd.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/internal/simd.h"
 #include "indexer/lib/metric.h"
 #include "indexer/lib/signature_arena.h"
 #include "indexer/lib/signature_index.h"
@@ -931,4 +932,16 @@ BENCHMARK(BM_KnnSpread)
 }  // namespace
 }  // namespace tpr::index
 
-BENCHMARK_MAIN();
+// The benchmark main, which also prints the kernel variant that runs
+// (indexer/lib/internal/simd.h; TPR_SIMD=avx2 or scalar forces a lower
+// one) in the context header: "tpr_simd: avx512".
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::AddCustomContext("tpr_simd",
+                              tpr::index::internal::SimdLevelName(
+                                  tpr::index::internal::ChosenSimdLevel()));
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -14,6 +14,7 @@
 
 #include "gtest/gtest.h"
 #include "indexer/lib/ground_distance.h"
+#include "indexer/lib/internal/ground_distance_kernels.h"
 #include "tests/allocation_counter.h"
 #include "tests/indexer/emd_oracle.h"
 #include "tests/indexer/eq7_oracle.h"

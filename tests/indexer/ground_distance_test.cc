@@ -2,16 +2,16 @@
 #include "indexer/lib/ground_distance.h"
 
 #include <cmath>
-#include <fstream>
+#include <iostream>
 #include <limits>
 #include <random>
-#include <set>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "gtest/gtest.h"
 #include "indexer/lib/emd.h"
+#include "indexer/lib/internal/ground_distance_kernels.h"
+#include "indexer/lib/internal/simd.h"
 #include "tests/indexer/eq7_oracle.h"
 #include "tests/indexer/signature_testing.h"
 
@@ -174,53 +174,94 @@ TEST(GroundDistanceTest, MatrixKernelMatchesScalarAndIsSymmetric) {
   }
 }
 
-// Every kernel this CPU runs (not only the one chosen at run time) agrees
-// with the scalar GroundDistance, at every tail length of the masked
-// float32 loads (sizes 1 .. 17 cover all 8 residues twice).
-TEST(GroundDistanceTest, EveryKernelMatchesScalar) {
+// Every kernel variant this CPU runs (not only the one chosen at run
+// time) agrees with the scalar GroundDistance, at every tail length of the
+// masked float32 loads (sizes 1 .. 17 cover all 8 residues twice), and the
+// wide ones with each other bit for bit. One test instance per variant;
+// skipped, naming it, where this CPU cannot run it.
+class MatrixKernelTest : public ::testing::TestWithParam<internal::SimdLevel> {
+ protected:
+  void SetUp() override {
+    if (!internal::SimdLevelSupported(GetParam())) {
+      GTEST_SKIP() << "this CPU cannot run the "
+                   << internal::SimdLevelName(GetParam())
+                   << " matrix kernels: not tested here";
+    }
+  }
+};
+
+TEST_P(MatrixKernelTest, MatchesScalarAndTheOtherWideVariant) {
+  const internal::SimdLevel level = GetParam();
+  // The other wide level, when this CPU runs it too.
+  const internal::SimdLevel other = level == internal::SimdLevel::kAvx2
+                                        ? internal::SimdLevel::kAvx512
+                                        : internal::SimdLevel::kAvx2;
+  const bool compare_other = level != internal::SimdLevel::kScalar &&
+                             internal::SimdLevelSupported(other);
   SignatureGenerator gen(SignatureGeneratorOptions{});
-  int kernels_run = 0;
-  for (int kernel = 0; kernel < 3; ++kernel) {
-    bool ran = false;
-    for (int na = 1; na <= 17; na += 4) {
-      for (int nb = 1; nb <= 17; ++nb) {
-        const PreparedSignature a =
-            Prep(gen.Random(na), GroundDistanceOptions{});
-        const PreparedSignature b =
-            Prep(gen.Random(nb), GroundDistanceOptions{});
-        std::vector<double> m(static_cast<size_t>(na) * b.stride(), -1.0);
-        const bool supported = internal::KernelSupported(kernel);
-        ASSERT_EQ(internal::GroundDistanceMatrixWithKernel(
-                      kernel, a, b, m.data(), b.stride()),
-                  supported)
-            << "kernel " << kernel;
-        if (!supported) continue;
-        ran = true;
-        for (int i = 0; i < na; ++i) {
-          for (int j = 0; j < nb; ++j) {
-            EXPECT_NEAR(m[static_cast<size_t>(i) * b.stride() + j],
-                        GroundDistance(a, i, b, j), 1e-14)
-                << "kernel " << kernel << " " << na << " x " << nb;
+  for (int na = 1; na <= 17; na += 4) {
+    for (int nb = 1; nb <= 17; ++nb) {
+      const PreparedSignature a = Prep(gen.Random(na), GroundDistanceOptions{});
+      const PreparedSignature b = Prep(gen.Random(nb), GroundDistanceOptions{});
+      std::vector<double> m(static_cast<size_t>(na) * b.stride(), -1.0);
+      ASSERT_TRUE(
+          internal::GroundDistanceMatrixAt(level, a, b, m.data(), b.stride()));
+      std::vector<double> o(m.size(), -1.0);
+      if (compare_other) {
+        ASSERT_TRUE(internal::GroundDistanceMatrixAt(other, a, b, o.data(),
+                                                     b.stride()));
+      }
+      for (int i = 0; i < na; ++i) {
+        for (int j = 0; j < b.stride(); ++j) {
+          const size_t k = static_cast<size_t>(i) * b.stride() + j;
+          EXPECT_TRUE(std::isfinite(m[k]));
+          if (j < nb) {
+            EXPECT_NEAR(m[k], GroundDistance(a, i, b, j), 1e-14)
+                << na << " x " << nb;
           }
-          for (int j = nb; j < b.stride(); ++j) {
-            EXPECT_TRUE(
-                std::isfinite(m[static_cast<size_t>(i) * b.stride() + j]));
+          if (compare_other) {
+            EXPECT_EQ(m[k], o[k]) << na << " x " << nb;
           }
         }
       }
     }
-    kernels_run += ran ? 1 : 0;
   }
-  EXPECT_GE(kernels_run, 1);  // the portable kernel always runs
+  // Band counts that differ: the wide kernels refuse, nothing written.
+  SignatureGeneratorOptions o7;
+  o7.bands = 7;
+  const PreparedSignature a =
+      Prep(SignatureGenerator(o7).Random(3), GroundDistanceOptions{});
+  const PreparedSignature b = Prep(gen.Random(3), GroundDistanceOptions{});
+  std::vector<double> m(8 * 3, -1.0);
+  EXPECT_EQ(internal::GroundDistanceMatrixAt(level, a, b, m.data(), 8),
+            level == internal::SimdLevel::kScalar);
+  if (level != internal::SimdLevel::kScalar) {
+    EXPECT_EQ(m[0], -1.0);
+  }
 }
 
-// The float32 matrix (GroundDistanceMatrix32) stays within its documented
-// relative error of the double one, at every tail length of its 16-lane
-// masked loads (column sizes 1 .. 40), for several band counts; it is
-// exactly 0 between a feature and itself; it refuses band counts that
-// differ and CPUs without AVX-512F.
-TEST(GroundDistanceTest, Float32MatrixWithinItsErrorBound) {
-  const bool supported = internal::KernelSupported(2);
+// The float32 matrix (GroundDistanceMatrix32) of each wide variant stays
+// within its documented relative error of the double one, at every tail
+// length of the masked loads (column sizes 1 .. 40), for several band
+// counts, and equals the other wide variant's bit for bit; it is exactly
+// 0 between a feature and itself; it refuses band counts that differ.
+// The scalar level has no float32 kernel (and says so).
+TEST_P(MatrixKernelTest, Float32MatrixWithinItsErrorBound) {
+  const internal::SimdLevel level = GetParam();
+  if (level == internal::SimdLevel::kScalar) {
+    const PreparedSignature a =
+        Prep(SignatureGenerator(SignatureGeneratorOptions{}).Random(3),
+             GroundDistanceOptions{});
+    std::vector<float> m(16 * 3, -1.0f);
+    EXPECT_FALSE(internal::GroundDistanceMatrix32At(level, a, a, m.data(), 16));
+    EXPECT_EQ(m[0], -1.0f);
+    GTEST_SKIP() << "the scalar level has no float32 kernel (the double "
+                    "matrix stands in for it)";
+  }
+  const internal::SimdLevel other = level == internal::SimdLevel::kAvx2
+                                        ? internal::SimdLevel::kAvx512
+                                        : internal::SimdLevel::kAvx2;
+  const bool compare_other = internal::SimdLevelSupported(other);
   int checked = 0;
   double worst = 0.0;  // largest |error| / (theta c)
   for (int bands : {20, 7, 33}) {
@@ -238,13 +279,22 @@ TEST(GroundDistanceTest, Float32MatrixWithinItsErrorBound) {
         ASSERT_EQ(stride % 16, 0);
         ASSERT_GE(stride, nb);
         std::vector<float> m(static_cast<size_t>(na) * stride, -1.0f);
-        ASSERT_EQ(internal::GroundDistanceMatrix32(a, b, m.data(), stride),
-                  supported);
-        if (!supported) continue;
+        ASSERT_TRUE(
+            internal::GroundDistanceMatrix32At(level, a, b, m.data(), stride));
+        std::vector<float> om(m.size(), -1.0f);
+        if (compare_other) {
+          ASSERT_TRUE(internal::GroundDistanceMatrix32At(other, a, b, om.data(),
+                                                         stride));
+        }
         for (int i = 0; i < na; ++i) {
           for (int j = 0; j < stride; ++j) {
-            const double got = m[static_cast<size_t>(i) * stride + j];
+            const size_t k = static_cast<size_t>(i) * stride + j;
+            const double got = m[k];
             ASSERT_TRUE(std::isfinite(got));
+            if (compare_other) {
+              EXPECT_EQ(m[k], om[k]) << bands << " bands, " << na << " x " << nb
+                                     << " entry " << i << ", " << j;
+            }
             if (j >= nb) continue;
             const double want = GroundDistance(a, i, b, j);
             EXPECT_LE(std::abs(got - want), (theta + 1e-15) * want)
@@ -255,8 +305,8 @@ TEST(GroundDistanceTest, Float32MatrixWithinItsErrorBound) {
         }
         std::vector<float> self(static_cast<size_t>(na) *
                                 internal::Stride32(a));
-        ASSERT_TRUE(internal::GroundDistanceMatrix32(a, a, self.data(),
-                                                     internal::Stride32(a)));
+        ASSERT_TRUE(internal::GroundDistanceMatrix32At(level, a, a, self.data(),
+                                                       internal::Stride32(a)));
         for (int i = 0; i < na; ++i) {
           EXPECT_EQ(self[static_cast<size_t>(i) * internal::Stride32(a) + i],
                     0.0f);
@@ -264,9 +314,12 @@ TEST(GroundDistanceTest, Float32MatrixWithinItsErrorBound) {
       }
     }
   }
-  if (!supported) GTEST_SKIP() << "no AVX-512F: the float32 kernel is absent";
   EXPECT_GT(checked, 10000);
   EXPECT_GT(worst, 0.0);  // float32 rounding shows, and stays in the bound
+  if (!compare_other) {
+    std::cout << "not compared with " << internal::SimdLevelName(other)
+              << ": this CPU cannot run it\n";
+  }
   // Band counts that differ: refused, nothing written.
   SignatureGeneratorOptions o7;
   o7.bands = 7;
@@ -276,46 +329,32 @@ TEST(GroundDistanceTest, Float32MatrixWithinItsErrorBound) {
       Prep(SignatureGenerator(SignatureGeneratorOptions{}).Random(3),
            GroundDistanceOptions{});
   std::vector<float> m(16 * 3, -1.0f);
-  EXPECT_FALSE(internal::GroundDistanceMatrix32(a, b, m.data(), 16));
+  EXPECT_FALSE(internal::GroundDistanceMatrix32At(level, a, b, m.data(), 16));
   EXPECT_EQ(m[0], -1.0f);
 }
 
-// CpuFlags returns the feature flags the kernel lists in /proc/cpuinfo (an
-// oracle independent of the compiler's CPU query), empty where there is none.
-std::set<std::string> CpuFlags() {
-  std::ifstream in("/proc/cpuinfo");
-  for (std::string line; std::getline(in, line);) {
-    if (line.rfind("flags", 0) != 0) continue;
-    std::istringstream words(line.substr(line.find(':') + 1));
-    std::set<std::string> flags;
-    for (std::string w; words >> w;) flags.insert(w);
-    return flags;
-  }
-  return {};
-}
+INSTANTIATE_TEST_SUITE_P(
+    Variants, MatrixKernelTest,
+    ::testing::Values(internal::SimdLevel::kScalar, internal::SimdLevel::kAvx2,
+                      internal::SimdLevel::kAvx512),
+    [](const ::testing::TestParamInfo<internal::SimdLevel>& info) {
+      return std::string(internal::SimdLevelName(info.param));
+    });
 
-// KernelSupported is the one CPU-feature check: it agrees with the CPU's
-// flags, GroundDistanceMatrix runs the highest supported kernel, and only
-// kernels 0-2 exist.
-TEST(GroundDistanceTest, KernelSupportedMatchesCpuFlags) {
-  EXPECT_TRUE(internal::KernelSupported(0));
-  EXPECT_FALSE(internal::KernelSupported(-1));
-  EXPECT_FALSE(internal::KernelSupported(3));
-  int highest = 0;
-  for (int kernel = 0; kernel < 3; ++kernel) {
-    if (internal::KernelSupported(kernel)) highest = kernel;
-  }
-  EXPECT_EQ(internal::ChosenKernel(), highest);
-#if defined(__GNUC__) && defined(__x86_64__)
-  const std::set<std::string> flags = CpuFlags();
-  if (flags.empty()) GTEST_SKIP() << "no flags line in /proc/cpuinfo";
-  EXPECT_EQ(internal::KernelSupported(1),
-            flags.count("avx2") == 1 && flags.count("fma") == 1);
-  EXPECT_EQ(internal::KernelSupported(2), flags.count("avx512f") == 1);
-#else
-  EXPECT_FALSE(internal::KernelSupported(1));
-  EXPECT_FALSE(internal::KernelSupported(2));
-#endif
+// GroundDistanceMatrix32 runs the chosen level's kernel: none at the
+// scalar level, the wide one's values otherwise.
+TEST(GroundDistanceTest, Float32MatrixFollowsTheChosenLevel) {
+  const PreparedSignature a =
+      Prep(SignatureGenerator(SignatureGeneratorOptions{}).Random(5),
+           GroundDistanceOptions{});
+  std::vector<float> m(16 * 5, -1.0f), want(16 * 5, -1.0f);
+  const internal::SimdLevel level = internal::ChosenSimdLevel();
+  const bool ran = internal::GroundDistanceMatrix32(a, a, m.data(), 16);
+  EXPECT_EQ(ran, level != internal::SimdLevel::kScalar)
+      << internal::SimdLevelName(level);
+  if (!ran) return;
+  ASSERT_TRUE(internal::GroundDistanceMatrix32At(level, a, a, want.data(), 16));
+  EXPECT_EQ(m, want);
 }
 
 TEST(GroundDistanceTest, DifferentBandCountsComparedWithZeroPadding) {
