@@ -136,7 +136,7 @@ absl::StatusOr<ExtractResult> ExtractSignature(const Mesh& input,
   }
   const Mesh& mesh = cut ? cut->mesh : input;
 
-  // The Laplace-Beltrami spectrum of the whole mesh (issue 9) needs only
+  // The Laplace-Beltrami spectrum of the whole mesh needs only
   // the mesh: with threads > 1 it runs on its own thread beside the TPR
   // stages below, otherwise after them. Everything the thread touches is
   // declared before its joiner, which waits for it on every return.
