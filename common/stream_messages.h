@@ -6,7 +6,7 @@
 // report the client's half-close: Read returns false (grpcpp/impl/
 // call_op_set.h, CallOpRecvMessage::FinishOp). A handler looping on Read
 // then took garbage for the end and answered OK for a truncated stream
-// (issue 12: a BatchUpsert with garbage in the middle wrote the models
+// (a BatchUpsert with garbage in the middle wrote the models
 // before it and reported success). The client-streaming methods therefore
 // receive grpc::ByteBuffer and parse each message here, which tells the two
 // apart. RawClientStreamHandler (below) installs such a handler in place of

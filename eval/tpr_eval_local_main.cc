@@ -82,7 +82,7 @@ void DeclareFlags(CLI::App* app, Flags* f) {
   app->add_option("--identity-surface", c.identity_surface,
                   "identity mode's surfaces: skinned (one rest mesh per body, "
                   "skinned to each pose; default) or repolygonized (each "
-                  "pose polygonized afresh, the set up to session 5)")
+                  "pose polygonized afresh, the older sets)")
       ->transform(CLI::CheckedTransformer(
           std::map<std::string, synth::IdentitySurface>{
               {"skinned", synth::IdentitySurface::kSkinned},

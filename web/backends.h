@@ -22,7 +22,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
-#include "tpr/client.h"
+#include "tpr/connection.h"
 #include "tpr/v1/extractor.grpc.pb.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 

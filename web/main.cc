@@ -21,11 +21,11 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "client/peer/connection_flags.h"
 #include "common/config.h"
 #include "common/logging.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
-#include "tpr/connection_flags.h"
 #include "web/api.h"
 #include "web/backends.h"
 #include "web/recent_searches.h"

@@ -36,6 +36,11 @@ struct AddOptions {
   // model (Model.media). Default: none; `tpr add` asks for the thumbnail
   // with the TPR overlay and the preview (--no-media, --no-overlay).
   tpr::v1::MediaOptions media;
+  // Add a file whose content (sha256 of its bytes, stored as the model's
+  // metadata "sha256") is already indexed under another id, or appears
+  // earlier in the same run. Default true; `tpr add` skips such files with
+  // a warning unless --allow-duplicates.
+  bool allow_duplicates = true;
 };
 
 // AddOutcome is what happened to one item.
@@ -43,19 +48,25 @@ struct AddOutcome {
   enum Kind { kAdded, kUpdated, kSkipped, kFailed };
   Kind kind = kFailed;
   std::string error;  // why, for kFailed (the status as text)
+  // Why, for kSkipped: "already present", or "same content as ID".
+  std::string reason;
 };
 
 // AddItems extracts and upserts every item (model id = item.id, label =
-// item.label, metadata file_name = the file's base name) on options.jobs
-// threads, and returns one outcome per item, in the items' order. Without
-// options.update, one listing of the index says which ids exist; those are
-// skipped, as are ids that someone else adds meanwhile (ALREADY_EXISTS).
-// A file that cannot be read or extracted, or a refused upsert, is kFailed
-// with its reason; the other items go on. `progress`, if not null, gets one
-// Step per item.
-// Errors: only the listing's (e.g. UNAVAILABLE); per-item failures are
-// outcomes. Cost: one extract and one upsert call per item not skipped.
-// Thread-safe (the clients are).
+// item.label, metadata file_name = the file's base name and sha256 = the
+// hex SHA-256 of its bytes) on options.jobs threads, and returns one
+// outcome per item, in the items' order. One listing of the index says
+// which ids and contents exist: without options.update, ids present are
+// skipped, as are ids that someone else adds meanwhile (ALREADY_EXISTS);
+// without options.allow_duplicates, so is a file whose content is indexed
+// under another id. A file that cannot be read or extracted, or a refused
+// upsert, is kFailed with its reason; the other items go on. `progress`, if
+// not null, gets one Step per item.
+// Errors: the listing's, and a call failing in a way every later call
+// would (UNAVAILABLE, UNIMPLEMENTED, UNAUTHENTICATED, PERMISSION_DENIED):
+// then no further item is tried and that status is returned, saying how
+// many items were done. Cost: one read of each file, one extract and one
+// upsert call per item not skipped. Thread-safe (the clients are).
 absl::StatusOr<std::vector<AddOutcome>> AddItems(
     const tpr::client::ExtractorClient& extractor,
     const tpr::client::IndexerClient& indexer, const std::vector<Item>& items,

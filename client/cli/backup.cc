@@ -20,7 +20,7 @@ struct BackupArgs {
 
 int RunBackup(const Globals& g, const BackupArgs& args) {
   std::optional<AdminTarget> admin = ConnectAdmin(g);
-  if (!admin) return 1;
+  if (!admin) return 2;
   grpc::ClientContext context;
   admin->prepare(&context);
   tpr::v1::BackupRequest request;
@@ -55,7 +55,8 @@ const bool kRegistered = RegisterCommand(
                       "afterwards keep only this many newest backups (0: all)")
            ->check(CLI::NonNegativeNumber);
        return [args](const Globals& g) { return RunBackup(g, *args); };
-     }});
+     },
+     "tpr --indexer 127.0.0.1:7002 backup --to /backups/tpr --keep-last 7"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -38,8 +38,29 @@ using tpr::eval::JsonNumber;
 using tpr::eval::JsonString;
 using tpr::eval::TextField;
 
-// Fail prints "tpr: WHAT: STATUS" on stderr and returns exit code 1.
+// SetJsonErrors makes every error of the process a JSON object on stdout
+// (--json) instead of text on stderr. Call once, before any output.
+void SetJsonErrors(bool json);
+
+// ReportError prints one error: "tpr: MESSAGE" and "  hint: HINT" (when
+// not empty) on stderr, or under SetJsonErrors(true) one line
+// {"error":{"code":C,"message":M,"hint":H}} on stdout, C being "USAGE" for
+// a usage error. Thread-safe.
+void ReportError(const std::string& message, const std::string& hint,
+                 bool usage, const std::string& code = "");
+
+// Fail reports "WHAT: STATUS" (ReportError, code = the status's code), with
+// a hint for the mistakes a user makes most (a service not running or at
+// another address, plaintext against TLS, one service's address given for
+// the other), and returns exit code 1.
 int Fail(const std::string& what, const absl::Status& status);
+
+// FailUsage reports MESSAGE as a usage error (ReportError) and returns
+// exit code 2.
+int FailUsage(const std::string& message);
+
+// HintFor returns the hint Fail prints for `status` ("" when none). Pure.
+std::string HintFor(const absl::Status& status);
 
 // WriteBytesToFile writes `bytes` to `path`, replacing it. Errors: the
 // file cannot be opened or written (the message names the path and the
@@ -93,10 +114,11 @@ void AddHandlesOption(CLI::App& command, tpr::v1::ExtractOptions* options);
 // refuses any other word, naming it. `options` must outlive the parse.
 void AddTopologyOption(CLI::App& command, tpr::v1::ExtractOptions* options);
 
-// ToJson returns `message` as one line of JSON (proto field names, every
-// primitive field printed; 64-bit integers as strings, non-finite doubles
-// as the strings "Infinity", "-Infinity" and "NaN": protobuf's JSON
-// mapping, valid JSON).
+// ToJson returns `message` as one line of JSON: proto field names, every
+// scalar field printed, every number a JSON number (64-bit integers too,
+// unlike protobuf's JSON mapping; NaN and infinities as null), enums by
+// name, bytes in base64, maps as objects, unset message fields left out.
+// Valid JSON whatever the strings hold (JsonString).
 std::string ToJson(const google::protobuf::Message& message);
 
 // Progress reports work done on stderr: a redrawn bar with rate and ETA on a

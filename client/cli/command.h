@@ -6,7 +6,7 @@
 //   const bool kRegistered = RegisterCommand(
 //       {"stats", "index counts and sizes", [](CLI::App& sub) {
 //          return [](const Globals& g) { return RunStats(g); };  // exit code
-//        }});
+//        }, "tpr stats"});
 #ifndef TPR_CLIENT_CLI_COMMAND_H_
 #define TPR_CLIENT_CLI_COMMAND_H_
 
@@ -37,6 +37,8 @@ struct Command {
   // The action reads the values the parser stored; keep them in storage the
   // action owns (e.g. a std::shared_ptr captured by both).
   std::function<CommandAction(CLI::App& sub)> setup;
+  // One typical command line, shown under "Example:" in the command's help.
+  std::string example;
 };
 
 // RegisterCommand adds `command` to the registry and returns true (for use

@@ -6,7 +6,7 @@
 //
 //   Globals g;  AddGlobalFlags(&app, &g);   // before parsing
 //   std::optional<IndexerClient> indexer = ConnectIndexer(g);
-//   if (!indexer) return 1;                 // the reason is on stderr
+//   if (!indexer) return 2;                 // the reason is reported
 //   indexer->Stats(&CallOptionsFor(g));
 #ifndef TPR_CLIENT_CLI_CONNECTION_H_
 #define TPR_CLIENT_CLI_CONNECTION_H_
@@ -36,8 +36,8 @@ struct Globals {
   // Deadline per call, in seconds. Default 120.
   double timeout_s = 120;
   // TLS and API key (--tls, --tls-ca, --tls-cert, --tls-key,
-  // --tls-server-name, --api-key or TPR_API_KEY), as the SDK's
-  // ConnectionOptions. Default: plaintext, no key.
+  // --tls-server-name, --api-key or TPR_API_KEY). Default: plaintext, no
+  // key.
   tpr::client::ConnectionOptions connection;
   // -v: print each call's method, status and request id on stderr.
   // Default false.
@@ -53,9 +53,10 @@ void AddGlobalFlags(CLI::App* app, Globals* g);
 // SDK's default retry policy).
 tpr::client::CallOptions CallOptionsFor(const Globals& g);
 
-// ConnectExtractor returns a client for g.extractor, or prints
-// "tpr: --extractor: <reason>" on stderr and returns nullopt (e.g. an
-// address without a port). Connection itself happens at the first call.
+// ConnectExtractor returns a client for g.extractor, or reports
+// "--extractor: <reason>" (Fail) and returns nullopt, a usage error (exit
+// 2: e.g. an address without a port, a missing TLS file). Connection itself
+// happens at the first call.
 std::optional<tpr::client::ExtractorClient> ConnectExtractor(const Globals& g);
 
 // ConnectIndexer is ConnectExtractor for g.indexer.

@@ -123,7 +123,7 @@ std::vector<eval::Query> RankAll(
 // D2Queries ranks the evaluated models by the D2 shape distribution
 // (Osada et al. 2001; eval/lib/d2.h, the options tpr-eval-local uses),
 // computed here from the mesh files, not by the services: the baseline of
-// issue 9's side-by-side tables. A file that cannot be read fails the
+// the side-by-side tables. A file that cannot be read fails the
 // column (NOT_FOUND / INVALID_ARGUMENT naming it).
 absl::StatusOr<std::vector<eval::Query>> D2Queries(
     const std::vector<Item>& items, const std::vector<int>& evaluated,
@@ -234,9 +234,9 @@ int RunEval(const Globals& g, const std::string& dataset,
     return 2;
   }
   std::optional<ExtractorClient> extractor = ConnectExtractor(g);
-  if (!extractor) return 1;
+  if (!extractor) return 2;
   std::optional<IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   const tpr::client::CallOptions call = CallOptionsFor(g);
 
   // 1. Extract and index, exactly as `tpr add` (same skip/--update rules).
@@ -305,8 +305,8 @@ int RunEval(const Globals& g, const std::string& dataset,
                              absl::StrCat("intent ", IntentTitle(intent)),
                              nullptr, intent);
       }
-      columns.emplace_back("paper", "paper TPR (EMD of Eq. 7 alone)", &paper,
-                           tpr::v1::INTENT_UNSPECIFIED);
+      columns.emplace_back("paper", "paper TPR (the EMD of the paper alone)",
+                           &paper, tpr::v1::INTENT_UNSPECIFIED);
       columns.emplace_back("spectrum", "spectrum alone (ShapeDNA)", &spectrum,
                            tpr::v1::INTENT_UNSPECIFIED);
       for (const auto& [key, title, ranking, intent] : columns) {
@@ -344,7 +344,7 @@ int RunEval(const Globals& g, const std::string& dataset,
   for (int i : evaluated) labels.push_back((*items)[i].label);
   const eval::ClassSizes models_per_class = eval::CountClasses(labels);
   const eval::Scores scores = eval::Evaluate(labels, queries);
-  // Issue 9's measure of class separation under the served distance.
+  // The measure of class separation under the served distance.
   const eval::ClassSeparation separation = eval::Separation(labels, queries);
   const bool evaluable = scores.overall.queries > 0;
   if (options.compare) {
@@ -486,7 +486,8 @@ const bool kRegistered = RegisterCommand(
        return [flags](const Globals& g) {
          return RunEval(g, flags->dataset, flags->options);
        };
-     }});
+     },
+     "tpr eval shapes/ --out results/"});
 
 }  // namespace
 

@@ -74,13 +74,11 @@ int RunExtract(const Globals& g, const ExtractFlags& flags) {
   media.set_preview(!flags.preview.empty());
   const bool pictures = media.thumbnail() || media.preview();
   if (pictures && flags.meshes.size() != 1) {
-    std::fprintf(stderr,
-                 "tpr extract: --thumbnail and --preview take exactly one "
-                 "MESH\n");
-    return 2;
+    return FailUsage(
+        "extract: --thumbnail and --preview take exactly one MESH");
   }
   std::optional<tpr::client::ExtractorClient> client = ConnectExtractor(g);
-  if (!client) return 1;
+  if (!client) return 2;
   int failures = 0;
   for (const std::string& path : flags.meshes) {
     absl::StatusOr<tpr::v1::ExtractResponse> r =
@@ -109,7 +107,8 @@ int RunExtract(const Globals& g, const ExtractFlags& flags) {
 }
 
 const bool kRegistered = RegisterCommand(
-    {"extract", "print the signature summary of meshes", [](CLI::App& sub) {
+    {"extract", "print the signature summary of meshes",
+     [](CLI::App& sub) {
        auto flags = std::make_shared<ExtractFlags>();
        sub.add_option("MESH", flags->meshes, "mesh files (OFF, OBJ, PLY, STL)")
            ->required();
@@ -127,7 +126,8 @@ const bool kRegistered = RegisterCommand(
                     "thumbnail without the TPR overlay");
        AddTopologyOption(sub, &flags->options);
        return [flags](const Globals& g) { return RunExtract(g, *flags); };
-     }});
+     },
+     "tpr extract dog.off --thumbnail dog.png"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -68,12 +68,10 @@ int SaveMedia(const tpr::client::IndexerClient& indexer,
 int RunGet(const Globals& g, const GetFlags& flags) {
   const bool media = !flags.thumbnail.empty() || !flags.preview.empty();
   if (media && flags.ids.size() != 1) {
-    std::fprintf(stderr,
-                 "tpr get: --thumbnail and --preview take exactly one ID\n");
-    return 2;
+    return FailUsage("get: --thumbnail and --preview take exactly one ID");
   }
   std::optional<tpr::client::IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   int failures = 0;
   for (const std::string& id : flags.ids) {
     absl::StatusOr<tpr::v1::Model> m = indexer->Get(id);
@@ -101,7 +99,8 @@ const bool kRegistered = RegisterCommand(
                       "save the model's preview mesh (binary PLY, at most "
                       "5,000 triangles) to FILE");
        return [flags](const Globals& g) { return RunGet(g, *flags); };
-     }});
+     },
+     "tpr get dog1/T305.obj --thumbnail dog.png"});
 
 }  // namespace
 }  // namespace tpr::cli

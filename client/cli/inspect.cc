@@ -187,7 +187,8 @@ const bool kRegistered = RegisterCommand(
                     "extract in this process instead of through "
                     "tpr-extractor (no service needed)");
        return [flags](const Globals& g) { return RunInspect(g, *flags); };
-     }});
+     },
+     "tpr inspect dog.off -o dog_regions.ply"});
 
 }  // namespace
 }  // namespace tpr::cli

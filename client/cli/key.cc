@@ -89,7 +89,8 @@ const bool kRegistered = RegisterCommand(
        make->add_option("--name", args->name,
                         "a label kept next to the hash (no spaces)");
        return [args](const Globals& g) { return RunKeyNew(g, *args); };
-     }});
+     },
+     "tpr key new --role write --keys /etc/tpr/keys.txt --name ingest"});
 
 }  // namespace
 }  // namespace tpr::cli

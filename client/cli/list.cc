@@ -15,7 +15,7 @@ namespace {
 
 int RunList(const Globals& g, const std::string& label) {
   std::optional<tpr::client::IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   absl::StatusOr<std::vector<tpr::v1::Model>> models = indexer->ListAll(label);
   if (!models.ok()) return Fail("list", models.status());
   for (const tpr::v1::Model& m : *models) {
@@ -40,7 +40,8 @@ const bool kRegistered = RegisterCommand(
        auto label = std::make_shared<std::string>();
        sub.add_option("--label", *label, "only models with this label");
        return [label](const Globals& g) { return RunList(g, *label); };
-     }});
+     },
+     "tpr list --label dog1"});
 
 }  // namespace
 }  // namespace tpr::cli

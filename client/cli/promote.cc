@@ -52,7 +52,7 @@ int RunStatus(const Globals& g, AdminTarget& admin) {
 
 int RunPromote(const Globals& g, bool status_only) {
   std::optional<AdminTarget> admin = ConnectAdmin(g);
-  if (!admin) return 1;
+  if (!admin) return 2;
   if (status_only) return RunStatus(g, *admin);
   grpc::ClientContext context;
   admin->prepare(&context);
@@ -84,7 +84,8 @@ const bool kRegistered = RegisterCommand(
        return [status_only](const Globals& g) {
          return RunPromote(g, *status_only);
        };
-     }});
+     },
+     "tpr --indexer 127.0.0.1:7012 promote --status"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -31,15 +31,14 @@ struct QueryFlags {
 
 int RunQuery(const Globals& g, const QueryFlags& flags) {
   if (flags.mesh.empty() == flags.id.empty()) {
-    std::fprintf(stderr, "tpr query: give either MESH or --id ID\n");
-    return 2;
+    return FailUsage("query: give either MESH or --id ID");
   }
   std::optional<tpr::client::IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   tpr::v1::SearchRequest request;
   if (!flags.mesh.empty()) {
     std::optional<tpr::client::ExtractorClient> extractor = ConnectExtractor(g);
-    if (!extractor) return 1;
+    if (!extractor) return 2;
     absl::StatusOr<tpr::v1::ExtractResponse> r =
         extractor->ExtractFile(flags.mesh, flags.extract);
     if (!r.ok()) return Fail(flags.mesh, r.status());
@@ -89,28 +88,37 @@ int RunQuery(const Globals& g, const QueryFlags& flags) {
 }
 
 const bool kRegistered = RegisterCommand(
-    {"query", "k nearest models to a mesh or a stored id", [](CLI::App& sub) {
+    {"query", "k nearest models to a mesh or a stored id",
+     [](CLI::App& sub) {
        auto flags = std::make_shared<QueryFlags>();
        sub.add_option("MESH", flags->mesh, "query mesh file");
        sub.add_option("--id", flags->id,
                       "query by stored model id instead of a mesh");
        sub.add_option("-k", flags->k, "number of neighbours")
-           ->capture_default_str();
+           ->capture_default_str()
+           ->check(CLI::Range(1, 1000000));
        sub.add_option("--radius", flags->radius,
-                      "only neighbours at distance <= radius (0: any)");
+                      "only neighbours at distance <= radius (0: any); 0 is "
+                      "the same shape, the scale depends on --intent "
+                      "(docs/distances.md)")
+           ->check(CLI::NonNegativeNumber);
        sub.add_option("--label", flags->label, "only models with this label");
        sub.add_flag("--exclude-self", flags->exclude_self,
                     "with --id, leave the query model out");
        sub.add_option("--rank-by", flags->rank_by,
-                      "default: the intent's distance; paper: the EMD of Eq. "
-                      "7 alone; spectrum: the spectrum alone (overrides "
-                      "--intent)")
-           ->check(CLI::IsMember({"default", "paper", "spectrum"}));
+                      "default: the intent's distance; paper: the distance "
+                      "of Tam and Lau's paper alone (the EMD between the "
+                      "topological points); spectrum: the shape spectrum "
+                      "alone (both override --intent)")
+           ->check(
+               CLI::IsMember({"default", "paper", "spectrum"}).description(""))
+           ->type_name("default|paper|spectrum");
        AddIntentOption(sub, &flags->intent);
        AddHandlesOption(sub, &flags->extract);
        AddTopologyOption(sub, &flags->extract);
        return [flags](const Globals& g) { return RunQuery(g, *flags); };
-     }});
+     },
+     "tpr query dog.off -k 5            # or: tpr query --id dog1/T305.obj"});
 
 }  // namespace
 }  // namespace tpr::cli

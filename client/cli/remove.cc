@@ -13,7 +13,7 @@ namespace {
 
 int RunRemove(const Globals& g, const std::vector<std::string>& ids) {
   std::optional<tpr::client::IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   int failures = 0;
   for (const std::string& id : ids) {
     absl::Status s = indexer->Delete(id);
@@ -30,11 +30,13 @@ int RunRemove(const Globals& g, const std::vector<std::string>& ids) {
 }
 
 const bool kRegistered = RegisterCommand(
-    {"remove", "delete stored models", [](CLI::App& sub) {
+    {"remove", "delete stored models",
+     [](CLI::App& sub) {
        auto ids = std::make_shared<std::vector<std::string>>();
        sub.add_option("ID", *ids, "model ids")->required();
        return [ids](const Globals& g) { return RunRemove(g, *ids); };
-     }});
+     },
+     "tpr remove dog1/T305.obj dog1/T306.obj"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -22,7 +22,7 @@ struct RestoreArgs {
 
 int RunRestore(const Globals& g, const RestoreArgs& args) {
   std::optional<AdminTarget> admin = ConnectAdmin(g);
-  if (!admin) return 1;
+  if (!admin) return 2;
   grpc::ClientContext context;
   admin->prepare(&context);
   tpr::v1::RestoreRequest request;
@@ -57,7 +57,8 @@ const bool kRegistered = RegisterCommand(
        sub.add_option("--backup-id", args->backup_id,
                       "backup to restore (0: the latest)");
        return [args](const Globals& g) { return RunRestore(g, *args); };
-     }});
+     },
+     "tpr restore --from /backups/tpr --into /var/lib/tpr/indexer"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -12,7 +12,7 @@ namespace {
 
 int RunStats(const Globals& g) {
   std::optional<tpr::client::IndexerClient> indexer = ConnectIndexer(g);
-  if (!indexer) return 1;
+  if (!indexer) return 2;
   absl::StatusOr<tpr::v1::StatsResponse> s = indexer->Stats();
   if (!s.ok()) return Fail("stats", s.status());
   if (g.json) {
@@ -33,10 +33,10 @@ int RunStats(const Globals& g) {
   return 0;
 }
 
-const bool kRegistered =
-    RegisterCommand({"stats", "index counts and sizes", [](CLI::App&) {
-                       return [](const Globals& g) { return RunStats(g); };
-                     }});
+const bool kRegistered = RegisterCommand(
+    {"stats", "index counts and sizes",
+     [](CLI::App&) { return [](const Globals& g) { return RunStats(g); }; },
+     "tpr stats"});
 
 }  // namespace
 }  // namespace tpr::cli

@@ -24,41 +24,6 @@
 namespace tpr::client {
 namespace {
 
-// Whether `host` is a dotted IPv4 literal (four decimal groups).
-bool IsIpv4Literal(absl::string_view host) {
-  std::vector<absl::string_view> parts = absl::StrSplit(host, '.');
-  if (parts.size() != 4) return false;
-  for (absl::string_view p : parts) {
-    if (p.empty() || p.size() > 3) return false;
-    for (char c : p) {
-      if (!absl::ascii_isdigit(static_cast<unsigned char>(c))) return false;
-    }
-  }
-  return true;
-}
-
-enum class Family { kIpv4, kIpv6, kName };
-
-absl::StatusOr<Family> ClassifyAddress(absl::string_view address) {
-  if (absl::StartsWith(address, "[")) {
-    const size_t close = address.find(']');
-    if (close == absl::string_view::npos || close + 1 >= address.size() ||
-        address[close + 1] != ':' || close + 2 >= address.size()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("address '", address, "' needs the form [v6]:PORT"));
-    }
-    return Family::kIpv6;
-  }
-  const size_t colon = address.rfind(':');
-  if (colon == absl::string_view::npos || colon == 0 ||
-      colon + 1 == address.size()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("address '", address, "' needs the form HOST:PORT"));
-  }
-  return IsIpv4Literal(address.substr(0, colon)) ? Family::kIpv4
-                                                 : Family::kName;
-}
-
 std::chrono::system_clock::time_point DeadlineFor(const CallOptions& call) {
   if (call.timeout == absl::InfiniteDuration()) {
     return std::chrono::system_clock::time_point::max();
@@ -108,56 +73,6 @@ grpc::Status WithRetries(grpc::Channel* channel, const CallOptions& call,
 }
 
 }  // namespace
-
-absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses) {
-  addresses = absl::StripAsciiWhitespace(addresses);
-  if (addresses.empty())
-    return absl::InvalidArgumentError("no server address given");
-  // Already a gRPC target with a resolver scheme.
-  for (absl::string_view scheme :
-       {"dns:", "ipv4:", "ipv6:", "unix:", "unix-abstract:"}) {
-    if (absl::StartsWith(addresses, scheme)) return std::string(addresses);
-  }
-  std::vector<std::string> list;
-  for (absl::string_view a :
-       absl::StrSplit(addresses, ',', absl::SkipWhitespace())) {
-    list.emplace_back(absl::StripAsciiWhitespace(a));
-  }
-  if (list.empty())
-    return absl::InvalidArgumentError("no server address given");
-  std::vector<Family> families;
-  for (const std::string& a : list) {
-    absl::StatusOr<Family> f = ClassifyAddress(a);
-    if (!f.ok()) return f.status();
-    families.push_back(*f);
-  }
-  if (std::any_of(families.begin(), families.end(),
-                  [&](Family f) { return f != families.front(); })) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("addresses '", addresses,
-                     "' mix IPv4, IPv6 and host names; list one kind"));
-  }
-  switch (families.front()) {
-    case Family::kIpv4:
-      return absl::StrCat("ipv4:", absl::StrJoin(list, ","));
-    case Family::kIpv6:
-      return absl::StrCat("ipv6:", absl::StrJoin(list, ","));
-    case Family::kName:
-      if (list.size() > 1) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("addresses '", addresses,
-                         "' list several host names; give IP literals or one "
-                         "dns:///NAME:PORT"));
-      }
-      return absl::StrCat("dns:///", list.front());
-  }
-  return absl::InternalError("unreachable");
-}
-
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
-    absl::string_view addresses) {
-  return MakeChannel(addresses, ConnectionOptions());
-}
 
 // --- ExtractorClient ---------------------------------------------------------
 
@@ -619,6 +534,26 @@ absl::StatusOr<v1::StatsResponse> IndexerClient::Stats(
                   });
   if (!status.ok()) return common::FromGrpcStatus(status);
   return response;
+}
+
+// --- Connect with TLS and API key --------------------------------------------
+
+absl::StatusOr<ExtractorClient> ExtractorClient::Connect(
+    absl::string_view addresses, const ConnectionOptions& connection,
+    CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      MakeChannel(addresses, connection);
+  if (!channel.ok()) return channel.status();
+  return ExtractorClient(*std::move(channel), defaults);
+}
+
+absl::StatusOr<IndexerClient> IndexerClient::Connect(
+    absl::string_view addresses, const ConnectionOptions& connection,
+    CallOptions defaults) {
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+      MakeChannel(addresses, connection);
+  if (!channel.ok()) return channel.status();
+  return IndexerClient(*std::move(channel), defaults);
 }
 
 }  // namespace tpr::client

@@ -81,7 +81,7 @@ DistanceMatrix PairwiseDistances(size_t n, int threads,
 std::vector<Query> LeaveOneOutQueries(const DistanceMatrix& d);
 
 // ClassSeparation: mean distance between two distinct models of one class
-// and of different classes, over every pair (issue 9's measure of how well
+// and of different classes, over every pair (the measure of how well
 // a distance separates similar-skeleton classes).
 struct ClassSeparation {
   double within = 0.0, between = 0.0;

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Shortest non-separating cycle of closed triangle meshes (issue 9).
+"""Shortest non-separating cycle of closed triangle meshes.
 
 For each mesh (OBJ or OFF) prints the vertex count, the genus (from V - E + F
 of a closed, connected mesh) and, when the genus is positive, the length of

@@ -1,6 +1,6 @@
 // Handles (genus > 0): find the shortest non-separating cycle of a closed
 // mesh and cut the surface open along it, capping both sides, until the
-// mesh has genus 0 (issue 9).
+// mesh has genus 0.
 //
 // Why. TPR is defined for genus-0 surfaces (Tam & Lau 2007, 7.4: "our
 // method does not handle models of genus > 0"): a handle gives the geodesic

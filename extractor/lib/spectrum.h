@@ -3,7 +3,7 @@
 // L x = lambda M x with the linear-FEM cotangent stiffness L and the
 // consistent mass M, scaled by area so that the spectrum is invariant to
 // uniform scale. A global, pose-invariant description that complements the
-// TPR's local features on similar-skeleton shapes (issue 9).
+// TPR's local features on similar-skeleton shapes.
 //
 //   absl::StatusOr<Spectrum> s =
 //       LaplaceBeltramiSpectrum(mesh, SpectrumOptions{});

@@ -39,8 +39,8 @@ enum class IdentitySurface {
   // a body. Measured: surface area within 2.1% of the rest mesh's, where
   // spread legs stretch the groin (synth_test, SkinnedPosesKeepOneSkin).
   kSkinned,
-  // The posed skeleton is polygonized afresh for every pose (the behaviour
-  // up to session 5): each pose is a new skin, whose area moves by 0.6 to
+  // The posed skeleton is polygonized afresh for every pose (the older
+  // identity sets): each pose is a new skin, whose area moves by 0.6 to
   // 1.4% between poses of one body (docs/results.md). Kept to reproduce the
   // earlier identity set.
   kRepolygonized,
@@ -133,12 +133,12 @@ absl::StatusOr<Skeleton> StarSkeleton(int arms, int pose_index,
 absl::StatusOr<extract::Mesh> GenerateStar(int arms,
                                            const ShapeOptions& options);
 
-// Identity mode (issue 9): several bodies on one skeleton, the biped's,
+// Identity mode: several bodies on one skeleton, the biped's,
 // that differ in limb lengths and thickness, each in many poses. Class =
 // body: the similar-skeleton case (Tam & Lau 2007, 5.3 and Tables 2-3) in
 // unlimited supply, like people of different build in different poses.
 //
-// Why the poses are skinned (session 6, the lead's decision): the held-out
+// Why the poses are skinned: the held-out
 // set identity mode stands for ("ten people, ten poses each") consists of
 // registrations of real bodies, where a pose is a near-isometric
 // deformation of one skin. Re-polygonizing the blended union of the posed

@@ -10,7 +10,7 @@
 // that differ in limb lengths and thickness (body_000, body_001, ...;
 // synth.h, identity mode); --identity-surface skinned (default: one rest
 // mesh per body, skinned to each pose) or repolygonized (each pose
-// polygonized afresh, the sets made up to session 5).
+// polygonized afresh, the older identity sets).
 #include <atomic>
 #include <chrono>
 #include <cstdio>

@@ -5,7 +5,7 @@
 //   client ──> tpr-gateway ──> shard 0 (primary, replicas...)
 //                          ──> shard 1 ...
 //
-// Routing (issue 10):
+// Routing:
 // - Upsert, Get, GetThumbnail, GetPreview and Delete go to the owning
 //   shard, ShardOf(id, S). Writes go to its primary; reads to any serving
 //   address of the shard. GetPreview reads the shard's whole stream (at
@@ -43,7 +43,7 @@
 // cancellation propagate to the shards, and carries the call's request id
 // (x-request-id, common/call_interceptor.h) into the shards' logs.
 //
-// Security and observation (issue 11): the shard channels use the
+// Security and observation: the shard channels use the
 // credentials in GatewayOptions (TLS, optionally a client certificate for
 // shards that demand mutual TLS) and send shard_api_key as `authorization:
 // Bearer` with every call; every shard call ends in on_shard_call (latency

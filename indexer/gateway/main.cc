@@ -18,14 +18,14 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
+#include "client/peer/connection_flags.h"
 #include "common/config.h"
 #include "common/server_flags.h"
 #include "common/server_lifecycle.h"
 #include "indexer/gateway/gateway_service.h"
 #include "indexer/gateway/shard_map.h"
 #include "indexer/service/search_metrics.h"
-#include "tpr/client.h"
-#include "tpr/connection_flags.h"
+#include "tpr/connection.h"
 
 namespace {
 

@@ -6,7 +6,7 @@
 //   absl::StatusOr<ShardMap> map = ParseShardMap(file_text);
 //   int shard = ShardOf("dog/dog_3.off", map->shards.size());
 //
-// Sharding (issue 10): a fixed number S of shards; an id belongs to shard
+// Sharding: a fixed number S of shards; an id belongs to shard
 // Fnv1a64(UTF-8 bytes of the id) mod S. FNV-1a is stable across builds,
 // platforms and languages (std::hash is not), so a data directory written
 // under one gateway build is routed the same way by the next. Changing S

@@ -112,7 +112,7 @@ inline constexpr int kMaxFeatures = 200;
 // the spectral and heat-trace embeddings. Copyable and movable; built only by
 // Prepare. Thread-safe to read from any number of threads.
 //
-// Compact storage (issue 14: at most 4 KB per model). One block per model
+// Compact storage (at most 4 KB per model). One block per model
 // holds the masses in double, then the spectral embedding, the heat-trace
 // embedding and the coordinates in float32, unpadded: the coordinates (1 + 3
 // bands values per feature) are the bulk of a signature. The index keeps its

@@ -1,4 +1,4 @@
-// Huge pages for the index's large arrays (issue 14: 10-NN over 1M models).
+// Huge pages for the index's large arrays (10-NN over 1M models).
 //
 // A search over 1M models touches about 15,600 cold signatures of 3.5 KB,
 // 20,700 centroid rows and the stored distances of about 30,000 bucket

@@ -1,6 +1,6 @@
 // The indexer's view of a TPR signature: a weighted set of features, each a
 // point in the ground-distance space of Eq. 7 (Tam & Lau 2007, section 6),
-// plus the mesh's Laplace-Beltrami spectrum (issue 9).
+// plus the mesh's Laplace-Beltrami spectrum.
 // The indexer library does not know the extractor; services convert from
 // tpr.v1.Signature.
 //

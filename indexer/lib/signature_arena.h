@@ -1,5 +1,5 @@
 // SignatureArena: an index's prepared signatures in one contiguous,
-// huge-page-advised block, laid out in the VP-tree's order (issue 14).
+// huge-page-advised block, laid out in the VP-tree's order.
 //
 // A search over 1M models bounds about 15,600 cold signatures of 3.5 KB per
 // 10-NN query at level 2 (docs/search-cost.md). With one heap block per

@@ -1,4 +1,4 @@
-// Follower mode of tpr-indexer (`--follow PRIMARY`, issue 10): a read-only
+// Follower mode of tpr-indexer (`--follow PRIMARY`): a read-only
 // copy of one primary, kept current by RocksDB's own mechanisms.
 //
 //   1. PrepareFollowerDir, before the store is opened: an empty data

@@ -22,6 +22,7 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
+#include "client/peer/connection_flags.h"
 #include "common/config.h"
 #include "common/metrics.h"
 #include "common/server_flags.h"
@@ -30,8 +31,7 @@
 #include "indexer/service/follower.h"
 #include "indexer/service/indexer_core.h"
 #include "indexer/service/indexer_service.h"
-#include "tpr/client.h"
-#include "tpr/connection_flags.h"
+#include "tpr/connection.h"
 
 int main(int argc, char** argv) {
   CLI::App app{

@@ -1,4 +1,4 @@
-// Copying an indexer's data with RocksDB's own mechanisms (issue 10): online
+// Copying an indexer's data with RocksDB's own mechanisms: online
 // incremental backups (BackupEngine), consistent copies for a starting
 // follower (Checkpoint), and the primary's write-ahead log for a follower to
 // tail (GetUpdatesSince) and apply. No consensus of our own: one primary per

@@ -190,7 +190,7 @@ absl::Status CheckAgainstAcknowledged(const Acknowledged& ack,
 //   crash at the very end of a log (never acknowledged: acknowledged writes
 //   are synced whole) is dropped; any other corruption refuses the open.
 //   RocksDB's default, kPointInTimeRecovery, stops replay silently at the
-//   first bad record and serves what came before (issue 12, item 2).
+//   first bad record and serves what came before.
 // - paranoid_checks (the default, stated): corruption found in reads or
 //   table files fails instead of being skipped; a failed write stops writes.
 // - best_efforts_recovery off (the default, stated): never fall back to an

@@ -311,7 +311,7 @@ const tpr::index::SignatureArena& Arena(Db& db) {
 
 // Where a search reads the items' signatures.
 enum class Storage {
-  kHeap,   // Db::items: a heap block each (the index before session 7)
+  kHeap,   // Db::items: a heap block each (the former layout)
   kArena,  // Arena(db): as SignatureIndex keeps them
 };
 
@@ -651,7 +651,7 @@ BENCHMARK(BM_KnnVpTreeExtractedLevel2)
 // BM_KnnVpTreeExtractedStorage/<n>/<k>/<spectral>/<arena>: the index's
 // search (as BM_KnnVpTreeExtractedLevel2/<n>/<k>/<spectral>/1) with the
 // signatures read from one heap block each in generation order (arena 0,
-// the index before session 7) or from the SignatureArena in tree order
+// the former layout) or from the SignatureArena in tree order
 // (1, the index's), side by side on one database and tree. Both rows
 // build the arena (a second copy of the signatures), so peak_rss_mib
 // counts both; bytes_per_model is each storage's.
@@ -691,7 +691,7 @@ BENCHMARK(BM_KnnIntentExtracted)
     ->Unit(benchmark::kMillisecond);
 
 // BM_KnnVpTreeExtractedBefore/<n>/<k>/<spectral>: the search as it was
-// before session 5's last changes (level 1 reads the spectral term from
+// before its last changes (level 1 reads the spectral term from
 // the signature, the signature prefetched with the centroid row always,
 // level 2 on the double matrix), on the data of BM_KnnVpTreeExtractedLevel2
 // (same <spectral> meaning), to run beside it: `Level2/<n>/<k>/<s>/1` is

@@ -536,7 +536,7 @@ TEST(MeshIoTest, UnknownFormatIsInvalidArgument) {
   EXPECT_THAT(m.status().message(), HasSubstr("cannot tell the mesh format"));
 }
 
-// Issue 12: huge coordinates were reported as "degenerate triangles".
+// Huge coordinates were reported as "degenerate triangles".
 TEST(MeshIoTest, HugeCoordinatesNameTheVertexAndLine) {
   const std::string off =
       "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1e20 0\n0 0 1\n"

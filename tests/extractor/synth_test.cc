@@ -831,7 +831,7 @@ TEST(SynthTest, SkinnedEdgesAreRigidAwayFromJoints) {
   }
 }
 
-// The re-polygonizing mode still makes the identity set of sessions 1 to 5:
+// The re-polygonizing mode still makes the older identity set:
 // this fingerprint was taken from GenerateIdentity(3, 1) as the code made it
 // before the skinned mode existed (and tpr-synth --identity --classes 10
 // --poses 10 --vertices 5000 --seed 1 --identity-surface repolygonized

@@ -184,7 +184,7 @@ TEST(EmdTest, RandomPairsMatchLemon) {
   RecordProperty("worst_relative_error", std::to_string(worst));
 }
 
-// Compact storage (issue 14): the EMD on float32 coordinates stays within
+// Compact storage: the EMD on float32 coordinates stays within
 // the documented bound (ground_distance.h) of the EMD computed by LEMON on
 // Eq. 7 in double straight from the raw features.
 TEST(EmdTest, Float32StorageErrorWithinBound) {

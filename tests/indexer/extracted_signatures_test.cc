@@ -1,6 +1,6 @@
 // Search machinery on signatures extracted from real meshes (the dev sets
 // under $TPR_SHARED_DIR when present, generated shapes always), not only on
-// drawn ones (issue 14):
+// drawn ones:
 // - Compact storage (ground_distance.h): PreparedSignature keeps its
 //   coordinates in float32. Every EMD stays within the documented bound of
 //   the EMD on double coordinates (LEMON on Eq. 7 computed in double from

@@ -12,6 +12,7 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <regex>
@@ -73,6 +74,12 @@ std::string ReadBytes(const std::string& path) {
   std::stringstream bytes;
   bytes << in.rdbuf();
   return bytes.str();
+}
+
+// The id `tpr add FILE` gives: "<its folder's name>/<its name>".
+std::string FileId(const std::string& path) {
+  const std::filesystem::path p(path);
+  return p.parent_path().filename().string() + "/" + p.filename().string();
 }
 
 int JsonInt(const std::string& json, const std::string& key) {
@@ -237,7 +244,7 @@ TEST_F(CliTest, AddThenQueryStreamsTheBruteForceRanking) {
   EXPECT_EQ(RunTpr(cluster_, "query --id no/such/id").exit_code, 1);
   EXPECT_EQ(RunTpr(cluster_, "query -k 0 --id " + files->front().relative_path)
                 .exit_code,
-            1);
+            2);  // a usage error
   CommandResult extract =
       RunTpr(cluster_, "extract " + set + "/" + files->front().relative_path);
   EXPECT_EQ(extract.exit_code, 0) << extract.err;
@@ -299,12 +306,12 @@ TEST_F(CliTest, HandlesOptionSelectsCutOrKeep) {
   EXPECT_NE(bad.err.find("sew"), std::string::npos) << bad.err;
 
   ASSERT_EQ(RunTpr(cluster_, "add --handles keep " + torus).exit_code, 0);
-  CommandResult stored = RunTpr(cluster_, "--json get " + torus);
+  CommandResult stored = RunTpr(cluster_, "--json get " + FileId(torus));
   ASSERT_EQ(stored.exit_code, 0) << stored.err;
   EXPECT_NE(stored.out.find("HANDLE_TREATMENT_KEEP"), std::string::npos)
       << stored.out;
   ASSERT_EQ(RunTpr(cluster_, "add --update " + torus).exit_code, 0);
-  stored = RunTpr(cluster_, "--json get " + torus);
+  stored = RunTpr(cluster_, "--json get " + FileId(torus));
   EXPECT_NE(stored.out.find("HANDLE_TREATMENT_CUT"), std::string::npos)
       << stored.out;
 }
@@ -328,8 +335,8 @@ TEST_F(CliTest, AddStoresMediaAndGetSavesThem) {
 
   const std::string png = cluster_.dir() + "/a.png";
   const std::string ply = cluster_.dir() + "/a.ply";
-  CommandResult got = RunTpr(
-      cluster_, "get " + id_a + " --thumbnail " + png + " --preview " + ply);
+  CommandResult got = RunTpr(cluster_, "get " + FileId(id_a) + " --thumbnail " +
+                                           png + " --preview " + ply);
   ASSERT_EQ(got.exit_code, 0) << got.err;
   EXPECT_NE(got.out.find("thumbnail and preview stored"), std::string::npos)
       << got.out;
@@ -363,13 +370,15 @@ TEST_F(CliTest, AddStoresMediaAndGetSavesThem) {
   EXPECT_LE(back->mesh.triangles.size(), 5000u);
 
   // Without media: a clear refusal, then --update makes them.
-  CommandResult none = RunTpr(cluster_, "get " + id_b + " --thumbnail " + png);
+  CommandResult none =
+      RunTpr(cluster_, "get " + FileId(id_b) + " --thumbnail " + png);
   EXPECT_EQ(none.exit_code, 1);
   EXPECT_NE(none.err.find("NOT_FOUND"), std::string::npos) << none.err;
   EXPECT_NE(none.err.find("tpr add --update"), std::string::npos) << none.err;
   ASSERT_EQ(RunTpr(cluster_, "add --update " + id_b).exit_code, 0);
-  EXPECT_EQ(RunTpr(cluster_, "get " + id_b + " --thumbnail " + png).exit_code,
-            0);
+  EXPECT_EQ(
+      RunTpr(cluster_, "get " + FileId(id_b) + " --thumbnail " + png).exit_code,
+      0);
   // Usage: media flags take one id.
   EXPECT_EQ(RunTpr(cluster_, "get " + id_a + " " + id_b + " --preview " + ply)
                 .exit_code,
@@ -397,7 +406,7 @@ TEST_F(CliTest, TopologyOptionSelectsPersistenceOrPaper) {
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.err.find("morse"), std::string::npos) << bad.err;
   ASSERT_EQ(RunTpr(cluster_, "add --topology paper " + torus).exit_code, 0);
-  CommandResult stored = RunTpr(cluster_, "--json get " + torus);
+  CommandResult stored = RunTpr(cluster_, "--json get " + FileId(torus));
   ASSERT_EQ(stored.exit_code, 0) << stored.err;
   EXPECT_NE(stored.out.find("TOPOLOGY_METHOD_PAPER"), std::string::npos)
       << stored.out;

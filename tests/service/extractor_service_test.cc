@@ -201,7 +201,7 @@ TEST_F(ExtractorServiceTest,
   EXPECT_TRUE(ok.ok()) << ok.status();
 }
 
-// Issue 12: bytes that do not parse in the middle of an upload were taken
+// Bytes that do not parse in the middle of an upload were taken
 // for the end of the stream (gRPC's typed reader reports both the same
 // way), so the chunks before them were extracted as if they were the whole
 // mesh and the call answered OK. Now it fails with INVALID_ARGUMENT naming
@@ -409,7 +409,7 @@ class RawUpload {
   std::unique_ptr<grpc::ClientWriter<v1::ExtractRequest>> writer_;
 };
 
-// Issue 12 item 5, reproduced: as many uploads as there are slots each send
+// Slot starvation, reproduced: as many uploads as there are slots each send
 // 4 bytes and wait. While they wait everyone else is refused; after the idle
 // timeout they are refused with DEADLINE_EXCEEDED naming the flag, their
 // slots are free, and a normal client is served. Under a sanitizer every
@@ -517,7 +517,7 @@ TEST_F(ExtractorServiceTest, TricklingUploadIsRefusedBelowTheMinimumRate) {
   EXPECT_GT(fast.response().signature().features_size(), 0);
 }
 
-// The reproduction of issue 12 item 5 on the real binary with its flags:
+// The slot-starvation reproduction on the real binary with its flags:
 // 16 streams that send 4 bytes and wait no longer hold every slot for
 // minutes; a normal client is served once the idle timeout has passed.
 // Under a sanitizer the idle timeout and every wait and time bound are
@@ -619,7 +619,7 @@ std::string HostileUpload(int kind, size_t bytes) {
   return out;
 }
 
-// Issue 12 item 6: the documented memory bound (extractor_service.h) on a
+// The documented memory bound (extractor_service.h) on a
 // real process. Every slot holds a nearly full hostile upload at once while
 // more clients push oversized uploads (chunked, and as one huge message);
 // then the held uploads are parsed, two at a time. The growth of VmHWM over

@@ -1,4 +1,4 @@
-// tpr-gateway's operations part (issue 11) through the real binaries on
+// tpr-gateway's operations part through the real binaries on
 // loopback: two tpr-indexer shards that demand TLS and API keys, a
 // tpr-gateway that serves TLS and checks keys itself and reaches the shards
 // with its own client TLS options and key (--shard-tls, --shard-tls-ca,
@@ -10,7 +10,7 @@
 // gateway and of the shards that served it; and the gateway's /metrics
 // after known calls (per-shard latency counts equal to the calls each shard
 // got, per-shard errors with their code). Also a follower tpr-indexer
-// reaching its TLS primary with its own TLS options and key (issue 10).
+// reaching its TLS primary with its own TLS options and key.
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 #include <gtest/gtest.h>

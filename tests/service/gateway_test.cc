@@ -392,7 +392,7 @@ TEST_F(GatewayTest, UnaryCallsAnswerAsOneIndexer) {
             grpc::StatusCode::INVALID_ARGUMENT);
 }
 
-// Issue 12: a message that does not parse in a BatchUpsert stream was taken
+// A message that does not parse in a BatchUpsert stream was taken
 // for its end (OK for a truncated batch). Through the gateway it fails with
 // INVALID_ARGUMENT naming the message; the models before it are on their
 // shards, none after it.
@@ -835,7 +835,7 @@ class EndlessShard final : public tpr::v1::Indexer::Service {
   std::vector<End> ends_;
 };
 
-// Issue 10: "shard streams are cancelled once k neighbours have been sent",
+// "shard streams are cancelled once k neighbours have been sent",
 // observed on the shard. Shard 0 (a real indexer) holds every near model;
 // shard 1 would stream neighbours for ever. The gateway sends shard 0's k
 // nearest (the oracle: brute force over shard 0's models) and must then

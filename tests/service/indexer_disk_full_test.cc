@@ -1,4 +1,4 @@
-// tpr-indexer on a full disk (issue 12, item 7): writes fail with
+// tpr-indexer on a full disk: writes fail with
 // RESOURCE_EXHAUSTED (which the SDK does not retry), readiness reports the
 // reason meanwhile, and once space is freed the indexer accepts writes again
 // by itself, without a restart; no acknowledged model is lost. The disk is a

@@ -453,7 +453,7 @@ TEST_F(IndexerServiceTest, BadInputGetsItsCodeAndServerKeepsServing) {
                           BruteForce(models[0].signature, models, 4));
 }
 
-// Issue 12 item 3: a label of tens of MiB made List and Stats fail for
+// A label of tens of MiB made List and Stats fail for
 // every client. Labels are bounded (256 bytes), and List and Stats answers
 // stay under gRPC's default 4 MiB receive limit by construction, even with
 // every model at the largest id, label and metadata allowed. The stub's
@@ -565,7 +565,7 @@ TEST_F(IndexerServiceTest, LabelsAreBoundedAndListAndStatsStayUnderFourMiB) {
     EXPECT_EQ(stats.labels().at(absl::StrCat("popular", i)), 3);
 }
 
-// Issue 12 item 8 (indexer): invalid UTF-8 in an id, garbage bytes and ids
+// Invalid UTF-8 in an id, garbage bytes and ids
 // outside the alphabet get INVALID_ARGUMENT naming the problem, never
 // INTERNAL with an empty message. Raw bytes go on the wire through a
 // generic call, as a client in another language (or a fuzzer) sends them.
@@ -675,7 +675,7 @@ TEST_F(IndexerServiceTest, BatchUpsertCountsAndKeepsModelsBeforeAnError) {
                           BruteForce(models[39].signature, kept, 50));
 }
 
-// Issue 12: bytes that do not parse in the middle of a BatchUpsert stream
+// Bytes that do not parse in the middle of a BatchUpsert stream
 // were taken for the end of the stream (gRPC's typed reader reports both
 // the same way): the call answered OK with the models before them written
 // and the rest silently dropped. Now the call fails with INVALID_ARGUMENT
@@ -1013,7 +1013,7 @@ TEST_F(IndexerServiceTest,
                           BruteForce(models[5].signature, models, 3));
 }
 
-// Issue 12 item 4 (search side): a slow search (k = every model, large
+// A slow search (k = every model, large
 // signatures) with a short deadline. The server stops between EMDs at the
 // deadline: the call ends with DEADLINE_EXCEEDED, the search leaves the
 // server soon after, having computed a small part of the full search's EMDs

@@ -29,11 +29,8 @@
 
 #include <grpcpp/channel.h>
 #include <grpcpp/client_context.h>
-#include <grpcpp/security/credentials.h>
-#include <grpcpp/support/channel_arguments.h>
 
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -42,6 +39,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
+#include "tpr/connection.h"
 #include "tpr/v1/extractor.grpc.pb.h"
 #include "tpr/v1/indexer.grpc.pb.h"
 
@@ -64,81 +62,6 @@ struct CallOptions {
   double backoff_multiplier = 2.0;
   absl::Duration max_backoff = absl::Seconds(2);
 };
-
-// ChannelTarget returns the gRPC target for `addresses`:
-//   "127.0.0.1:7001"                   -> "ipv4:127.0.0.1:7001"
-//   "127.0.0.1:7001,127.0.0.1:7002"    -> "ipv4:127.0.0.1:7001,127.0.0.1:7002"
-//   "[::1]:7001,[::1]:7002"            -> "ipv6:[::1]:7001,[::1]:7002"
-//   "localhost:7001"                   -> "dns:///localhost:7001"
-//   "dns:///name:7001", "ipv4:...", "unix:/path" -> unchanged.
-// Errors: INVALID_ARGUMENT for an empty list, an entry without a port, a
-// list mixing families, or several host names (use one dns:/// name that
-// resolves to several addresses instead). O(length). Thread-safe.
-absl::StatusOr<std::string> ChannelTarget(absl::string_view addresses);
-
-// MakeChannel returns an insecure channel to ChannelTarget(addresses) with
-// round_robin load balancing (every resolved address gets calls in turn)
-// and 64 MiB message limits, reconnecting after a failure within 100 ms to
-// 2 s (gRPC's default starts at 1 s and grows to 120 s). Connection happens
-// lazily on the first call.
-// Errors: those of ChannelTarget.
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
-    absl::string_view addresses);
-
-// ConnectionOptions: how a client reaches and authenticates to the servers
-// (TLS, API key) and what it hears about each call. Defaults: plaintext, no
-// key.
-struct ConnectionOptions {
-  // Speak TLS. Default false.
-  bool tls = false;
-  // PEM file of the certificate authorities to trust; empty: the system's
-  // roots. Only with tls.
-  std::string tls_ca_file;
-  // PEM client certificate chain and private key, for servers that demand
-  // mutual TLS (--tls-client-ca). Both or neither. Only with tls.
-  std::string tls_cert_file;
-  std::string tls_key_file;
-  // Name the server's certificate must carry when it differs from the host
-  // in the address (e.g. connecting by IP). Empty: the address's host.
-  std::string tls_server_name;
-  // API key, sent with every call as `authorization: Bearer <key>`. Empty:
-  // none. ConnectionOptionsFromEnvironment() reads TPR_API_KEY.
-  std::string api_key;
-  // Called when each call ends (on the thread that ends it) with the full
-  // method name, the server's request id (trailing `x-request-id`, "" when
-  // the call never reached a server) and the final status. Default none.
-  std::function<void(absl::string_view method, absl::string_view request_id,
-                     const grpc::Status& status)>
-      on_call_done;
-};
-
-// ConnectionOptionsFromEnvironment returns default options with api_key
-// taken from the TPR_API_KEY environment variable (empty when unset).
-ConnectionOptions ConnectionOptionsFromEnvironment();
-
-// MakeChannel with `connection`: as above, over TLS when connection.tls (the
-// files are read now: NOT_FOUND naming a missing one, INVALID_ARGUMENT for
-// a certificate without its key), adding the API key to every call. A call
-// that cannot connect fails with UNAVAILABLE and a hint: plaintext against
-// a TLS server, or a TLS handshake refused (wrong CA, wrong name, missing
-// client certificate), never a hang.
-absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(
-    absl::string_view addresses, const ConnectionOptions& connection);
-
-// MakeChannelCredentials returns the channel credentials MakeChannel uses
-// for `connection` (plaintext, or TLS with the CA and client certificate
-// files read now) and sets the TLS server-name override in `*args`; the API
-// key is not in them (MakeChannel adds it per call). For programs that build
-// their own channels, e.g. tpr-gateway's to its shards. Errors: NOT_FOUND
-// naming a missing file, INVALID_ARGUMENT for a certificate without its key
-// or TLS files without tls. Thread-safe.
-absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>>
-MakeChannelCredentials(const ConnectionOptions& connection,
-                       grpc::ChannelArguments* args);
-
-// kChunkBytes is the size of one upload message of ExtractorClient: 1 MiB,
-// well under gRPC's 4 MiB default message limit.
-inline constexpr size_t kChunkBytes = size_t{1} << 20;
 
 // ExtractorClient calls tpr.v1.Extractor.
 class ExtractorClient {

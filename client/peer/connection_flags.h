@@ -9,14 +9,14 @@
 //                                       &primary);
 //   ... CLI11_PARSE ...; MakeChannelCredentials(primary, &args)
 //
-// Header-only and templated on the CLI11 app type, so that the SDK itself
-// does not depend on CLI11.
-#ifndef TPR_CLIENT_CONNECTION_FLAGS_H_
-#define TPR_CLIENT_CONNECTION_FLAGS_H_
+// Header-only and templated on the CLI11 app type, so that tpr_peer does not
+// depend on CLI11. Not part of the installed SDK.
+#ifndef TPR_CLIENT_PEER_CONNECTION_FLAGS_H_
+#define TPR_CLIENT_PEER_CONNECTION_FLAGS_H_
 
 #include <string>
 
-#include "tpr/client.h"
+#include "tpr/connection.h"
 
 namespace tpr::client {
 
@@ -47,4 +47,4 @@ void AddPeerConnectionFlags(App& app, const std::string& prefix,
 
 }  // namespace tpr::client
 
-#endif  // TPR_CLIENT_CONNECTION_FLAGS_H_
+#endif  // TPR_CLIENT_PEER_CONNECTION_FLAGS_H_
