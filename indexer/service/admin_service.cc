@@ -48,9 +48,9 @@ absl::Status CheckUnderBackupRoot(const std::string& root, const char* field,
   const fs::path base = fs::weakly_canonical(fs::absolute(root, ec), ec);
   const fs::path relative = resolved.lexically_relative(base);
   if (ec || relative.empty() || *relative.begin() == "..") {
-    return absl::InvalidArgumentError(absl::StrCat(
-        field, " '", path, "' is outside the backup root '", root,
-        "' (--backup-root)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " '", path, "' is outside the backup root '", root,
+                     "' (--backup-root)"));
   }
   return absl::OkStatus();
 }
@@ -71,8 +71,8 @@ IndexerAdminService::IndexerAdminService(IndexerCore* core, Follower* follower,
 grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
                                          const tpr::v1::BackupRequest* request,
                                          tpr::v1::BackupResponse* response) {
-  if (absl::Status st = CheckUnderBackupRoot(
-          options_.backup_root, "backup_dir", request->backup_dir());
+  if (absl::Status st = CheckUnderBackupRoot(options_.backup_root, "backup_dir",
+                                             request->backup_dir());
       !st.ok()) {
     return common::ToGrpcStatus(st);
   }
@@ -106,10 +106,9 @@ grpc::Status IndexerAdminService::Backup(grpc::ServerContext*,
 grpc::Status IndexerAdminService::Restore(
     grpc::ServerContext*, const tpr::v1::RestoreRequest* request,
     tpr::v1::RestoreResponse* response) {
-  for (const auto& [field, path] :
-       {std::pair<const char*, const std::string&>{"backup_dir",
-                                                   request->backup_dir()},
-        {"data_dir", request->data_dir()}}) {
+  for (const auto& [field, path] : {std::pair<const char*, const std::string&>{
+                                        "backup_dir", request->backup_dir()},
+                                    {"data_dir", request->data_dir()}}) {
     if (absl::Status st =
             CheckUnderBackupRoot(options_.backup_root, field, path);
         !st.ok()) {

@@ -31,6 +31,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "indexer/gateway/shard_map.h"
 #include "tests/service/extsvc_test_util.h"
 #include "tests/service/indexer_testing.h"
@@ -283,7 +284,21 @@ TEST_F(ClusterTest, ShardedAnswersEqualOneIndexer) {
     *request.mutable_model()->mutable_signature() = r->signature();
     requests.push_back(request);
   }
-  std::vector<TestModel> models = MakeModels(400, 8, 23);
+  // Generated models with the extractor's band count (one index holds one
+  // band count), ids m00000..m00399.
+  std::vector<TestModel> models;
+  {
+    index::testing::SignatureGeneratorOptions options;
+    options.seed = 23;
+    options.features = 12;
+    options.bands = requests[0].model().signature().options().bands();
+    options.classes = 8;
+    index::testing::SignatureGenerator gen(options);
+    for (int i = 0; i < 400; ++i) {
+      models.push_back({absl::StrFormat("m%05d", i),
+                        absl::StrCat("class", i % 8), gen.Member(i % 8)});
+    }
+  }
   for (int i = 0; i < 40; i += 4) {
     for (const char* suffix : {"-x", "-y"}) {
       TestModel copy = models[static_cast<size_t>(i)];
